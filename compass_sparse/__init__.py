@@ -1,0 +1,1 @@
+"""compass_sparse"""
