@@ -1,0 +1,216 @@
+"""Merit functions and residuals of MCP(F, [l, u]).
+
+Fischer–Burmeister (thesis §2.6, after Billups): with phi(a, b) = sqrt(a^2 + b^2) - a - b,
+which vanishes exactly when a >= 0, b >= 0, ab = 0, define row-wise
+
+    lower bound only   Phi_i = phi(z_i - l_i, F_i)
+    upper bound only   Phi_i = -phi(u_i - z_i, -F_i)
+    both bounds        Phi_i = phi(z_i - l_i, phi(u_i - z_i, -F_i))
+    free               Phi_i = -F_i
+
+so Phi(z) = 0 iff z solves the MCP.  The merit function is Psi = 0.5 ||Phi||^2, which is
+continuously differentiable; ||Phi||_2 is PATH's convergence measure.
+
+An element H of the generalized Jacobian of Phi has the form H = Da + Db J(z) with
+diagonal Da, Db (computed by :func:`fb_jacobian_diagonals`), so grad Psi = H^T Phi
+= Da Phi + J^T (Db Phi).  At a kink (a = b = 0) we take the derivative of the smooth branch
+along the diagonal direction (a, b) = (1, 1)/sqrt(2), a valid element of the generalized
+gradient; Psi's gradient does not depend on that choice because Phi vanishes there.
+
+The normal map (thesis §3.1) is F_B(x) = F(pi(x)) + x - pi(x) with pi the projection on
+the box; x solves F_B(x) = 0 iff z = pi(x) solves the MCP.  The natural (minimum-map)
+residual ||z - pi(z - F(z))||_inf is the independent check applied to every returned
+point.
+
+phi is evaluated in the cancellation-free form -2ab / (sqrt(a^2+b^2) + a + b) when
+a + b > 0, so that Phi keeps full relative accuracy near a solution with a, b > 0.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = [
+    "fischer",
+    "fb_phi",
+    "fb_psi",
+    "fb_jacobian_diagonals",
+    "fb_gradient",
+    "project",
+    "normal_map",
+    "natural_residual",
+    "min_map",
+    "ResidualReport",
+    "residual_report",
+]
+
+
+def fischer(a, b):
+    """phi(a, b) = sqrt(a^2 + b^2) - a - b, elementwise, without cancellation."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    r = np.hypot(a, b)
+    s = a + b
+    with np.errstate(invalid="ignore", divide="ignore"):
+        stable = -2.0 * a * b / (r + s)
+    return np.where(s > 0, np.where(r + s > 0, stable, 0.0), r - s)
+
+
+def _fischer_grad(a, b):
+    """(d phi / da, d phi / db), using the direction (1, 1)/sqrt(2) at (0, 0)."""
+    r = np.hypot(a, b)
+    zero = r == 0
+    rs = np.where(zero, 1.0, r)
+    ga = np.where(zero, 1.0 / np.sqrt(2.0), a / rs) - 1.0
+    gb = np.where(zero, 1.0 / np.sqrt(2.0), b / rs) - 1.0
+    return ga, gb
+
+
+def _kinds(lb, ub):
+    fl = np.isfinite(lb)
+    fu = np.isfinite(ub)
+    return fl & ~fu, ~fl & fu, fl & fu, ~fl & ~fu
+
+
+def fb_phi(z, f, lb, ub):
+    """The Fischer–Burmeister vector Phi(z) for given F values f = F(z)."""
+    z = np.asarray(z, dtype=float)
+    f = np.asarray(f, dtype=float)
+    lo, up, box, free = _kinds(lb, ub)
+    phi = np.empty_like(z)
+    if lo.any():
+        phi[lo] = fischer(z[lo] - lb[lo], f[lo])
+    if up.any():
+        phi[up] = -fischer(ub[up] - z[up], -f[up])
+    if box.any():
+        inner = fischer(ub[box] - z[box], -f[box])
+        phi[box] = fischer(z[box] - lb[box], inner)
+    phi[free] = -f[free]
+    return phi
+
+
+def fb_psi(phi) -> float:
+    """Psi = 0.5 ||Phi||^2."""
+    return 0.5 * float(np.dot(phi, phi))
+
+
+def fb_jacobian_diagonals(z, f, lb, ub):
+    """Diagonals (da, db) with H = diag(da) + diag(db) J an element of d Phi(z)."""
+    z = np.asarray(z, dtype=float)
+    f = np.asarray(f, dtype=float)
+    lo, up, box, free = _kinds(lb, ub)
+    da = np.zeros_like(z)
+    db = np.zeros_like(z)
+    if lo.any():
+        da[lo], db[lo] = _fischer_grad(z[lo] - lb[lo], f[lo])
+    if up.any():
+        # Phi = -phi(u - z, -F): d/dz = phi_a, d/dF = phi_b
+        da[up], db[up] = _fischer_grad(ub[up] - z[up], -f[up])
+    if box.any():
+        a1 = ub[box] - z[box]
+        c = fischer(a1, -f[box])
+        ia, ib = _fischer_grad(a1, -f[box])  # of c = phi(u - z, -F)
+        oa, ob = _fischer_grad(z[box] - lb[box], c)  # of phi(z - l, c)
+        da[box] = oa - ob * ia
+        db[box] = -ob * ib
+    db[free] = -1.0
+    return da, db
+
+
+def fb_gradient(z, f, J, lb, ub, phi=None):
+    """grad Psi(z) = H^T Phi with H = diag(da) + diag(db) J."""
+    if phi is None:
+        phi = fb_phi(z, f, lb, ub)
+    da, db = fb_jacobian_diagonals(z, f, lb, ub)
+    return da * phi + J.T @ (db * phi)
+
+
+def project(x, lb, ub):
+    """pi(x): the projection of x on the box [lb, ub]."""
+    return np.minimum(np.maximum(x, lb), ub)
+
+
+def normal_map(x, f_at_pi, lb, ub):
+    """F_B(x) = F(pi(x)) + x - pi(x), given f_at_pi = F(pi(x))."""
+    return f_at_pi + x - project(x, lb, ub)
+
+
+def min_map(z, f, lb, ub):
+    """z - pi(z - F(z)): zero exactly at solutions."""
+    return z - project(z - f, lb, ub)
+
+
+def natural_residual(z, f, lb, ub) -> float:
+    """||z - pi(z - F(z))||_inf, the natural (minimum-map) residual."""
+    r = min_map(z, f, lb, ub)
+    return float(np.max(np.abs(r))) if r.size else 0.0
+
+
+@dataclass
+class ResidualReport:
+    """Accuracy measures of a point z (thesis §2.6; PATH's final statistics).
+
+    ``fb_norm`` (||Phi||_2) is the convergence measure; ``natural`` is the independent check.
+    ``worst`` lists (row name, |Phi_i|, |min-map_i|) for the rows with the largest |Phi_i|.
+    """
+
+    fb_norm: float
+    fb_inf: float
+    natural: float
+    normal_map_inf: float
+    merit: float
+    worst: list = field(default_factory=list)
+    worst_index: int = -1
+
+    def summary(self) -> str:
+        w = f", worst row {self.worst[0][0]}" if self.worst else ""
+        return (
+            f"||Phi||_2 = {self.fb_norm:.3e}, ||Phi||_inf = {self.fb_inf:.3e}, "
+            f"natural residual = {self.natural:.3e}{w}"
+        )
+
+
+def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5) -> ResidualReport:
+    """All residual measures at z with F values f, naming the k worst rows.
+
+    ``names`` is a callable i -> str or a sequence of row names.
+    """
+    z = np.asarray(z, dtype=float)
+    f = np.asarray(f, dtype=float)
+    phi = fb_phi(z, f, lb, ub)
+    mm = np.abs(min_map(z, f, lb, ub))
+    nm = _normal_map_at(z, f, lb, ub)
+    aphi = np.abs(phi)
+    k = min(k_worst, z.size)
+    idx = np.argpartition(-aphi, k - 1)[:k] if k > 0 else np.array([], dtype=int)
+    idx = idx[np.argsort(-aphi[idx])]
+    if names is None:
+        label = lambda i: f"F[{i}]"  # noqa: E731
+    elif callable(names):
+        label = names
+    else:
+        label = lambda i: str(names[i])  # noqa: E731
+    worst = [(label(int(i)), float(aphi[i]), float(mm[i])) for i in idx]
+    return ResidualReport(
+        fb_norm=float(np.sqrt(np.dot(phi, phi))),
+        fb_inf=float(aphi.max()) if z.size else 0.0,
+        natural=float(mm.max()) if z.size else 0.0,
+        normal_map_inf=float(np.max(np.abs(nm))) if z.size else 0.0,
+        merit=fb_psi(phi),
+        worst=worst,
+        worst_index=int(idx[0]) if k > 0 else -1,
+    )
+
+
+def _normal_map_at(z, f, lb, ub):
+    """min over x with pi(x) = z of |F_B(x)|, componentwise: F minus the part of it that the
+    normal cone of the box at z absorbs (thesis (2.5.8)-(2.5.9))."""
+    at_l = z <= lb
+    at_u = z >= ub
+    r = f.copy()
+    r[at_l] = np.minimum(f[at_l], 0.0) if at_l.any() else r[at_l]
+    r[at_u & ~at_l] = np.maximum(f[at_u & ~at_l], 0.0) if at_u.any() else r[at_u & ~at_l]
+    fixed = at_l & at_u
+    r[fixed] = 0.0
+    return r

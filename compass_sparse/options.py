@@ -1,0 +1,221 @@
+"""Solver options: one frozen dataclass.
+
+Names follow PATH 5.2's option names where PATH has the option (see the option table in
+PATH's manual); defaults are PATH's unless stated.  Build from keywords, from a dict
+(``Options.from_dict``; unknown keys raise :class:`OptionError`) or modify with
+``opts.replace(name=value)``.  Every field documents its default and valid range, and
+``validate`` checks them.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping
+
+from .exceptions import OptionError
+
+__all__ = ["Options"]
+
+
+def _opt(default, doc: str, *, lo=None, hi=None, choices=None, lo_open=False, nullable=False):
+    return field(
+        default=default,
+        metadata={"doc": doc, "lo": lo, "hi": hi, "choices": choices, "lo_open": lo_open,
+                  "nullable": nullable},
+    )
+
+
+@dataclass(frozen=True)
+class Options:
+    """Options of :func:`compass_sparse.solve_mcp` and :func:`compass_sparse.solve_lcp`.
+
+    Every field: ``name = default`` — meaning [valid range].  See ``Options.describe()``.
+    """
+
+    # --- stopping --------------------------------------------------------------------
+    convergence_tolerance: float = _opt(
+        1e-6, "stop when ||Phi_FB(z)||_2 <= this (PATH's measure)", lo=0.0, lo_open=True)
+    major_iteration_limit: int = _opt(
+        500, "maximum major (Newton) iterations; 0 only evaluates the start point", lo=0)
+    minor_iteration_limit: int | None = _opt(
+        None, "maximum pivots in one pivotal path; None = max(2n, 1000)", lo=1, nullable=True)
+    cumulative_iteration_limit: int | None = _opt(
+        None, "maximum pivots over the whole solve; None = max(10000, 20n)", lo=1,
+        nullable=True)
+    time_limit: float = _opt(math.inf, "wall-clock seconds for the solve", lo=0.0, lo_open=True)
+
+    # --- crash (projected Newton, thesis §2.5) -----------------------------------------
+    crash_method: str = _opt("pnewton", "crash pass: 'pnewton' or 'none'",
+                             choices=("pnewton", "none"))
+    crash_iteration_limit: int = _opt(50, "maximum crash iterations", lo=0)
+    crash_minimum_dimension: int = _opt(
+        10, "skip the crash below this dimension (thesis n_min = 10)", lo=0)
+    crash_nbchange_limit: int = _opt(
+        1, "stop the crash when at most this many active-set changes occur", lo=0)
+    crash_perturb: bool = _opt(True, "perturb a singular reduced Jacobian by eps*I")
+    crash_sigma: float = _opt(0.05, "sufficient decrease of ||F_B|| in the crash (thesis 0.05)",
+                              lo=0.0, hi=1.0, lo_open=True)
+    crash_stepsize_minimum: float = _opt(2.0 ** -12, "smallest crash step (thesis 2^-12)",
+                                         lo=0.0, hi=1.0, lo_open=True)
+    crash_searchtype: str = _opt("line", "crash search: 'line' (halving) or 'arc'",
+                                 choices=("line", "arc"))
+
+    # --- pivotal path (thesis §3.3) ----------------------------------------------------
+    lemke_start: str = _opt(
+        "automatic", "'automatic' (warm basis, Lemke ray start as fallback), 'first' (ray "
+        "start in the first major iteration only), 'always' (ray start every time)",
+        choices=("automatic", "first", "always"))
+    lemke_rank_deficiency_iterations: int = _opt(
+        10, "attempts to repair a rank-deficient start basis", lo=0)
+    lemke_cycle_limit: int = _opt(
+        20, "a variable entering the basis more often than this in one path signals cycling",
+        lo=1)
+    pivot_tolerance: float = _opt(
+        1e-9, "smallest |pivot| (relative to the entering column's norm) allowed in the "
+        "ratio test", lo=0.0, lo_open=True)
+    ratio_tolerance: float = _opt(
+        1e-9, "Harris tolerance: bound violations up to this (relative) are allowed in the "
+        "first ratio-test pass so that the largest pivot among near ties is chosen",
+        lo=0.0)
+    factorization_update_limit: int = _opt(
+        50, "Forrest–Tomlin updates before a fresh factorization", lo=1)
+
+    # --- non-monotone stabilization (thesis §3.4) ---------------------------------------
+    nms: bool = _opt(True, "non-monotone stabilization (False: monotone line search)")
+    nms_memory_size: int = _opt(10, "checkpoint merits kept for the reference value", lo=1)
+    nms_mstep_frequency: int = _opt(10, "at most this many d-steps between m-steps", lo=1)
+    nms_initial_reference_factor: float = _opt(
+        20.0, "initial reference value = factor * Psi(z0)", lo=1.0)
+    nms_searchtype: str = _opt("line", "watchdog search: 'line' or 'arc'",
+                               choices=("line", "arc"))
+    nms_maximum_watchdogs: int = _opt(5, "watchdog returns before a gradient step", lo=0)
+    nms_sigma: float = _opt(1e-4, "sufficient-decrease constant", lo=0.0, hi=1.0, lo_open=True)
+    nms_shrink_factor: float = _opt(0.8, "step shrink factor of the watchdog search",
+                                    lo=0.0, hi=1.0, lo_open=True)
+    nms_stepsize_minimum: float = _opt(1e-8, "smallest watchdog step", lo=0.0, hi=1.0,
+                                       lo_open=True)
+    nms_delta_shrink_factor: float = _opt(0.9, "d-step radius shrink factor per d-step",
+                                          lo=0.0, hi=1.0, lo_open=True)
+    nms_delta_min: float = _opt(1e-15, "smallest d-step radius", lo=0.0)
+
+    # --- projected gradient and Levenberg–Marquardt fallbacks ---------------------------
+    gradient_step_limit: int = _opt(5, "projected-gradient steps per fallback", lo=0)
+    gradient_searchtype: str = _opt("arc", "'arc' (project the ray) or 'line'",
+                                    choices=("line", "arc"))
+    gradient_sigma: float = _opt(1e-4, "sufficient decrease in gradient steps", lo=0.0,
+                                 hi=1.0, lo_open=True)
+    gradient_shrink_factor: float = _opt(0.8, "gradient step shrink", lo=0.0, hi=1.0,
+                                         lo_open=True)
+    gradient_stepsize_minimum: float = _opt(1e-15, "smallest gradient step", lo=0.0)
+    lm_fallback: bool = _opt(
+        True, "try a Levenberg–Marquardt step on Psi before projected-gradient steps")
+    lm_initial_mu: float = _opt(1e-3, "initial LM damping relative to ||H^T Phi||",
+                                lo=0.0, lo_open=True)
+
+    # --- proximal perturbation (Billups) -----------------------------------------------
+    proximal_perturbation: float = _opt(
+        0.0, "initial eps in M = J + eps*I; 0 uses eps only where needed (singular basis)",
+        lo=0.0)
+    proximal_shrink_factor: float = _opt(0.4, "eps shrink per major iteration", lo=0.0,
+                                         hi=1.0)
+    proximal_increase_factor: float = _opt(10.0, "eps growth on failure", lo=1.0)
+
+    # --- restarts -------------------------------------------------------------------
+    restart_limit: int = _opt(
+        10, "restarts when progress stops: PATH's three configurations, then restarts "
+        "near the best point and (when stuck repeatedly) from new points", lo=0)
+    return_best_point: bool = _opt(True, "return the best point found on failure")
+    seed: int = _opt(0, "seed of the random restart points", lo=0)
+
+    # --- passes -------------------------------------------------------------------------
+    presolve: bool = _opt(True, "run the preprocessor when the problem has linear structure")
+    project_start: bool = _opt(True, "project the start point onto the box")
+
+    # --- output ---------------------------------------------------------------------
+    verbosity: int = _opt(0, "0 silent, 1 summary, 2 major-iteration log, 3 minor log",
+                          lo=0, hi=3)
+    progress: bool = _opt(False, "one-line progress display on stderr for long solves")
+
+    def __post_init__(self):
+        self.validate()
+
+    # ---------------------------------------------------------------------------------
+    def validate(self):
+        """Check every field against its documented range; raise OptionError."""
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            m = f.metadata
+            if v is None:
+                if m.get("nullable"):
+                    continue
+                raise OptionError(f"option {f.name} may not be None")
+            if m.get("choices") is not None:
+                if v not in m["choices"]:
+                    raise OptionError(f"option {f.name}={v!r}: expected one of {m['choices']}")
+                continue
+            if isinstance(f.default, bool) or f.type in ("bool",):
+                if not isinstance(v, (bool,)):
+                    raise OptionError(f"option {f.name}={v!r}: expected True or False")
+                continue
+            if not isinstance(v, (int, float)) or isinstance(v, bool):
+                raise OptionError(f"option {f.name}={v!r}: expected a number")
+            if "int" in str(f.type) and not float(v).is_integer():
+                raise OptionError(f"option {f.name}={v!r}: expected an integer")
+            if isinstance(v, float) and math.isnan(v):
+                raise OptionError(f"option {f.name} is NaN")
+            lo, hi = m.get("lo"), m.get("hi")
+            if lo is not None and (v < lo or (m.get("lo_open") and v == lo)):
+                op = ">" if m.get("lo_open") else ">="
+                raise OptionError(f"option {f.name}={v!r}: must be {op} {lo}")
+            if hi is not None and v > hi:
+                raise OptionError(f"option {f.name}={v!r}: must be <= {hi}")
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> "Options":
+        names = {f.name for f in dataclasses.fields(cls)}
+        unknown = sorted(set(d) - names)
+        if unknown:
+            import difflib
+
+            hints = []
+            for u in unknown:
+                close = difflib.get_close_matches(u, names, n=1)
+                hints.append(f"{u!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+            raise OptionError("unknown option(s): " + ", ".join(hints))
+        return cls(**dict(d))
+
+    @classmethod
+    def coerce(cls, options) -> "Options":
+        """None, a dict or an Options -> Options."""
+        if options is None:
+            return cls()
+        if isinstance(options, cls):
+            return options
+        if isinstance(options, Mapping):
+            return cls.from_dict(options)
+        raise OptionError(f"options must be an Options, a dict or None, not {type(options)}")
+
+    def replace(self, **changes) -> "Options":
+        """A copy with some fields changed (unknown names raise OptionError)."""
+        d = dataclasses.asdict(self)
+        names = set(d)
+        bad = sorted(set(changes) - names)
+        if bad:
+            raise OptionError(f"unknown option(s): {bad}")
+        d.update(changes)
+        return Options(**d)
+
+    def minor_limit(self, n: int) -> int:
+        return self.minor_iteration_limit or max(2 * n, 1000)
+
+    def cumulative_limit(self, n: int) -> int:
+        return self.cumulative_iteration_limit or max(10000, 20 * n)
+
+    @classmethod
+    def describe(cls) -> str:
+        """A table of every option with its default and meaning."""
+        rows = []
+        for f in dataclasses.fields(cls):
+            rows.append(f"{f.name:36s} {f.default!r:>12}  {f.metadata['doc']}")
+        return "\n".join(rows)
