@@ -1,0 +1,126 @@
+"""Compiled hot loops of the basis manager (numba, ``cache=True``).
+
+All vectors are indexed by *position* (the pivot order of the factorization): positions
+``0..n-1`` belong to the fresh factorization, position ``n + k`` is created by the k-th
+Forrest-Tomlin update. Every loop runs over positions in index order, which is a valid
+triangular order for L (positions < n only) and for U (the appended columns have larger
+indices than every row they touch).
+
+Storage
+-------
+L : strictly lower part, CSC (``Lp, Li, Lx``) and its CSR copy (``Lrp, Lri, Lrx``) for
+    the transposed solve; unit diagonal implicit.
+U : column ``j`` holds ``Ui[Us[j]:Ue[j]]``, ``Ux[...]`` (off-diagonal entries, rows < j)
+    and ``Ud[j]`` (the diagonal). A replaced position gets an empty column with diagonal
+    1 (a "dead" position); entries of old columns in dead rows stay in place and only
+    accumulate ignored values in the backward solve.
+R : the row-eta file; eta t eliminates position ``Rp_pos[t]`` into ``Rq[t]``:
+    ``w[q] = w[p] - sum_e Rx[e] * w[Ri[e]]`` (e in ``Rs[t]:Rs[t+1]``), then ``w[p] = 0``.
+
+The column-oriented solves skip zero entries, so a sparse right-hand side costs O(N)
+index checks plus the flops on its actual fill (not O(nnz(L + U))).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def lsolve(Lp, Li, Lx, w, start):
+    """In place: w <- L^{-1} w (unit lower triangular, strictly lower part in CSC)."""
+    n = Lp.shape[0] - 1
+    for j in range(start, n):
+        x = w[j]
+        if x != 0.0:
+            for e in range(Lp[j], Lp[j + 1]):
+                w[Li[e]] -= Lx[e] * x
+
+
+@njit(cache=True)
+def ltsolve(Lrp, Lri, Lrx, w, start):
+    """In place: w <- L^{-T} w, using the CSR copy (row j of L) of the strict lower part."""
+    n = Lrp.shape[0] - 1
+    for j in range(n - 1, start - 1, -1):
+        x = w[j]
+        if x != 0.0:
+            for e in range(Lrp[j], Lrp[j + 1]):
+                w[Lri[e]] -= Lrx[e] * x
+
+
+@njit(cache=True)
+def apply_etas(Rs, Ri, Rx, Rpos, Rq, k, w):
+    """In place: w <- R_k ... R_1 w (FTRAN direction)."""
+    for t in range(k):
+        p = Rpos[t]
+        s = w[p]
+        for e in range(Rs[t], Rs[t + 1]):
+            s -= Rx[e] * w[Ri[e]]
+        w[Rq[t]] = s
+        w[p] = 0.0
+
+
+@njit(cache=True)
+def apply_etas_t(Rs, Ri, Rx, Rpos, Rq, k, w):
+    """In place: w <- R_1^T ... R_k^T w (BTRAN direction)."""
+    for t in range(k - 1, -1, -1):
+        q = Rq[t]
+        s = w[q]
+        w[q] = 0.0
+        if s != 0.0:
+            w[Rpos[t]] += s
+            for e in range(Rs[t], Rs[t + 1]):
+                w[Ri[e]] -= Rx[e] * s
+
+
+@njit(cache=True)
+def usolve(Us, Ue, Ui, Ux, Ud, w, N):
+    """In place: w <- U^{-1} w over positions 0..N-1 (column-oriented, backward)."""
+    for j in range(N - 1, -1, -1):
+        x = w[j]
+        if x != 0.0:
+            x = x / Ud[j]
+            w[j] = x
+            for e in range(Us[j], Ue[j]):
+                w[Ui[e]] -= Ux[e] * x
+
+
+@njit(cache=True)
+def utsolve(Us, Ue, Ui, Ux, Ud, w, start, N):
+    """In place: w <- U^{-T} w over positions start..N-1 (w[:start] must be zero or is
+    ignored as already solved)."""
+    for j in range(start, N):
+        s = w[j]
+        for e in range(Us[j], Ue[j]):
+            s -= Ux[e] * w[Ui[e]]
+        w[j] = s / Ud[j]
+
+
+@njit(cache=True)
+def unit_rhs_utsolve(Us, Ue, Ui, Ux, Ud, w, p, N):
+    """Solve U^T y = e_p into the zero vector w (positions >= p only)."""
+    w[p] = 1.0 / Ud[p]
+    for j in range(p + 1, N):
+        s = 0.0
+        for e in range(Us[j], Ue[j]):
+            s -= Ux[e] * w[Ui[e]]
+        if s != 0.0:
+            w[j] = s / Ud[j]
+
+
+def warmup():
+    """Compile (or load from the cache) every kernel once."""
+    i1 = np.zeros(2, dtype=np.int64)
+    i0 = np.zeros(1, dtype=np.int64)
+    f0 = np.zeros(0)
+    i00 = np.zeros(0, dtype=np.int64)
+    w = np.zeros(1)
+    lsolve(i1, i00, f0, w, 0)
+    ltsolve(i1, i00, f0, w, 0)
+    apply_etas(i0, i00, f0, i00, i00, 0, w)
+    apply_etas_t(i0, i00, f0, i00, i00, 0, w)
+    d = np.ones(1)
+    usolve(i0, i0, i00, f0, d, w, 1)
+    utsolve(i0, i0, i00, f0, d, w, 0, 1)
+    unit_rhs_utsolve(i0, i0, i00, f0, d, np.zeros(1), 0, 1)

@@ -1,0 +1,183 @@
+"""Options, statistics and result records of the basis manager.
+
+Tolerances (all relative, all documented with their defaults on :class:`BasisOptions`):
+
+* ``pivot_tolerance`` (1e-11): a column replacement is REFUSED when the new diagonal
+  of U is tiny relative to the spike, ``|u_new| <= pivot_tolerance * ||spike||_inf``, or
+  when the pivot element of the FTRAN column is tiny,
+  ``|d_p| <= pivot_tolerance * ||d||_inf``.
+* ``stability_tolerance`` (1e-8): the new diagonal is computed twice, as
+  ``d1 = d_p * u_pp`` (from the FTRAN column) and as ``d2 = u_pp * (U^{-T} e_p)^T spike``
+  (from the row eta); ``|d1 - d2| > stability_tolerance * |d1|`` forces a refactorization.
+* ``residual_tolerance`` (1e-10): every ``residual_check_frequency``-th FTRAN computes the
+  normwise backward error ``||B x - a||_inf / (||a||_inf + ||B||_inf ||x||_inf)`` and
+  refactorizes when it exceeds the tolerance.
+* ``rank_tolerance`` (1e-11): a pivot of the fresh LU of the non-unit block is treated
+  as zero when ``|u_jj| <= rank_tolerance * ||column||_inf``; the rank-revealing QR used to
+  repair small singular blocks uses the same relative threshold on ``|R_ii| / |R_00|``.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass, field
+
+from ..exceptions import OptionError
+
+KIND_M = 0
+"""Slot kind: ``sign * M[:, index]``."""
+KIND_UNIT = 1
+"""Slot kind: ``sign * e_index`` (slacks w (sign -1), v (sign +1), artificials)."""
+KIND_DENSE = 2
+"""Slot kind: ``sign * r``, the dense covering vector (index ignored)."""
+
+_BACKENDS = ("superlu", "umfpack", "auto")
+
+
+@dataclass(frozen=True)
+class BasisOptions:
+    """Options of :class:`~compass_sparse.basis.BasisManager` (immutable).
+
+    Attributes
+    ----------
+    update_limit : int, default 50, range >= 0
+        Maximum number of Forrest-Tomlin updates between two factorizations (PATH's
+        ``factorization_update_limit``). The replacement that would exceed it is done by
+        a fresh factorization (counted in ``stats.refactor_by_count``). 0 = refactorize on
+        every replacement.
+    fill_factor : float, default 2.0, range >= 1
+        Refactorize (``stats.refactor_by_fill``) when ``nnz(L) + nnz(U) + nnz(etas)`` would
+        exceed ``fill_factor`` times ``nnz(L) + nnz(U)`` right after the last factorization
+        (nonzeros counted including the diagonal of U).
+    pivot_tolerance : float, default 1e-11, range [0, 1)
+        Relative tininess that REFUSES a replacement: ``|u_new| <= pivot_tolerance *
+        ||spike||_inf`` or ``|d_p| <= pivot_tolerance * ||d||_inf`` (d the FTRAN column,
+        p the leaving slot). The basis is then left unchanged.
+    stability_tolerance : float, default 1e-8, range > 0
+        Relative disagreement between the two computations of the new diagonal
+        (``d1 = d_p u_pp`` vs ``d2`` from the row eta) that triggers a refactorization
+        (``stats.refactor_by_stability``).
+    residual_check_frequency : int, default 20, range >= 0
+        Every k-th FTRAN (``ftran``/``ftran_column``) computes the backward error
+        ``||B x - a|| / (||a|| + ||B|| ||x||)`` (inf-norms); 0 disables the check.
+    residual_tolerance : float, default 1e-10, range > 0
+        Backward-error bound of the periodic check; above it the manager refactorizes
+        (``stats.refactor_by_residual``) and solves again.
+    rank_tolerance : float, default 1e-11, range [0, 1)
+        Relative pivot size below which a fresh factorization treats a column as
+        dependent (see the module docstring); such columns are repaired by unit columns.
+    dense_rank_limit : int, default 3000, range >= 0
+        Non-unit blocks up to this order are rank-repaired with a dense QR with column
+        pivoting; larger ones by repeated sparse LU with tiny-pivot detection.
+    backend : {"superlu", "umfpack", "auto"}, default "auto"
+        Sparse LU of the non-unit block. "auto" = UMFPACK when ``scikits.umfpack`` is
+        importable, else SuperLU.
+    permc_spec : str, default "COLAMD"
+        SuperLU column ordering ("NATURAL", "MMD_ATA", "MMD_AT_PLUS_A", "COLAMD").
+    diag_pivot_thresh : float, default 1.0, range [0, 1]
+        SuperLU threshold for partial pivoting (1.0 = classical partial pivoting).
+    """
+
+    update_limit: int = 50
+    fill_factor: float = 2.0
+    pivot_tolerance: float = 1e-11
+    stability_tolerance: float = 1e-8
+    residual_check_frequency: int = 20
+    residual_tolerance: float = 1e-10
+    rank_tolerance: float = 1e-11
+    dense_rank_limit: int = 3000
+    backend: str = "auto"
+    permc_spec: str = "COLAMD"
+    diag_pivot_thresh: float = 1.0
+
+    def __post_init__(self):
+        def bad(name, why):
+            raise OptionError(f"BasisOptions.{name}={getattr(self, name)!r}: {why}")
+
+        if int(self.update_limit) != self.update_limit or self.update_limit < 0:
+            bad("update_limit", "must be an integer >= 0")
+        if not self.fill_factor >= 1.0:
+            bad("fill_factor", "must be >= 1")
+        if not 0.0 <= self.pivot_tolerance < 1.0:
+            bad("pivot_tolerance", "must be in [0, 1)")
+        if not self.stability_tolerance > 0.0:
+            bad("stability_tolerance", "must be > 0")
+        if int(self.residual_check_frequency) != self.residual_check_frequency or \
+                self.residual_check_frequency < 0:
+            bad("residual_check_frequency", "must be an integer >= 0")
+        if not self.residual_tolerance > 0.0:
+            bad("residual_tolerance", "must be > 0")
+        if not 0.0 <= self.rank_tolerance < 1.0:
+            bad("rank_tolerance", "must be in [0, 1)")
+        if self.dense_rank_limit < 0:
+            bad("dense_rank_limit", "must be >= 0")
+        if self.backend not in _BACKENDS:
+            bad("backend", f"must be one of {_BACKENDS}")
+        if self.permc_spec not in ("NATURAL", "MMD_ATA", "MMD_AT_PLUS_A", "COLAMD"):
+            bad("permc_spec", "must be NATURAL, MMD_ATA, MMD_AT_PLUS_A or COLAMD")
+        if not 0.0 <= self.diag_pivot_thresh <= 1.0:
+            bad("diag_pivot_thresh", "must be in [0, 1]")
+
+
+@dataclass
+class BasisStats:
+    """Counters and timers of a :class:`BasisManager` (cumulative unless stated).
+
+    ``refactor_by_*`` count the replacements that were carried out by a fresh
+    factorization, one counter per trigger; ``nnz_L``, ``nnz_U`` (including its diagonal)
+    and ``nnz_eta`` describe the current factors. Times are wall-clock seconds.
+    """
+
+    factorizations: int = 0
+    updates: int = 0
+    refused_updates: int = 0
+    refactor_by_count: int = 0
+    refactor_by_fill: int = 0
+    refactor_by_stability: int = 0
+    refactor_by_residual: int = 0
+    residual_checks: int = 0
+    rank_repairs: int = 0
+    ftran_calls: int = 0
+    btran_calls: int = 0
+    time_factor: float = 0.0
+    time_solve: float = 0.0
+    time_update: float = 0.0
+    nnz_L: int = 0
+    nnz_U: int = 0
+    nnz_eta: int = 0
+
+
+class UpdateStatus(enum.IntEnum):
+    """Outcome of :meth:`BasisManager.replace`."""
+
+    OK = 0
+    """Forrest-Tomlin update done."""
+    REFACTORED = 1
+    """The replacement was done by a fresh factorization (a trigger fired or the
+    stability test failed); the slot table holds the new column."""
+    REFUSED = 2
+    """The new pivot is relatively tiny (the new basis would be singular or nearly so):
+    the basis is UNCHANGED and its factors are still valid."""
+
+
+@dataclass
+class FactorReport:
+    """Result of :meth:`BasisManager.factor` / :meth:`BasisManager.refactor`.
+
+    Attributes
+    ----------
+    ok : bool
+        True when the factorization is valid (the basis is regular, possibly after the
+        repair listed in ``replaced``). False never leaves the manager usable; it is only
+        returned together with an exception-free failure that cannot happen in practice
+        (kept for callers that test it).
+    replaced : list of (slot, old_kind, old_index, old_sign, new_row)
+        Slots whose column made B singular (numerically or structurally, or a duplicated
+        unit column) and now hold the unit column ``+e_{new_row}``.
+    rank_deficiency : int
+        ``len(replaced)``.
+    """
+
+    ok: bool = True
+    replaced: list = field(default_factory=list)
+    rank_deficiency: int = 0

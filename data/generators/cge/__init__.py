@@ -1,0 +1,1 @@
+"""CGE generators (placeholder)."""
