@@ -2,7 +2,7 @@
 
 A backend factors a square sparse matrix K (CSC) as
 
-    diag(s) K[row_order, :][:, col_order] = L U
+    diag(s[row_order]) K[row_order, :][:, col_order] = L U
 
 with L unit lower triangular and U upper triangular (``s`` an optional row scaling, ones
 for SuperLU). ``row_order[t]`` is the row of K pivoted at position t, ``col_order[t]`` its
@@ -30,7 +30,7 @@ class LUFactors:
     U: sp.csc_matrix          # upper triangular with diagonal
     row_order: np.ndarray     # position -> row of K
     col_order: np.ndarray     # position -> column of K
-    row_scale: np.ndarray | None = None   # None = no scaling
+    row_scale: np.ndarray | None = None   # indexed by row of K; None = no scaling
 
 
 def umfpack_available() -> bool:
@@ -57,11 +57,12 @@ class SuperLUBackend:
                       options=dict(SymmetricMode=False))
         except RuntimeError as exc:  # "Factor is exactly singular"
             raise SingularFactorError(str(exc)) from exc
-        # Pr K Pc = L U with row i of K at position perm_r[i], column perm_c[j] at j.
-        row_order = np.empty_like(lu.perm_r)
-        row_order[lu.perm_r] = np.arange(lu.perm_r.size, dtype=lu.perm_r.dtype)
-        return LUFactors(sp.csc_matrix(lu.L), sp.csc_matrix(lu.U),
-                         row_order.astype(np.int64), lu.perm_c.astype(np.int64))
+        # Pr K Pc = L U: row i of K sits at position perm_r[i], column j at perm_c[j].
+        row_order = np.empty(lu.perm_r.size, dtype=np.int64)
+        row_order[lu.perm_r] = np.arange(lu.perm_r.size, dtype=np.int64)
+        col_order = np.empty(lu.perm_c.size, dtype=np.int64)
+        col_order[lu.perm_c] = np.arange(lu.perm_c.size, dtype=np.int64)
+        return LUFactors(sp.csc_matrix(lu.L), sp.csc_matrix(lu.U), row_order, col_order)
 
 
 class UmfpackBackend:
@@ -77,11 +78,24 @@ class UmfpackBackend:
         U = sp.csc_matrix(lu.U)
         if U.shape[0] and np.any(U.diagonal() == 0.0):
             raise SingularFactorError("UMFPACK: zero pivot")
-        # UMFPACK: P R A Q = L U with R = diag(R) a row scaling (R scales rows of A).
-        row_order = np.asarray(lu.perm_r, dtype=np.int64)
-        col_order = np.asarray(lu.perm_c, dtype=np.int64)
-        scale = np.asarray(getattr(lu, "R", np.ones(K.shape[0])), dtype=float)
-        return LUFactors(sp.csc_matrix(lu.L), U, row_order, col_order, scale)
+        # UMFPACK: P R A Q = L U with a row scaling R (multiplied or divided, depending on
+        # the build) -- the conventions of the wrapper are settled by a probe product.
+        n = K.shape[0]
+        L = sp.csc_matrix(lu.L)
+        pr = np.asarray(lu.perm_r, dtype=np.int64)
+        pc = np.asarray(lu.perm_c, dtype=np.int64)
+        R = np.asarray(getattr(lu, "R", np.ones(n)), dtype=float).ravel()
+        x = np.random.default_rng(0).standard_normal(n)
+        lux = L @ (U @ x)
+        inv = np.empty_like(pr)
+        inv[pr] = np.arange(n)
+        for ro in (pr, inv):
+            for co in (pc, np.argsort(pc)):
+                for s in (R, 1.0 / R):
+                    y = s[ro] * (K[ro, :][:, co] @ x)
+                    if np.linalg.norm(y - lux) <= 1e-8 * (np.linalg.norm(lux) + 1.0):
+                        return LUFactors(L, U, ro, co, s)
+        raise SingularFactorError("UMFPACK factors could not be interpreted")
 
 
 def make_backend(name, permc_spec="COLAMD", diag_pivot_thresh=1.0):

@@ -35,6 +35,7 @@ value is 0.
 from __future__ import annotations
 
 import io
+import logging
 import math
 import re
 import time
@@ -45,6 +46,7 @@ import numpy as np
 import scipy.sparse as sp
 
 __all__ = [
+    "PathLicenseError",
     "PathRun",
     "PathSession",
     "natural_residual",
@@ -56,6 +58,10 @@ __all__ = [
 
 #: Size limit of the free (demo) GAMSPy licence for MCP models (rows = columns).
 FREE_LICENSE_MAX_SIZE = 1000
+
+
+class PathLicenseError(RuntimeError):
+    """GAMS refused the model because of licence limits (free licence: MCP size <= 1000)."""
 
 
 # --------------------------------------------------------------------------- #
@@ -228,6 +234,7 @@ def _as_coo(A, n: int, *, add_diagonal: bool):
     """Return (rows, cols, vals) of the nonzeros of A; optionally (explicit) zeros on
     a missing diagonal (vals=0 there, sent later as EPS)."""
     if sp.issparse(A):
+        shape = A.shape
         C = sp.coo_matrix(A)
         C.sum_duplicates()
         r, c, v = C.row.astype(np.int64), C.col.astype(np.int64), C.data.astype(float)
@@ -235,11 +242,11 @@ def _as_coo(A, n: int, *, add_diagonal: bool):
         Ad = np.asarray(A, dtype=float)
         if Ad.ndim != 2:
             raise ValueError("matrix must be 2-D")
+        shape = Ad.shape
         r, c = np.nonzero(Ad)
         v = Ad[r, c]
         r = r.astype(np.int64)
         c = c.astype(np.int64)
-    shape = A.shape
     if tuple(shape) != (n, n):
         raise ValueError(f"matrix has shape {tuple(shape)}, expected {(n, n)}")
     if not np.all(np.isfinite(v)):
@@ -408,6 +415,10 @@ class PathSession:
         gopts = gp.Options(time_limit=float(time_limit)) if time_limit is not None else None
 
         buf = io.StringIO()
+        # GAMSPy logs a warning for every non-normal solve status; PathRun carries the status.
+        model_logger = logging.getLogger("MODEL")
+        old_level = model_logger.level
+        model_logger.setLevel(logging.ERROR)
         t1 = time.perf_counter()
         try:
             self.model.solve(
@@ -415,9 +426,12 @@ class PathSession:
             )
         except GamspyException as exc:
             log = buf.getvalue()
-            raise RuntimeError(
+            err = PathLicenseError if "license" in str(exc).lower() else RuntimeError
+            raise err(
                 f"GAMS failed before/while running PATH: {exc}\n--- log tail ---\n{log[-3000:]}"
             ) from exc
+        finally:
+            model_logger.setLevel(old_level)
         wall = time.perf_counter() - t1
         log = buf.getvalue()
         if output is not None:

@@ -1,0 +1,148 @@
+"""Rank repair of the non-unit block of a basis (COMPASS thesis §4.2.3).
+
+With the unit columns of B ordered first, B permutes to ``[[D, C], [0, K]]`` where D is a
+signed identity on the rows covered by unit columns and K holds the non-unit columns
+(M columns and the dense column) restricted to the uncovered rows. B is regular iff K is.
+
+When K is singular, the repair keeps a maximal independent set of K's columns and gives
+each left-out column's slot a unit column ``+e_row`` on a row that then lacks a pivot; in
+effect the basis is rebuilt from unit columns by bringing non-unit columns in while the
+factor stays regular. The number of non-unit columns kept equals rank(K) (up to the rank
+tolerance), the largest number any regular basis of this form can keep.
+
+Steps, repeated until the LU of the kept block has no tiny pivot:
+
+1. structural: a maximum bipartite matching of K's pattern
+   (``scipy.sparse.csgraph.maximum_bipartite_matching``); unmatched columns are dropped,
+   unmatched rows freed;
+2. numerical, small blocks (order <= ``dense_rank_limit``): QR with column pivoting of
+   the column-equilibrated dense block picks ``rank`` independent columns
+   (``|R_ii| > rank_tolerance * |R_00|``); a second pivoted QR of the kept columns'
+   transpose picks the rows they pivot on;
+3. numerical, large blocks: pivots of the sparse LU with
+   ``|u_jj| <= rank_tolerance * ||K[:, j]||_inf`` mark dependent columns; the column and
+   the row pivoted at that position are dropped. An exactly singular block (the LU
+   backend gives up) is factored with a tiny diagonal perturbation on the matching
+   (``0.01 * rank_tolerance`` relative) to locate the dependent columns.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+from scipy.sparse.csgraph import maximum_bipartite_matching
+
+from ..exceptions import SingularBasisError
+from .backends import SingularFactorError
+
+
+def _col_inf_norms(K):
+    K = sp.csc_matrix(K)
+    if K.nnz == 0:
+        return np.zeros(K.shape[1])
+    a = np.abs(K.data)
+    nz = np.diff(K.indptr) > 0
+    out = np.zeros(K.shape[1])
+    out[nz] = np.maximum.reduceat(a, K.indptr[:-1][nz])
+    return out
+
+
+def _structural(K):
+    """Return (rows, cols) of a maximum matching, paired (rows[i] matched to cols[i])."""
+    if K.shape[1] == 0 or K.shape[0] == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    Kp = sp.csr_matrix(K, copy=True)
+    Kp.eliminate_zeros()
+    match = maximum_bipartite_matching(Kp, perm_type="row")  # column -> row
+    cols = np.flatnonzero(match >= 0)
+    return match[cols].astype(np.int64), cols.astype(np.int64)
+
+
+def _tiny_pivots(fac, K, rank_tol):
+    """Positions of the LU whose pivot is tiny relative to its column."""
+    Ks = K
+    if fac.row_scale is not None:
+        Ks = sp.diags(fac.row_scale) @ K
+    cn = _col_inf_norms(Ks)[fac.col_order]
+    d = np.abs(fac.U.diagonal())
+    bad = ~np.isfinite(d) | (d <= rank_tol * cn) | (d == 0.0)
+    return np.flatnonzero(bad)
+
+
+def _dense_select(K, rank_tol):
+    """Indices (rows, cols) of a maximal regular square sub-block of the dense K."""
+    A = K.toarray() if sp.issparse(K) else np.asarray(K, float)
+    m, c = A.shape
+    if m == 0 or c == 0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    cn = np.abs(A).max(axis=0)
+    cn[cn == 0.0] = 1.0
+    R, piv = sla.qr(A / cn, mode="r", pivoting=True)
+    rd = np.abs(np.diag(R))
+    if rd.size == 0 or rd[0] == 0.0:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    rank = int(np.count_nonzero(rd > rank_tol * rd[0]))
+    cols = np.sort(piv[:rank])
+    At = A[:, cols].T
+    rn = np.abs(At).max(axis=0)
+    rn[rn == 0.0] = 1.0
+    R2, piv2 = sla.qr(At / rn, mode="r", pivoting=True)
+    rows = np.sort(piv2[:rank])
+    return rows.astype(np.int64), cols.astype(np.int64)
+
+
+def select_regular_block(K, backend, rank_tol, dense_limit, max_rounds=30):
+    """Find row and column index sets of K such that K[rows][:, cols] is square and
+    regular, with len(cols) = rank(K) (numerically), and factor it.
+
+    Returns (rows, cols, factors): ``factors`` is the backend LU of
+    ``K[rows, :][:, cols]``; ``rows``/``cols`` index K.
+    """
+    K = sp.csc_matrix(K)
+    rows = np.arange(K.shape[0], dtype=np.int64)
+    cols = np.arange(K.shape[1], dtype=np.int64)
+    dense_done = False
+    for _ in range(max_rounds):
+        sub = K[rows, :][:, cols]
+        r_m, c_m = _structural(sub)
+        rows, cols = rows[r_m], cols[c_m]
+        if cols.size == 0:
+            return rows, cols, None
+        Kk = sp.csc_matrix(K[rows, :][:, cols])
+        try:
+            fac = backend.factor(Kk)
+            bad = _tiny_pivots(fac, Kk, rank_tol)
+        except SingularFactorError:
+            fac, bad = None, None
+        if fac is not None and bad.size == 0:
+            return rows, cols, fac
+        if cols.size <= dense_limit and not dense_done:
+            dense_done = True
+            r_d, c_d = _dense_select(Kk, rank_tol)
+            rows, cols = rows[r_d], cols[c_d]
+            continue
+        if fac is None:
+            # exactly singular: perturb the matched diagonal slightly to find the culprits
+            cn = _col_inf_norms(Kk)
+            cn[cn == 0.0] = 1.0
+            dg = Kk.diagonal()
+            sg = np.where(dg < 0.0, -1.0, 1.0)
+            Kp = sp.csc_matrix(Kk + sp.diags(sg * cn * (0.01 * max(rank_tol, 1e-14))))
+            try:
+                fac_p = backend.factor(Kp)
+            except SingularFactorError as exc:
+                raise SingularBasisError(
+                    "rank repair failed: perturbed block still singular") from exc
+            bad = _tiny_pivots(fac_p, Kk, rank_tol)
+            if bad.size == 0:
+                bad = _tiny_pivots(fac_p, Kk, max(rank_tol, 1e-10) * 1e3)
+            if bad.size == 0:
+                raise SingularBasisError("rank repair failed: no dependent column found")
+            fac = fac_p
+        keep = np.ones(cols.size, bool)
+        keep[fac.col_order[bad]] = False
+        keep_r = np.ones(rows.size, bool)
+        keep_r[fac.row_order[bad]] = False
+        rows, cols = rows[keep_r], cols[keep]
+    raise SingularBasisError("rank repair did not converge")

@@ -1,0 +1,561 @@
+"""The pivotal path: solve the linear MCP of one major iteration (thesis §3.2–3.3).
+
+Linear MCP(M, q, [l, u]): find a valid triple (z, w, v) — l <= z <= u, w, v >= 0,
+w_i (z_i - l_i) = 0, v_i (u_i - z_i) = 0 — with
+
+    M z + q - w + v = 0.
+
+Start at a point x_k with components z_k = pi(x_k), w_k = (z_k - x_k)+, v_k = (x_k - z_k)+
+and residual r = M z_k + q - w_k + v_k (= the normal map of the linearization at x_k).
+The path is the set of valid triples and t in [0, 1] with
+
+    M z - w + v + t r = r - q,                                              (*)
+
+starting at t = 0 in (z_k, w_k, v_k) and ending at t = 1 in a solution, the Newton point.
+Each index i has one basic variable: z_i when l_i < z_i < u_i, w_i when z_i = l_i, v_i when
+z_i = u_i (a free z_i is always basic; a fixed variable's slack w_i - v_i is a free basic
+variable).  With t entering first, (*) has n + 1 unknowns on a basis of n columns; each
+pivot moves the entering variable until a basic one hits a bound (ratio test), and that
+variable leaves.  The complement rule picks the next entering variable:
+
+    w_i leaves -> z_i enters at l_i;   v_i leaves -> z_i enters at u_i;
+    z_i leaves at l_i -> w_i enters;   z_i leaves at u_i -> v_i enters;
+    an artificial leaves -> the z it displaced enters (direction: increase t);
+    t reaches 1 -> solved.
+
+The basis is owned by the basis manager (sparse LU + Forrest–Tomlin updates).  A singular
+start basis or a refused update is repaired with artificial columns (thesis §3.3.1): a z
+column that cannot stay is moved to the right-hand side at its current value and an
+artificial unit column takes its slot at value 0.
+
+The ratio test is a two-pass (Harris) test: pass 1 finds the largest step that keeps every
+basic variable within its bound plus a small tolerance; pass 2 picks, among the variables
+that block within that step, the one with the largest |pivot|, so near-ties never force a
+tiny pivot.  Values that end slightly outside their bounds are projected back (thesis
+§4.2.2).  t reaching 1 wins every tie.
+
+Ray termination (§3.3.2): the entering variable can grow without bound.  The Lemke (ray)
+start is the classical Lemke method in this parametrization: with z at bounds and the
+covering vector r_i = F_i(z0) -+ delta_i, the slack values are w(t) = t q' + (1 - t) delta,
+which is Lemke's w = q' + lambda delta scaled by t (lambda = (1 - t)/t), so the
+copositive-plus theory applies: a ray from the Lemke start proves infeasibility.
+
+Cycling (§3.3.3): a variable that enters more than ``lemke_cycle_limit`` times stops the
+path; the point with the largest t is returned.
+"""
+from __future__ import annotations
+
+import enum
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from .basis import KIND_DENSE, KIND_M, KIND_UNIT
+
+# Basic-variable kinds of a slot.
+VAR_Z, VAR_W, VAR_V, VAR_A, VAR_T, VAR_S = 0, 1, 2, 3, 4, 5
+_VAR_NAMES = "zwvatS"
+
+
+class LinearCode(enum.Enum):
+    """Outcome of one pivotal path: PATH's one-letter linear-solver codes."""
+
+    SOLVED = "S"
+    RAY = "R"
+    CYCLE = "C"
+    MINOR_LIMIT = "I"
+    SINGULAR = "N"
+    TOLERANCE = "T"
+    ERROR = "E"
+
+
+@dataclass
+class WarmBasis:
+    """Which variable of each index is basic at the end of a path: VAR_Z, VAR_W or VAR_V
+    (VAR_S for fixed variables).  Artificials are not kept."""
+
+    basic: np.ndarray
+
+
+@dataclass
+class PathResult:
+    code: LinearCode
+    z: np.ndarray
+    w: np.ndarray
+    v: np.ndarray
+    t: float
+    pivots: int = 0
+    factorizations: int = 0
+    updates: int = 0
+    artificials: int = 0
+    breakpoints: list = field(default_factory=list)  # (t, x) with t increasing
+    basis: WarmBasis | None = None
+    ray_start: bool = False
+    time: float = 0.0
+    message: str = ""
+
+    @property
+    def x(self) -> np.ndarray:
+        return self.z - self.w + self.v
+
+
+def components(x, lb, ub):
+    """(z, w, v) comprising x: z = pi(x), w = (z - x)+, v = (x - z)+ (thesis (3.2.2)-(3.2.5))."""
+    z = np.minimum(np.maximum(x, lb), ub)
+    return z, np.maximum(z - x, 0.0), np.maximum(x - z, 0.0)
+
+
+def default_basis(z, lb, ub, previous: WarmBasis | None = None) -> np.ndarray:
+    """The basic variable of each index at a point z.
+
+    Strictly inside its bounds z_i is basic; at a bound the slack is basic (the thesis
+    prefers slack columns: fewer chances of a singular basis) unless the previous basis had
+    z_i basic there (a degenerate but valid warm start that saves pivots)."""
+    basic = np.full(z.shape, VAR_Z, dtype=np.int8)
+    at_l = z <= lb
+    at_u = (z >= ub) & ~at_l
+    fixed = lb == ub
+    basic[at_l] = VAR_W
+    basic[at_u] = VAR_V
+    if previous is not None and previous.basic.shape == z.shape:
+        keep_z = (previous.basic == VAR_Z) & (at_l | at_u)
+        basic[keep_z] = VAR_Z
+    basic[fixed] = VAR_S
+    return basic
+
+
+class PivotalPath:
+    """One linear MCP solved by a pivotal path on a basis manager.
+
+    Parameters
+    ----------
+    M : sparse (n, n)
+    q, lb, ub : arrays (n,)
+    manager : object with the BasisManager interface (sparse FT manager or dense reference)
+    options : compass_sparse.Options
+    """
+
+    def __init__(self, M, q, lb, ub, manager, options, *, minor_limit=None, deadline=None,
+                 log=None):
+        self.M = sp.csc_matrix(M)
+        self.n = self.M.shape[0]
+        self.q = np.asarray(q, dtype=float)
+        self.lb = lb
+        self.ub = ub
+        self.bm = manager
+        self.opt = options
+        self.minor_limit = minor_limit or options.minor_limit(self.n)
+        self.deadline = deadline
+        self.log = log
+
+    # ------------------------------------------------------------------ set-up
+    def _columns_for(self, kinds, idx):
+        """Basis-manager column specs of slot variables."""
+        n = kinds.size
+        ck = np.empty(n, dtype=np.int64)
+        ci = idx.astype(np.int64).copy()
+        cs = np.ones(n, dtype=np.int64)
+        isz = kinds == VAR_Z
+        ck[isz] = KIND_M
+        ck[~isz] = KIND_UNIT
+        cs[(kinds == VAR_W) | (kinds == VAR_S)] = -1
+        cs[kinds == VAR_A] = self.art_sign[idx[kinds == VAR_A]] if np.any(kinds == VAR_A) else 1
+        ist = kinds == VAR_T
+        ck[ist] = KIND_DENSE
+        ci[ist] = 0
+        return ck, ci, cs
+
+    def _col_of(self, kind, index):
+        if kind == VAR_Z:
+            return KIND_M, index, 1
+        if kind == VAR_T:
+            return KIND_DENSE, 0, 1
+        if kind in (VAR_W, VAR_S):
+            return KIND_UNIT, index, -1
+        if kind == VAR_A:
+            return KIND_UNIT, index, int(self.art_sign[index])
+        return KIND_UNIT, index, 1
+
+    def run(self, x_start, *, warm: WarmBasis | None = None, ray_start: bool = False,
+            r=None) -> PathResult:
+        t0 = time.perf_counter()
+        n, lb, ub = self.n, self.lb, self.ub
+        self.art_sign = np.ones(n, dtype=np.int64)
+        if ray_start:
+            z, w, v, r, basic = self._lemke_start()
+        else:
+            z, w, v = components(np.asarray(x_start, dtype=float), lb, ub)
+            if r is None:
+                r = self.M @ z + self.q - w + v
+            basic = default_basis(z, lb, ub, warm)
+        self.r = r
+        self.zval = z.copy()  # values of z (basic or not); basic ones refreshed from xb
+        st0 = self._stats0()
+        if not np.any(r):
+            # Already a solution of the linear problem: nothing to pivot.
+            res = PathResult(LinearCode.SOLVED, z, w, v, 1.0, basis=WarmBasis(basic.copy()),
+                             ray_start=ray_start)
+            res.time = time.perf_counter() - t0
+            return res
+        # Slot table: slot i initially holds index i's basic variable.
+        self.sk = basic.astype(np.int64)  # slot variable kind
+        self.si = np.arange(n, dtype=np.int64)  # slot variable index
+        xb = np.where(basic == VAR_Z, z, np.where(basic == VAR_W, w, v))
+        xb = np.where(basic == VAR_S, w - v, xb)
+        self.xb = xb.astype(float)
+        self.displaced = {}  # artificial row -> z index it displaced
+        self.bm.set_dense_column(r)
+        code, msg = self._factor(initial=True)
+        if code is not None:
+            return self._finish(code, 0.0, t0, st0, ray_start, msg)
+        self.t = 0.0
+        self.t_slot = -1
+        self.best = (0.0, None)
+        self.breakpoints = []
+        code, msg = self._pivot_loop()
+        if code is LinearCode.SOLVED:
+            code, msg = self._verify_solution()
+        return self._finish(code, self.t, t0, st0, ray_start, msg)
+
+    def _verify_solution(self):
+        """t reached 1: the point solves the linear MCP only if no artificial is left
+        nonzero and the equation holds to working accuracy (else never report 'S')."""
+        art = self.sk == VAR_A
+        tol = 1e-9 * (1.0 + float(np.max(np.abs(self.q))) + float(np.max(np.abs(self.r))))
+        if np.any(art) and np.max(np.abs(self.xb[art])) > tol:
+            return LinearCode.SINGULAR, "t reached 1 with nonzero artificial variables"
+        for attempt in range(2):
+            z, w, v = self._current_point()
+            res = float(np.max(np.abs(self.M @ z + self.q - w + v)))
+            scale = 1.0 + float(np.max(np.abs(self.M @ z))) + float(np.max(np.abs(self.q)))
+            if res <= 1e-9 * scale:
+                return LinearCode.SOLVED, ""
+            if attempt == 0:
+                code, msg = self._factor()
+                if code is not None:
+                    return code, msg
+        return LinearCode.TOLERANCE, f"linear residual {res:.2e} after refactorization"
+
+    def _stats0(self):
+        s = self.bm.stats
+        return (s.factorizations, s.updates)
+
+    def _lemke_start(self):
+        n, lb, ub = self.n, self.lb, self.ub
+        z = np.where(np.isfinite(lb), lb, np.where(np.isfinite(ub), ub, 0.0))
+        f = self.M @ z + self.q
+        basic = np.full(n, VAR_Z, dtype=np.int8)
+        has_l = np.isfinite(lb)
+        has_u = np.isfinite(ub) & ~has_l
+        basic[has_l] = VAR_W
+        basic[has_u] = VAR_V
+        basic[lb == ub] = VAR_S
+        # Covering vector: slacks start at delta > 0 (all slacks strictly positive at t = 0).
+        delta = np.maximum(1.0, np.abs(f))
+        r = f.copy()
+        r[has_l] = f[has_l] - delta[has_l]
+        r[has_u] = f[has_u] + delta[has_u]
+        w = np.where(basic == VAR_W, delta, 0.0)
+        v = np.where(basic == VAR_V, delta, 0.0)
+        # Rows of fixed variables: the free slack absorbs f - r; keep r = f there.
+        return z, w, v, r, basic
+
+    # ------------------------------------------------------------------ factorization
+    def _factor(self, initial=False):
+        """Factor the current slot table; repair singularity with artificials."""
+        ck, ci, cs = self._columns_for(self.sk, self.si)
+        for _attempt in range(max(1, self.opt.lemke_rank_deficiency_iterations)):
+            rep = self.bm.factor(ck, ci, cs)
+            if rep.ok and not rep.replaced:
+                break
+            if not rep.ok:
+                return LinearCode.SINGULAR, "the basis could not be factorized"
+            for (slot, okind, oidx, osign, new_row) in rep.replaced:
+                vk = self.sk[slot]
+                if vk == VAR_T:
+                    return LinearCode.SINGULAR, "the covering vector is dependent on the basis"
+                if vk != VAR_Z and vk != VAR_A:
+                    return LinearCode.SINGULAR, "slack columns are dependent"
+                if vk == VAR_Z:
+                    j = int(self.si[slot])
+                    self.zval[j] = self.xb[slot]  # stranded on the right-hand side
+                    self.displaced[int(new_row)] = j
+                else:
+                    j = self.displaced.pop(int(self.si[slot]), None)
+                    if j is not None:
+                        self.displaced[int(new_row)] = j
+                self.sk[slot] = VAR_A
+                self.si[slot] = new_row
+                self.art_sign[new_row] = 1
+            ck, ci, cs = self._columns_for(self.sk, self.si)
+            # The manager already holds the repaired basis; recompute basic values.
+            break
+        self._recompute_values()
+        return None, ""
+
+    def _recompute_values(self):
+        """x_B = B^{-1} (r - q - M_N z_N - t r) for the nonbasic values (no drift)."""
+        n = self.n
+        zn = self.zval.copy()
+        zb = self.sk == VAR_Z
+        zn[self.si[zb]] = 0.0
+        t_nb = 0.0 if getattr(self, "t_slot", -1) >= 0 else getattr(self, "t", 0.0)
+        rhs = self.r * (1.0 - t_nb) - self.q - self.M @ zn
+        xb = self.bm.ftran(rhs)
+        # Artificials whose value is ~0 are exactly 0: they were placed there.
+        self.xb = xb
+        ts = np.flatnonzero(self.sk == VAR_T)
+        if ts.size:
+            self.t = float(xb[ts[0]])
+        self._project()
+
+    # ------------------------------------------------------------------ pivoting
+    def _bounds_of_slots(self):
+        """Lower/upper bounds of the basic variables by slot."""
+        sk, si = self.sk, self.si
+        lo = np.zeros(self.n)
+        hi = np.full(self.n, np.inf)
+        isz = sk == VAR_Z
+        lo[isz] = self.lb[si[isz]]
+        hi[isz] = self.ub[si[isz]]
+        iss = sk == VAR_S
+        lo[iss] = -np.inf
+        ist = sk == VAR_T
+        hi[ist] = 1.0
+        isa = sk == VAR_A
+        # Artificials leave when they come back to 0 from either side.
+        a = self.xb[isa]
+        lo[isa] = np.where(a >= 0, 0.0, -np.inf)
+        hi[isa] = np.where(a >= 0, np.inf, 0.0)
+        return lo, hi
+
+    def _project(self):
+        lo, hi = self._bounds_of_slots()
+        np.clip(self.xb, lo, hi, out=self.xb)
+
+    def _pivot_loop(self):
+        opt = self.opt
+        n = self.n
+        entering = (VAR_T, 0, 1.0, 0.0)  # (kind, index, direction, start value)
+        enter_count = {}
+        pivots = 0
+        self.pivots = 0
+        cycle_limit = opt.lemke_cycle_limit
+        while True:
+            if pivots >= self.minor_limit:
+                return LinearCode.MINOR_LIMIT, f"{pivots} pivots: minor iteration limit"
+            if self.deadline is not None and time.perf_counter() > self.deadline:
+                return LinearCode.MINOR_LIMIT, "time limit during the path"
+            ek, ei, es, ev = entering
+            key = (ek, ei)
+            enter_count[key] = enter_count.get(key, 0) + 1
+            if enter_count[key] > cycle_limit:
+                return LinearCode.CYCLE, f"{_VAR_NAMES[ek]}[{ei}] entered {cycle_limit} times"
+            col = self._col_of(ek, ei)
+            d = self.bm.ftran_column(*col)
+            if ek == VAR_Z and es == 0.0:
+                # direction free (after an artificial left): increase t.
+                if self.t_slot >= 0 and d[self.t_slot] != 0.0:
+                    es = -np.sign(d[self.t_slot])
+                else:
+                    es = 1.0
+                entering = (ek, ei, es, ev)
+            rate = -es * d  # d xb / d theta
+            theta_self = self._entering_room(ek, ei, es, ev)
+            leave, theta = self._ratio_test(rate, d)
+            if leave < 0 and not np.isfinite(theta_self):
+                # Ray termination: the entering variable grows without bound.
+                return LinearCode.RAY, f"ray: {_VAR_NAMES[ek]}[{ei}] unbounded"
+            if leave < 0 or theta_self <= theta:
+                # The entering variable reaches its own bound first.
+                theta = theta_self
+                self.xb += theta * rate
+                self._project()
+                pivots += 1
+                self.pivots = pivots
+                if ek == VAR_T:
+                    self.t = 1.0
+                    return LinearCode.SOLVED, ""
+                if ek == VAR_Z:
+                    # Bound flip: z_i moves to its other bound; its other slack enters.
+                    newv = self.ub[ei] if es > 0 else self.lb[ei]
+                    self.zval[ei] = newv
+                    entering = (VAR_V, ei, 1.0, 0.0) if es > 0 else (VAR_W, ei, 1.0, 0.0)
+                    self._update_t()
+                    self._record()
+                    continue
+                return LinearCode.ERROR, "bounded entering slack"  # cannot happen
+            # A basic variable blocks: update values and exchange columns.
+            self.xb += theta * rate
+            new_val = ev + es * theta
+            lk, li = int(self.sk[leave]), int(self.si[leave])
+            lo, hi = self._bounds_of_slots()
+            leave_at_upper = rate[leave] > 0
+            leave_val = hi[leave] if leave_at_upper else lo[leave]
+            if lk == VAR_A:
+                leave_val = 0.0
+            status = self.bm.replace(leave, *col)
+            pivots += 1
+            self.pivots = pivots
+            if getattr(status, "name", str(status)) == "REFUSED":
+                # Tiny pivot: fall back to a fresh factorization with repair.
+                self._set_slot(leave, ek, ei, new_val, lk, li, leave_val)
+                code, msg = self._factor()
+                if code is not None:
+                    return code, msg
+            else:
+                self._set_slot(leave, ek, ei, new_val, lk, li, leave_val)
+                if getattr(status, "name", "") == "REFACTORED":
+                    self._resync_after_refactor()
+            self._project()
+            self._update_t()
+            if lk == VAR_T:
+                if leave_at_upper:
+                    return LinearCode.SOLVED, ""
+                return LinearCode.RAY, "t decreased to 0"
+            self._record()
+            # Complement rule.
+            if lk == VAR_W:
+                entering = (VAR_Z, li, 1.0, self.lb[li])
+            elif lk == VAR_V:
+                entering = (VAR_Z, li, -1.0, self.ub[li])
+            elif lk == VAR_Z:
+                entering = (VAR_V, li, 1.0, 0.0) if leave_at_upper else (VAR_W, li, 1.0, 0.0)
+            elif lk == VAR_A:
+                j = self.displaced.pop(li, None)
+                if j is None:
+                    return LinearCode.ERROR, "artificial without a displaced variable"
+                entering = (VAR_Z, j, 0.0, self.zval[j])
+            else:
+                return LinearCode.ERROR, f"unexpected leaving kind {lk}"
+
+    def _resync_after_refactor(self):
+        """A fresh factorization inside the manager may have repaired the basis; keep the
+        slot table in step with the manager's and recompute the basic values."""
+        ck, ci, cs = self._columns_for(self.sk, self.si)
+        if (np.array_equal(np.asarray(self.bm.kinds), ck)
+                and np.array_equal(np.asarray(self.bm.indices)[ck != KIND_DENSE],
+                                   ci[ck != KIND_DENSE])):
+            self._recompute_values()
+            return None, ""
+        return self._factor()
+
+    def _set_slot(self, slot, ek, ei, new_val, lk, li, leave_val):
+        if lk == VAR_Z:
+            self.zval[li] = leave_val
+        if lk == VAR_T:
+            self.t = leave_val
+            self.t_slot = -1
+        self.sk[slot] = ek
+        self.si[slot] = ei
+        self.xb[slot] = new_val
+        if ek == VAR_T:
+            self.t_slot = slot
+        if ek == VAR_Z:
+            self.zval[ei] = new_val
+
+    def _update_t(self):
+        if self.t_slot >= 0:
+            self.t = float(self.xb[self.t_slot])
+
+    def _entering_room(self, ek, ei, es, ev):
+        if ek == VAR_T:
+            return max(0.0, 1.0 - self.t)
+        if ek == VAR_Z:
+            bound = self.ub[ei] if es > 0 else self.lb[ei]
+            return abs(bound - ev) if np.isfinite(bound) else np.inf
+        return np.inf
+
+    def _ratio_test(self, rate, d):
+        """Two-pass (Harris) ratio test.  Returns (slot, theta) or (-1, inf)."""
+        lo, hi = self._bounds_of_slots()
+        xb = self.xb
+        scale = max(1.0, float(np.max(np.abs(d)))) if d.size else 1.0
+        piv_tol = self.opt.pivot_tolerance * scale
+        tol = self.opt.ratio_tolerance
+        up = rate > piv_tol
+        dn = rate < -piv_tol
+        room = np.full(self.n, np.inf)
+        room[up] = hi[up] - xb[up]
+        room[dn] = xb[dn] - lo[dn]
+        cand = np.isfinite(room) & (up | dn)
+        if not np.any(cand):
+            return -1, np.inf
+        idx = np.flatnonzero(cand)
+        arate = np.abs(rate[idx])
+        rm = np.maximum(room[idx], 0.0)
+        bnd = np.where(up[idx], hi[idx], lo[idx])
+        slack = tol * np.maximum(1.0, np.abs(bnd))
+        theta1 = float(np.min((rm + slack) / arate))
+        ratios = rm / arate
+        within = ratios <= theta1
+        # t reaching 1 wins every tie; then artificials; then the largest pivot.
+        sk = self.sk[idx]
+        pri = np.where(sk == VAR_T, 2, np.where(sk == VAR_A, 1, 0))
+        score = np.where(within, pri * 1e300 + arate, -np.inf)
+        k = int(np.argmax(score))
+        return int(idx[k]), float(ratios[k])
+
+    def _record(self):
+        if self.t > self.best[0] + 1e-15:
+            x = self._current_x()
+            self.best = (self.t, x)
+            if len(self.breakpoints) < 200:
+                self.breakpoints.append((self.t, x))
+
+    def _current_point(self):
+        z = self.zval.copy()
+        w = np.zeros(self.n)
+        v = np.zeros(self.n)
+        sk, si, xb = self.sk, self.si, self.xb
+        m = sk == VAR_Z
+        z[si[m]] = xb[m]
+        m = sk == VAR_W
+        w[si[m]] = np.maximum(xb[m], 0.0)
+        m = sk == VAR_V
+        v[si[m]] = np.maximum(xb[m], 0.0)
+        m = sk == VAR_S
+        s = xb[m]
+        w[si[m]] = np.maximum(s, 0.0)
+        v[si[m]] = np.maximum(-s, 0.0)
+        z = np.minimum(np.maximum(z, self.lb), self.ub)
+        return z, w, v
+
+    def _current_x(self):
+        z, w, v = self._current_point()
+        return z - w + v
+
+    def _finish(self, code, t, t0, st0, ray_start, msg):
+        s = self.bm.stats
+        if code in (LinearCode.SOLVED,) or not hasattr(self, "best") or self.best[1] is None:
+            z, w, v = self._current_point() if hasattr(self, "xb") else (self.zval, 0, 0)
+        else:
+            # Not solved: return the point with the largest t (PATH's return-best-point).
+            cur = self._current_point()
+            if self.t >= self.best[0]:
+                z, w, v = cur
+            else:
+                x = self.best[1]
+                z, w, v = components(x, self.lb, self.ub)
+                t = self.best[0]
+        if not isinstance(w, np.ndarray):
+            w = np.zeros(self.n)
+            v = np.zeros(self.n)
+        basic = np.full(self.n, VAR_Z, dtype=np.int8)
+        if hasattr(self, "sk"):
+            basic = default_basis(z, self.lb, self.ub)
+            for kind in (VAR_Z, VAR_W, VAR_V, VAR_S):
+                m = self.sk == kind
+                basic[self.si[m]] = kind
+        res = PathResult(
+            code, z, w, v, float(t if code is not LinearCode.SOLVED else 1.0),
+            pivots=getattr(self, "pivots", 0),
+            factorizations=s.factorizations - st0[0], updates=s.updates - st0[1],
+            artificials=int(np.sum(self.sk == VAR_A)) if hasattr(self, "sk") else 0,
+            breakpoints=getattr(self, "breakpoints", []),
+            basis=WarmBasis(basic), ray_start=ray_start, message=msg,
+        )
+        res.time = time.perf_counter() - t0
+        return res
