@@ -1,1 +1,31 @@
-"""compass_sparse"""
+"""compass_sparse: a sparse, large-scale solver for mixed complementarity problems.
+
+Solve MCP(F, [l, u]) — find l <= z <= u with F_i(z) = 0 where l_i < z_i < u_i, F_i(z) >= 0
+where z_i = l_i and F_i(z) <= 0 where z_i = u_i — by PATH's method: a normal-map Newton
+method whose every major iteration walks a Lemke-type pivotal path on a sparse basis with
+Forrest–Tomlin updates, stabilized by a non-monotone watchdog scheme on the
+Fischer–Burmeister merit function.
+
+Public names::
+
+    solve_mcp, solve_lcp, MCPSolver      entry points
+    MCP                                  problem definition (sparse Jacobian API)
+    Options                              solver options (frozen dataclass)
+    Result, Status, PointStatus          outcome
+    exceptions                           CompassError and subclasses
+"""
+from .exceptions import (BoundsError, CompassError, EvaluationError, JacobianPatternError,
+                         OptionError, ProblemError, ShapeError, StartPointError)
+from .options import Options
+from .problem import MCP
+from .result import IntermediateResult, PassStats, PointStatus, Result, Status
+from .solve import MCPSolver, solve_lcp, solve_mcp
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "solve_mcp", "solve_lcp", "MCPSolver", "MCP", "Options", "Result", "Status",
+    "PointStatus", "PassStats", "IntermediateResult", "CompassError", "ProblemError",
+    "ShapeError", "BoundsError", "StartPointError", "EvaluationError",
+    "JacobianPatternError", "OptionError", "__version__",
+]

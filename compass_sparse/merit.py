@@ -47,14 +47,22 @@ __all__ = [
 
 
 def fischer(a, b):
-    """phi(a, b) = sqrt(a^2 + b^2) - a - b, elementwise, without cancellation."""
+    """phi(a, b) = sqrt(a^2 + b^2) - a - b, elementwise, without cancellation.
+
+    The arguments are scaled by a power of two (exact) so that neither a + b nor a * b
+    overflows or underflows for huge or tiny |a|, |b|."""
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
+    big = np.maximum(np.abs(a), np.abs(b))
+    e = np.frexp(np.where(np.isfinite(big), big, 1.0))[1]
+    a = np.ldexp(a, -e)
+    b = np.ldexp(b, -e)
     r = np.hypot(a, b)
     s = a + b
     with np.errstate(invalid="ignore", divide="ignore"):
-        stable = -2.0 * a * b / (r + s)
-    return np.where(s > 0, np.where(r + s > 0, stable, 0.0), r - s)
+        stable = -2.0 * (a / (r + s)) * b
+    out = np.where(s > 0, np.where(r + s > 0, stable, 0.0), r - s)
+    return np.ldexp(out, e)
 
 
 def _fischer_grad(a, b):
@@ -67,6 +75,12 @@ def _fischer_grad(a, b):
     return ga, gb
 
 
+def _as_bounds(lb, ub, z):
+    """Broadcast scalar (or array) bounds to the shape of z."""
+    return (np.broadcast_to(np.asarray(lb, dtype=float), z.shape),
+            np.broadcast_to(np.asarray(ub, dtype=float), z.shape))
+
+
 def _kinds(lb, ub):
     fl = np.isfinite(lb)
     fu = np.isfinite(ub)
@@ -77,6 +91,7 @@ def fb_phi(z, f, lb, ub):
     """The Fischer–Burmeister vector Phi(z) for given F values f = F(z)."""
     z = np.asarray(z, dtype=float)
     f = np.asarray(f, dtype=float)
+    lb, ub = _as_bounds(lb, ub, z)
     lo, up, box, free = _kinds(lb, ub)
     phi = np.empty_like(z)
     if lo.any():
@@ -99,6 +114,7 @@ def fb_jacobian_diagonals(z, f, lb, ub):
     """Diagonals (da, db) with H = diag(da) + diag(db) J an element of d Phi(z)."""
     z = np.asarray(z, dtype=float)
     f = np.asarray(f, dtype=float)
+    lb, ub = _as_bounds(lb, ub, z)
     lo, up, box, free = _kinds(lb, ub)
     da = np.zeros_like(z)
     db = np.zeros_like(z)
@@ -137,8 +153,14 @@ def normal_map(x, f_at_pi, lb, ub):
 
 
 def min_map(z, f, lb, ub):
-    """z - pi(z - F(z)): zero exactly at solutions."""
-    return z - project(z - f, lb, ub)
+    """z - pi(z - F(z)): zero exactly at solutions.
+
+    Evaluated as the median of (z - u, F, z - l), which equals z - pi(z - F) but never
+    forms z - F: a small F next to a large z is not absorbed by rounding."""
+    z = np.asarray(z, dtype=float)
+    f = np.asarray(f, dtype=float)
+    with np.errstate(invalid="ignore"):
+        return np.minimum(np.maximum(f, z - ub), z - lb)
 
 
 def natural_residual(z, f, lb, ub) -> float:
@@ -178,6 +200,7 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5) -> ResidualRe
     """
     z = np.asarray(z, dtype=float)
     f = np.asarray(f, dtype=float)
+    lb, ub = _as_bounds(lb, ub, z)
     phi = fb_phi(z, f, lb, ub)
     mm = np.abs(min_map(z, f, lb, ub))
     nm = _normal_map_at(z, f, lb, ub)
@@ -193,7 +216,7 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5) -> ResidualRe
         label = lambda i: str(names[i])  # noqa: E731
     worst = [(label(int(i)), float(aphi[i]), float(mm[i])) for i in idx]
     return ResidualReport(
-        fb_norm=float(np.sqrt(np.dot(phi, phi))),
+        fb_norm=_norm2(phi),
         fb_inf=float(aphi.max()) if z.size else 0.0,
         natural=float(mm.max()) if z.size else 0.0,
         normal_map_inf=float(np.max(np.abs(nm))) if z.size else 0.0,
@@ -201,6 +224,14 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5) -> ResidualRe
         worst=worst,
         worst_index=int(idx[0]) if k > 0 else -1,
     )
+
+
+def _norm2(v) -> float:
+    """||v||_2 without underflow or overflow of the squares."""
+    m = float(np.max(np.abs(v))) if v.size else 0.0
+    if m == 0.0 or not np.isfinite(m):
+        return m
+    return m * float(np.sqrt(np.dot(v / m, v / m)))
 
 
 def _normal_map_at(z, f, lb, ub):

@@ -408,7 +408,9 @@ class PivotalPath:
             else:
                 self._set_slot(leave, ek, ei, new_val, lk, li, leave_val)
                 if getattr(status, "name", "") == "REFACTORED":
-                    self._resync_after_refactor()
+                    code, msg = self._resync_after_refactor()
+                    if code is not None:
+                        return code, msg
             self._project()
             self._update_t()
             if lk == VAR_T:

@@ -35,6 +35,7 @@ import scipy.sparse as sp
 
 from .exceptions import (
     BoundsError,
+    CompassError,
     EvaluationError,
     JacobianPatternError,
     ProblemError,
@@ -62,10 +63,13 @@ def as_bounds(lb, ub, n: int, names: Sequence[str] | None = None):
     """Broadcast and validate bounds; map |b| >= INFINITY to +-inf.
 
     Raises BoundsError naming the first offending variable."""
-    lo = np.array(np.broadcast_to(np.asarray(lb, dtype=float), (n,)), dtype=float)
-    hi = np.array(np.broadcast_to(np.asarray(ub, dtype=float), (n,)), dtype=float)
+    lo = _broadcast_bound(lb, n, "lb")
+    hi = _broadcast_bound(ub, n, "ub")
+    # |b| >= INFINITY is infinite on either side: lb >= 1e20 is lb = +inf (an error below)
     lo[lo <= -INFINITY] = -np.inf
+    lo[lo >= INFINITY] = np.inf
     hi[hi >= INFINITY] = np.inf
+    hi[hi <= -INFINITY] = -np.inf
 
     def name(i):
         return _var_label(names, int(i))
@@ -87,6 +91,16 @@ def as_bounds(lb, ub, n: int, names: Sequence[str] | None = None):
             f"lb > ub for {name(i)}: lb = {lo[i]:g}, ub = {hi[i]:g} ({bad.size} such variables)"
         )
     return lo, hi
+
+
+def _broadcast_bound(b, n, what):
+    arr = np.asarray(b, dtype=float)
+    if arr.ndim > 1 and arr.size == n:
+        arr = arr.reshape(n)
+    try:
+        return np.array(np.broadcast_to(arr, (n,)), dtype=float)
+    except ValueError:
+        raise ShapeError(f"{what} has shape {arr.shape}, expected ({n},) or a scalar") from None
 
 
 def _var_label(names, i: int) -> str:
@@ -200,6 +214,8 @@ class MCP:
                 self._pattern = S
         self._constant_spec = constant_jac
         self.constant_mask: np.ndarray | None = None
+        if self._pattern is not None:  # finite differences: the pattern is known now
+            self._set_constant_mask()
         if check:
             self.check_start()
 
@@ -215,7 +231,7 @@ class MCP:
             if np.ndim(arr) > 0:
                 cands.append((what, int(np.size(arr))))
         if pattern is not None:
-            shp = pattern.shape
+            shp = np.shape(pattern) if not sp.issparse(pattern) else pattern.shape
             if len(shp) != 2 or shp[0] != shp[1]:
                 raise ShapeError(
                     f"jac_sparsity has shape {shp}: an MCP is square (row i of F is paired "
@@ -350,15 +366,18 @@ class MCP:
         spec = self._constant_spec
         if spec is None or self._pattern is None:
             return
-        S = sp.csc_matrix(spec)
+        S = sp.csc_matrix(spec, copy=True)
         if S.shape != (self.n, self.n):
             raise ShapeError(f"constant_jac has shape {S.shape}, expected ({self.n}, {self.n})")
-        S = S.tocoo()
-        P = self._pattern.tocoo()
+        S.sum_duplicates()  # canonical: column-major keys, sorted and unique
+        S.sort_indices()
+        P = self._pattern  # canonical CSC, so its keys are sorted and unique too
         n = self.n
-        keys_p = P.col.astype(np.int64) * n + P.row
-        keys_s = np.unique(S.col.astype(np.int64) * n + S.row)
-        inside = np.isin(keys_s, keys_p)
+        keys_p = np.repeat(np.arange(n, dtype=np.int64), np.diff(P.indptr)) * n + P.indices
+        keys_s = np.repeat(np.arange(n, dtype=np.int64), np.diff(S.indptr)) * n + S.indices
+        pos = np.searchsorted(keys_p, keys_s)
+        inside = pos < keys_p.size
+        inside[inside] = keys_p[pos[inside]] == keys_s[inside]
         if not inside.all():
             k = keys_s[~inside][0]
             j, i = divmod(int(k), n)
@@ -366,10 +385,8 @@ class MCP:
                 f"constant_jac declares entry (row {self.row_label(i)}, column "
                 f"{self.var_label(j)}) that is not in the Jacobian's pattern"
             )
-        # pattern entries are stored in CSC order: column-major, rows sorted.
-        order = np.lexsort((P.row, P.col))
         mask = np.zeros(P.nnz, dtype=bool)
-        mask[np.isin(keys_p[order], keys_s)] = True
+        mask[pos] = True
         self.constant_mask = mask
 
     # -- finite differences -----------------------------------------------------------
@@ -386,6 +403,7 @@ class MCP:
         h = self.fd_step * np.maximum(1.0, np.abs(x))
         # Step inward when an upper bound is near, so F is never evaluated outside the box.
         h = np.where(x + h > self.ub, -h, h)
+        h = (x + h) - x  # the step actually taken in floating point
         data = np.empty(P.nnz)
         col_of_entry = np.repeat(np.arange(self.n), np.diff(P.indptr))
         for c in range(ncol):
@@ -406,7 +424,7 @@ class MCP:
         x = self.x0
         try:
             f, J = self.FJ(x)
-        except (ShapeError, JacobianPatternError):
+        except CompassError:  # our own diagnostics (shapes, pattern, ...) pass through
             raise
         except Exception as exc:  # the user's code failed at the start point
             raise EvaluationError(f"F or J raised at the start point: {exc!r}") from exc

@@ -23,7 +23,7 @@ import numpy as np
 
 from .merit import ResidualReport, natural_residual, residual_report
 
-__all__ = ["Status", "PointStatus", "PassStats", "Result"]
+__all__ = ["Status", "PointStatus", "PassStats", "Result", "IntermediateResult"]
 
 
 class Status(enum.IntEnum):
@@ -72,6 +72,18 @@ class PointStatus(enum.IntEnum):
     BEST_POINT = 2  #: the best point (lowest merit) found; not a solution
     START_POINT = 3  #: the (projected) start point; nothing better was found
     CERTIFICATE = 4  #: an LCP's ray (x is the ray's base; see Result.ray)
+
+
+@dataclass
+class IntermediateResult:
+    """What a callback receives after each major iteration (return True or raise
+    StopIteration to stop the solve)."""
+
+    x: np.ndarray
+    fun: np.ndarray
+    residual: float
+    nit: int
+    minor_iterations: int
 
 
 @dataclass

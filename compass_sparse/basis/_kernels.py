@@ -13,7 +13,8 @@ L : strictly lower part, CSC (``Lp, Li, Lx``) and its CSR copy (``Lrp, Lri, Lrx`
 U : column ``j`` holds ``Ui[Us[j]:Ue[j]]``, ``Ux[...]`` (off-diagonal entries, rows < j)
     and ``Ud[j]`` (the diagonal). A replaced position gets an empty column with diagonal
     1 (a "dead" position); entries of old columns in dead rows stay in place and only
-    accumulate ignored values in the backward solve.
+    accumulate ignored values in the backward solve. A row-wise copy of the fresh U
+    (``Urp, Urj, Urx``) serves the transposed solve; ``dead`` flags the dead positions.
 R : the row-eta file; eta t eliminates position ``Rp_pos[t]`` into ``Rq[t]``:
     ``w[q] = w[p] - sum_e Rx[e] * w[Ri[e]]`` (e in ``Rs[t]:Rs[t+1]``), then ``w[p] = 0``.
 
@@ -87,10 +88,31 @@ def usolve(Us, Ue, Ui, Ux, Ud, w, N):
 
 
 @njit(cache=True)
-def utsolve(Us, Ue, Ui, Ux, Ud, w, start, N):
-    """In place: w <- U^{-T} w over positions start..N-1 (w[:start] must be zero or is
-    ignored as already solved)."""
-    for j in range(start, N):
+def utsolve(Urp, Urj, Urx, dead, n, Us, Ue, Ui, Ux, Ud, w, start, N):
+    """In place: w <- U^{-T} w over positions start..N-1 (w[:start] must be zero).
+
+    Positions < n (the fresh factorization) are solved column-oriented through the
+    row-wise copy of the fresh U (``Urp, Urj, Urx``), skipping zeros and the entries of
+    dead columns; the appended columns (positions >= n, at most update_limit of them)
+    are solved in dot-product form from their column storage.
+    """
+    n0 = min(n, N)
+    for j in range(start, n0):
+        if dead[j]:
+            w[j] = 0.0
+            continue
+        x = w[j]
+        if x != 0.0:
+            x = x / Ud[j]
+            w[j] = x
+            for e in range(Urp[j], Urp[j + 1]):
+                k = Urj[e]
+                if not dead[k]:
+                    w[k] -= Urx[e] * x
+    for j in range(max(start, n), N):
+        if dead[j]:
+            w[j] = 0.0
+            continue
         s = w[j]
         for e in range(Us[j], Ue[j]):
             s -= Ux[e] * w[Ui[e]]
@@ -98,15 +120,13 @@ def utsolve(Us, Ue, Ui, Ux, Ud, w, start, N):
 
 
 @njit(cache=True)
-def unit_rhs_utsolve(Us, Ue, Ui, Ux, Ud, w, p, N):
-    """Solve U^T y = e_p into the zero vector w (positions >= p only)."""
-    w[p] = 1.0 / Ud[p]
-    for j in range(p + 1, N):
-        s = 0.0
-        for e in range(Us[j], Ue[j]):
-            s -= Ux[e] * w[Ui[e]]
-        if s != 0.0:
-            w[j] = s / Ud[j]
+def dot_from(a, b, start):
+    """sum_{i >= start} a[i] * b[i] (plain loop: no BLAS thread start-up in the hot path)."""
+    s = 0.0
+    for i in range(start, a.shape[0]):
+        if a[i] != 0.0:
+            s += a[i] * b[i]
+    return s
 
 
 def warmup():
@@ -122,5 +142,6 @@ def warmup():
     apply_etas_t(i0, i00, f0, i00, i00, 0, w)
     d = np.ones(1)
     usolve(i0, i0, i00, f0, d, w, 1)
-    utsolve(i0, i0, i00, f0, d, w, 0, 1)
-    unit_rhs_utsolve(i0, i0, i00, f0, d, np.zeros(1), 0, 1)
+    dead = np.zeros(1, dtype=np.bool_)
+    utsolve(i1, i00, f0, dead, 1, i0, i0, i00, f0, d, w, 0, 1)
+    dot_from(w, w, 0)

@@ -370,6 +370,10 @@ class BasisManager:
         self._Us[n:] = nnzu
         self._Ue[n:] = nnzu
         self._Ufree = nnzu
+        Ur = U.tocsr()
+        self._Urp, self._Urj, self._Urx = (Ur.indptr.astype(_I), Ur.indices.astype(_I),
+                                           Ur.data)
+        self._dead = np.zeros(cap_cols, dtype=np.bool_)
         self._Ud = np.ones(cap_cols)
         self._Ud[:n] = Ud
         rcap = max(4 * n, 1024)
@@ -391,6 +395,7 @@ class BasisManager:
         self._nnz_base = self._nnzL + self._nnzU
         self._rebuild_maps()
         self._factored = True
+        self._residual_refactored = False
         self._cache = None
         self._version += 1
         st = self.stats
@@ -423,6 +428,10 @@ class BasisManager:
         spike = w[:N].copy() if keep_spike else None
         kern.usolve(self._Us, self._Ue, self._Ui, self._Ux, self._Ud, w, N)
         return w[self._pos_of_slot], spike
+
+    def _utsolve(self, w, start, N):
+        kern.utsolve(self._Urp, self._Urj, self._Urx, self._dead, self.n, self._Us,
+                     self._Ue, self._Ui, self._Ux, self._Ud, w, start, N)
 
     def _column(self, kind, index, sign):
         if kind == KIND_M:
@@ -476,7 +485,7 @@ class BasisManager:
         N = self.n + self._k
         w = self._work()
         w[self._pos_of_slot] = c
-        kern.utsolve(self._Us, self._Ue, self._Ui, self._Ux, self._Ud, w, 0, N)
+        self._utsolve(w, 0, N)
         kern.apply_etas_t(self._Rs, self._Ri, self._Rx, self._Rpos, self._Rq, self._k, w)
         kern.ltsolve(self._Lrp, self._Lri, self._Lrx, w, self._m1)
         y = w[self._rowpos]
@@ -542,9 +551,11 @@ class BasisManager:
             rhs = np.zeros(self.n)
             rows, vals = self._column(*col)
             np.add.at(rhs, rows, vals)
-        if self._k > 0:
+        if self._k > 0 or not self._residual_refactored:
+            # (a fresh factorization is retried once: it may have been damaged)
             self.stats.refactor_by_residual += 1
             self._factorize()
+            self._residual_refactored = True
         if col is not None:
             x = self._ftran_column(*col)
         else:
@@ -607,8 +618,9 @@ class BasisManager:
             self.stats.refused_updates += 1
             return UpdateStatus.REFUSED
         y = np.zeros(N)
-        kern.unit_rhs_utsolve(self._Us, self._Ue, self._Ui, self._Ux, self._Ud, y, p, N)
-        d2 = upp * float(np.dot(y[p:], s[p:]))
+        y[p] = 1.0
+        self._utsolve(y, p, N)
+        d2 = upp * kern.dot_from(y, s, p)
         if not np.isfinite(d2) or abs(d1 - d2) > o.stability_tolerance * abs(d1):
             self.stats.refactor_by_stability += 1
             return self._replace_by_refactor(slot, kind, index, sign)
@@ -641,6 +653,7 @@ class BasisManager:
         self._Ud[q] = d2
         self._Ue[p] = self._Us[p]
         self._Ud[p] = 1.0
+        self._dead[p] = True
         r0 = self._Rs[k]
         need = r0 + eta_i.size
         if need > self._Ri.size:

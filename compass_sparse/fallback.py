@@ -1,0 +1,142 @@
+"""Fallback steps on the merit function Psi = 0.5 ||Phi_FB||^2 (thesis §3.4; Ferris, Kanzow
+& Munson 1999).
+
+* Projected gradient step from the best point: z(alpha) = pi(z - alpha grad Psi) (arc) or
+  z + alpha (pi(z - grad Psi) - z) (line), accepting the first alpha (shrinking by
+  ``gradient_shrink_factor``) with Psi(z(alpha)) <= Psi(z) - sigma grad Psi^T (z - z(alpha)).
+  Monotone and always possible at a non-stationary point, but slow.
+* Levenberg–Marquardt step: with H = diag(da) + diag(db) J an element of the generalized
+  Jacobian of Phi, solve the symmetric positive definite system
+
+      (H^T H + mu I) d = -H^T Phi = -grad Psi
+
+  and search along pi(z + alpha d).  For mu -> 0 this is a Gauss–Newton step on Phi, for
+  large mu a short gradient step, so it bridges Newton and gradient behaviour where the
+  pivotal path fails (singular or indefinite J).  The system is solved by CHOLMOD when
+  scikit-sparse is installed (a sparse Cholesky of an SPD matrix), else by SuperLU.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .merit import fb_jacobian_diagonals, fb_phi, fb_psi, project
+
+__all__ = ["gradient_steps", "lm_step", "spd_solve", "cholmod_available"]
+
+
+def cholmod_available() -> bool:
+    try:
+        import sksparse.cholmod  # noqa: F401
+    except Exception:
+        return False
+    return True
+
+
+def spd_solve(A, b):
+    """Solve A x = b for sparse SPD A: CHOLMOD when available, else SuperLU."""
+    A = sp.csc_matrix(A)
+    try:
+        from sksparse.cholmod import CholmodNotPositiveDefiniteError, cholesky
+
+        try:
+            return cholesky(A)(b)
+        except CholmodNotPositiveDefiniteError:
+            pass
+    except ImportError:
+        pass
+    return spla.splu(A, permc_spec="MMD_AT_PLUS_A").solve(b)
+
+
+def _armijo(evalr, z, psi, g, trial, lb, ub, sigma, shrink, alpha_min, alpha0=1.0,
+            on_point=None):
+    alpha = alpha0
+    while alpha >= alpha_min:
+        zt = trial(alpha)
+        ft = evalr.f(zt)
+        if ft is not None:
+            phit = fb_phi(zt, ft, lb, ub)
+            psit = fb_psi(phit)
+            if on_point is not None:
+                on_point(zt, ft, phit, psit)
+            dec = float(g @ (z - zt))
+            if psit <= psi - sigma * max(dec, 0.0) and psit < psi:
+                return zt, ft, phit, psit, alpha
+        alpha *= shrink
+    return None
+
+
+def gradient_steps(evalr, z, f, J, lb, ub, opt, *, on_point=None):
+    """Up to ``gradient_step_limit`` projected-gradient steps from z.  Returns the last
+    accepted (z, f, phi, psi, steps) or None when no step decreased Psi."""
+    phi = fb_phi(z, f, lb, ub)
+    psi = fb_psi(phi)
+    out = None
+    steps = 0
+    for _ in range(max(1, opt.gradient_step_limit)):
+        if J is None:
+            J = evalr.jac(z, f)
+            if J is None:
+                break
+        da, db = fb_jacobian_diagonals(z, f, lb, ub)
+        g = da * phi + J.T @ (db * phi)
+        gn = float(g @ g)
+        if gn == 0.0:
+            break
+        # First trial: the Cauchy-like step length psi / ||g||^2, capped at 1.
+        a0 = min(1.0, max(psi / gn, 1e-12))
+        if opt.gradient_searchtype == "arc":
+            trial = lambda a, z=z, g=g: project(z - a * g, lb, ub)  # noqa: E731
+        else:
+            pz = project(z - g, lb, ub) - z
+            trial = lambda a, z=z, pz=pz: z + a * pz  # noqa: E731
+            a0 = 1.0
+        acc = _armijo(evalr, z, psi, g, trial, lb, ub, opt.gradient_sigma,
+                      opt.gradient_shrink_factor, max(opt.gradient_stepsize_minimum, 1e-20),
+                      alpha0=a0, on_point=on_point)
+        if acc is None:
+            break
+        z, f, phi, psi, _ = acc
+        J = None
+        steps += 1
+        out = (z, f, phi, psi, steps)
+    return out
+
+
+def lm_step(evalr, z, f, J, lb, ub, opt, *, mu=None, on_point=None):
+    """One projected Levenberg–Marquardt step.  Returns (z, f, phi, psi, mu) or None."""
+    if J is None:
+        J = evalr.jac(z, f)
+        if J is None:
+            return None
+    phi = fb_phi(z, f, lb, ub)
+    psi = fb_psi(phi)
+    da, db = fb_jacobian_diagonals(z, f, lb, ub)
+    H = sp.diags(db) @ J + sp.diags(da)
+    H = sp.csc_matrix(H)
+    g = H.T @ phi
+    gnorm = float(np.linalg.norm(g))
+    if gnorm == 0.0:
+        return None
+    if mu is None:
+        mu = opt.lm_initial_mu * gnorm
+    HtH = (H.T @ H).tocsc()
+    n = z.size
+    for _ in range(4):
+        A = HtH + mu * sp.identity(n, format="csc")
+        try:
+            d = spd_solve(A, -g)
+        except RuntimeError:
+            mu *= 10.0
+            continue
+        if not np.all(np.isfinite(d)):
+            mu *= 10.0
+            continue
+        acc = _armijo(evalr, z, psi, g, lambda a: project(z + a * d, lb, ub), lb, ub,
+                      opt.nms_sigma, 0.5, 1e-6, on_point=on_point)
+        if acc is not None:
+            zt, ft, phit, psit, alpha = acc
+            return zt, ft, phit, psit, (mu * 0.3 if alpha == 1.0 else mu)
+        mu *= 10.0
+    return None

@@ -1,0 +1,498 @@
+"""Non-monotone stabilization (NMS): the major-iteration loop (thesis §3.4; Dirkse & Ferris
+1995; Ferris, Kanzow & Munson 1999).
+
+Each major iteration linearizes F at z_k = pi(x_k) with the proximal perturbation
+
+    M = J(z_k) + eps I,   q = F(z_k) - M z_k,
+
+and walks the pivotal path from x_k (warm-started from the previous basis) to the Newton
+point x_N.  Acceptance (merit Psi = 0.5 ||Phi_FB||^2):
+
+* d-step: ||z_N - z_k||_inf <= Delta (Delta shrinks by ``nms_delta_shrink_factor``) and at
+  most ``nms_mstep_frequency`` consecutive d-steps: accept without a descent test (fast
+  Newton progress);
+* m-step: Psi(z_N) <= R - sigma max(0, -grad Psi^T (z_N - z_k)), or (1 - sigma) R, where
+  the reference value R is the largest merit of the last ``nms_memory_size`` checkpoints;
+  an accepted m-step (or a d-step that beats R) becomes a checkpoint;
+* watchdog: otherwise return to the last checkpoint and search the segment towards the
+  Newton point computed there (line: convex combination of the z's; arc: projection of
+  the combination of the x's), shrinking by ``nms_shrink_factor``;
+* fallback: when the watchdog fails, the path fails without a usable point, or the
+  watchdog limit is reached, take a Levenberg–Marquardt step and/or projected-gradient
+  steps on Psi from the best point found.
+
+Restarts when progress stops use PATH's three configurations (proximal perturbation
+0.01 * residual without crash; no perturbation with a short memory and m-steps every
+step; crash with more basis changes and arc searches), then — as the thesis proposes —
+restarts near the best point and, when stuck repeatedly, from new points in the box.
+The best point is kept through everything and every exit returns it.
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from .crash import crash, normal_map_at
+from .fallback import gradient_steps, lm_step
+from .merit import fb_gradient, fb_phi, fb_psi, project
+from .path import LinearCode, PivotalPath, WarmBasis
+from .result import PassStats, Status
+
+logger = logging.getLogger("compass_sparse")
+
+__all__ = ["NMSSolver", "Outcome", "Linearizer"]
+
+
+class _Stop(Exception):
+    def __init__(self, status: Status, message: str):
+        self.status = status
+        self.message = message
+
+
+@dataclass
+class Point:
+    z: np.ndarray
+    f: np.ndarray
+    phi: np.ndarray
+    psi: float
+
+    @property
+    def fbn(self) -> float:
+        return float(np.sqrt(2.0 * self.psi))
+
+
+@dataclass
+class Outcome:
+    status: Status
+    message: str
+    best: Point
+    nit: int = 0
+    minor: int = 0
+    crash_iterations: int = 0
+    restarts: int = 0
+    gradient_steps: int = 0
+    lm_steps: int = 0
+    factorizations: int = 0
+    updates: int = 0
+    basis: WarmBasis | None = None
+    passes: dict = field(default_factory=dict)
+
+
+class Linearizer:
+    """M = J + eps I on the fixed pattern pattern(J) U diag, filled in place."""
+
+    def __init__(self, J: sp.csc_matrix):
+        n = J.shape[0]
+        ones = sp.csc_matrix((np.ones(J.nnz), J.indices, J.indptr), shape=J.shape)
+        # Structural union: values of J could cancel against the identity and vanish.
+        P = (ones + sp.identity(n, format="csc")).tocsc()
+        P.sort_indices()
+        P.data[:] = 0.0
+        self.M = P
+        # position of each J entry and each diagonal entry inside P
+        col = np.repeat(np.arange(n), np.diff(J.indptr))
+        self.pos_J = self._positions(P, J.indices, col)
+        self.pos_D = self._positions(P, np.arange(n), np.arange(n))
+        self.n = n
+
+    @staticmethod
+    def _positions(P, rows, cols):
+        key_p = np.repeat(np.arange(P.shape[1]), np.diff(P.indptr)).astype(np.int64) * \
+            P.shape[0] + P.indices
+        key = cols.astype(np.int64) * P.shape[0] + rows
+        return np.searchsorted(key_p, key)
+
+    def __call__(self, J, eps: float) -> sp.csc_matrix:
+        data = np.zeros_like(self.M.data)
+        data[self.pos_J] = J.data  # canonical pattern: positions are distinct
+        if eps:
+            data[self.pos_D] += eps
+        M = sp.csc_matrix((data, self.M.indices, self.M.indptr), shape=self.M.shape)
+        return M
+
+
+def _restart_configs(opt, residual):
+    """PATH's restart configurations, then the thesis' restarts near the best point."""
+    return [
+        dict(proximal_perturbation=0.01 * min(1.0, residual), crash_method="none",
+             nms_initial_reference_factor=2.0),
+        dict(proximal_perturbation=0.0, crash_method="none", crash_perturb=False,
+             nms_initial_reference_factor=10.0, nms_memory_size=2, nms_mstep_frequency=1),
+        dict(crash_method="pnewton", crash_nbchange_limit=10, nms_initial_reference_factor=2.0,
+             crash_searchtype="arc", nms_searchtype="arc", gradient_searchtype="arc"),
+    ]
+
+
+class NMSSolver:
+    """The stabilized Newton method on one MCP (after presolve)."""
+
+    def __init__(self, problem, evalr, options, *, manager_factory, callback=None,
+                 deadline=None, log_major=None):
+        self.p = problem
+        self.ev = evalr
+        self.opt0 = options
+        self.lb, self.ub = problem.lb, problem.ub
+        self.n = problem.n
+        self.manager_factory = manager_factory
+        self.callback = callback
+        self.deadline = deadline
+        self.log_major = log_major
+        self.tol = options.convergence_tolerance
+        self.best: Point | None = None
+        self.nit = 0
+        self.minor = 0
+        self.crash_its = 0
+        self.grad_steps = 0
+        self.lm_steps = 0
+        self.restarts = 0
+        self.passes = {"crash": PassStats(), "path": PassStats(), "fallback": PassStats()}
+        self.linearizer = None
+        self.bm = None
+        self.basis: WarmBasis | None = None
+        self.rng = np.random.default_rng(options.seed)
+
+    # ------------------------------------------------------------------ bookkeeping
+    def _consider(self, z, f, phi, psi):
+        """Every evaluated trial point may be the best (and a solution)."""
+        if self.best is None or psi < self.best.psi:
+            self.best = Point(z.copy(), f.copy(), phi.copy(), psi)
+        if np.sqrt(2.0 * psi) <= self.tol:
+            raise _Stop(Status.SOLVED, "solution found")
+
+    def _point(self, z, f=None):
+        if f is None:
+            f = self.ev.f(z)
+            if f is None:
+                return None
+        phi = fb_phi(z, f, self.lb, self.ub)
+        return Point(z, f, phi, fb_psi(phi))
+
+    def _check_limits(self, opt):
+        if self.deadline is not None and time.perf_counter() > self.deadline:
+            raise _Stop(Status.TIME_LIMIT, "time limit reached")
+        if self.nit >= opt.major_iteration_limit:
+            raise _Stop(Status.MAJOR_ITERATION_LIMIT,
+                        f"major iteration limit ({opt.major_iteration_limit}) reached")
+        if self.minor >= opt.cumulative_limit(self.n):
+            raise _Stop(Status.MINOR_ITERATION_LIMIT,
+                        f"cumulative pivot limit ({opt.cumulative_limit(self.n)}) reached")
+
+    def _callback(self, cur: Point):
+        if self.callback is None:
+            return
+        from .result import IntermediateResult
+
+        info = IntermediateResult(x=cur.z.copy(), fun=cur.f.copy(), residual=cur.fbn,
+                                  nit=self.nit, minor_iterations=self.minor)
+        try:
+            stop = self.callback(info)
+        except StopIteration:
+            stop = True
+        if stop:
+            raise _Stop(Status.CALLBACK_STOP, "stopped by the callback")
+
+    # ------------------------------------------------------------------ Newton point
+    def _newton_point(self, cur: Point, x, eps, opt):
+        J = self.ev.jac(cur.z, cur.f)
+        self._last_J = J
+        if J is None:
+            return None, None, LinearCode.ERROR
+        if self.linearizer is None:
+            self.linearizer = Linearizer(J)
+        M = self.linearizer(J, eps)
+        q = cur.f - M @ cur.z
+        if self.bm is None:
+            self.bm = self.manager_factory(M)
+        else:
+            self.bm.set_matrix(M)
+        r = cur.f + x - cur.z  # normal map of the linearization at x
+        limit = opt.minor_limit(self.n)
+        t0 = time.perf_counter()
+        path = PivotalPath(M, q, self.lb, self.ub, self.bm, opt, minor_limit=limit,
+                           deadline=self.deadline)
+        start_ray = opt.lemke_start == "always" or (opt.lemke_start == "first" and self.nit == 0)
+        res = path.run(x, warm=self.basis, ray_start=start_ray, r=r)
+        if (res.code is not LinearCode.SOLVED and opt.lemke_start == "automatic"
+                and res.t < 0.5 and not start_ray):
+            res2 = PivotalPath(M, q, self.lb, self.ub, self.bm, opt, minor_limit=limit,
+                               deadline=self.deadline).run(x, ray_start=True)
+            res2.pivots += res.pivots
+            res2.factorizations += res.factorizations
+            if res2.code is LinearCode.SOLVED or res2.t > res.t:
+                res = res2
+            else:
+                res.pivots = res2.pivots
+        st = self.passes["path"]
+        st.ran = True
+        st.time += time.perf_counter() - t0
+        st.pivots += res.pivots
+        st.factorizations += res.factorizations
+        st.iterations += 1
+        self.minor += res.pivots
+        if res.code is LinearCode.SOLVED or res.t > 0:
+            self.basis = res.basis
+        return res, J, res.code
+
+    # ------------------------------------------------------------------ fallbacks
+    def _fallback(self, opt):
+        """LM step and projected-gradient steps from the best point."""
+        t0 = time.perf_counter()
+        b = self.best
+        out = None
+        if opt.lm_fallback:
+            lm = lm_step(self.ev, b.z, b.f, None, self.lb, self.ub, opt,
+                         on_point=self._consider)
+            if lm is not None:
+                self.lm_steps += 1
+                out = Point(lm[0], lm[1], lm[2], lm[3])
+        if out is None:
+            g = gradient_steps(self.ev, b.z, b.f, None, self.lb, self.ub, opt,
+                               on_point=self._consider)
+            if g is not None:
+                self.grad_steps += g[4]
+                out = Point(g[0], g[1], g[2], g[3])
+        st = self.passes["fallback"]
+        st.ran = True
+        st.time += time.perf_counter() - t0
+        st.iterations += 1
+        return out
+
+    # ------------------------------------------------------------------ one run
+    def _run(self, z0, opt):
+        """Crash + NMS from z0 with options opt.  Returns when stuck (for a restart)."""
+        lb, ub = self.lb, self.ub
+        z = project(z0, lb, ub)
+        cur = self._point(z)
+        if cur is None:
+            return "domain error at the start point"
+        self._consider(cur.z, cur.f, cur.phi, cur.psi)
+        x, _ = normal_map_at(cur.z, cur.f, lb, ub)
+        # --- crash
+        if (opt.crash_method == "pnewton" and self.n >= opt.crash_minimum_dimension
+                and opt.crash_iteration_limit > 0):
+            t0 = time.perf_counter()
+            nf0, nj0 = self.p.counters.nfev, self.p.counters.njev
+            cr = crash(self.ev, cur.z, lb, ub, opt, f0=cur.f, tol=self.tol,
+                       deadline=self.deadline, log=self._crash_log)
+            st = self.passes["crash"]
+            st.ran = True
+            st.time += time.perf_counter() - t0
+            st.iterations += cr.iterations
+            st.factorizations += cr.factorizations
+            st.nfev += self.p.counters.nfev - nf0
+            st.njev += self.p.counters.njev - nj0
+            self.crash_its += cr.iterations
+            if cr.iterations > 0 and np.all(np.isfinite(cr.f)):
+                pt = self._point(cr.z, cr.f)
+                self._consider(pt.z, pt.f, pt.phi, pt.psi)
+                if pt.psi <= cur.psi * 4.0 or pt.psi <= opt.nms_initial_reference_factor * cur.psi:
+                    cur, x = pt, cr.x
+        elif self.passes["crash"].reason == "":
+            self.passes["crash"].reason = (
+                "crash_method none" if opt.crash_method == "none"
+                else f"n < crash_minimum_dimension ({opt.crash_minimum_dimension})")
+        # --- NMS
+        memory = [opt.nms_initial_reference_factor * cur.psi]
+        ckpt = (cur, x)
+        ckpt_newton = None
+        delta = 10.0 * max(1.0, float(np.max(np.abs(cur.z))) if cur.z.size else 1.0)
+        n_d = 0
+        watchdogs = 0
+        eps = opt.proximal_perturbation
+        stall = 0
+        best_seen = self.best.psi
+        while True:
+            self._check_limits(opt)
+            self._callback(cur)
+            res, J, code = self._newton_point(cur, x, eps, opt)
+            self.nit += 1
+            if res is None:
+                step = "E"
+                fb = self._fallback(opt)
+                if fb is None:
+                    return "evaluation failure and no fallback progress"
+                cur = fb
+                x, _ = normal_map_at(cur.z, cur.f, lb, ub)
+                memory = [cur.psi]
+                ckpt, ckpt_newton = (cur, x), None
+                self._log(code, "G", cur, eps, res)
+                continue
+            if cur is ckpt[0]:
+                ckpt_newton = res
+            # A failed path that did not move (t ~ 0) offers no candidate point.
+            usable = res.code is LinearCode.SOLVED or (
+                res.t > 1e-8 and bool(np.any(res.z != cur.z)))
+            step = None
+            new = None
+            if usable:
+                zN = res.z
+                cand = self._point(zN)
+                if cand is not None:
+                    self._consider(cand.z, cand.f, cand.phi, cand.psi)
+                    R = max(memory)
+                    dist = float(np.max(np.abs(zN - cur.z))) if zN.size else 0.0
+                    if n_d < opt.nms_mstep_frequency and dist <= delta and \
+                            cand.psi <= 100.0 * max(R, 1e-300):
+                        step, new = "D", cand
+                        n_d += 1
+                        delta = max(delta * opt.nms_delta_shrink_factor, opt.nms_delta_min)
+                        if cand.psi < R * (1.0 - opt.nms_sigma):
+                            step = "O" if self._descent_ok(cur, cand, R, opt) else "D"
+                    elif self._descent_ok(cur, cand, R, opt):
+                        step, new = "M", cand
+                        n_d = 0
+            if new is not None:
+                xN = res.x if new.z is res.z else normal_map_at(new.z, new.f, lb, ub)[0]
+                cur, x = new, xN
+                if step in ("M", "O") or cur.psi < min(memory):
+                    memory = (memory + [cur.psi])[-opt.nms_memory_size:]
+                    ckpt, ckpt_newton = (cur, x), None
+                    watchdogs = 0
+                eps *= opt.proximal_shrink_factor
+                self._log(res.code, step, cur, eps, res)
+            else:
+                # Watchdog: back to the checkpoint, search towards its Newton point.
+                if usable and eps == 0.0 and res.code is not LinearCode.SOLVED:
+                    eps = 0.01 * min(1.0, cur.fbn)
+                elif not usable:
+                    eps = max(eps * opt.proximal_increase_factor, 1e-6 * min(1.0, cur.fbn))
+                watchdogs += 1
+                found = None
+                if watchdogs <= opt.nms_maximum_watchdogs and ckpt_newton is not None and (
+                        ckpt_newton.code is LinearCode.SOLVED or ckpt_newton.t > 0):
+                    found = self._watchdog_search(ckpt, ckpt_newton, max(memory), opt)
+                if found is not None:
+                    cur, x = found
+                    memory = (memory + [cur.psi])[-opt.nms_memory_size:]
+                    ckpt, ckpt_newton = (cur, x), None
+                    n_d = 0
+                    self._log(res.code, "W", cur, eps, res)
+                else:
+                    fb = self._fallback(opt)
+                    if fb is None:
+                        self._log(res.code, "G", self.best, eps, res)
+                        return "no descent from the best point"
+                    cur = fb
+                    x, _ = normal_map_at(cur.z, cur.f, lb, ub)
+                    memory = [cur.psi]
+                    ckpt, ckpt_newton = (cur, x), None
+                    n_d = 0
+                    watchdogs = 0
+                    self._log(res.code, "G", cur, eps, res)
+            # Stationarity: restart when the best merit has not improved for a while.
+            if self.best.psi < best_seen * (1.0 - 1e-3):
+                best_seen = self.best.psi
+                stall = 0
+            else:
+                stall += 1
+                if stall >= 10:
+                    return "no progress in 10 major iterations"
+
+    def _descent_ok(self, cur, cand, R, opt):
+        # The directional derivative of Psi at z_k uses the Jacobian of this major iteration.
+        J = self._last_J
+        if J is not None:
+            g = fb_gradient(cur.z, cur.f, J, self.lb, self.ub, cur.phi)
+            dd = float(g @ (cand.z - cur.z))
+            if dd < 0:
+                return cand.psi <= R + opt.nms_sigma * dd
+        return cand.psi <= (1.0 - opt.nms_sigma) * R
+
+    def _watchdog_search(self, ckpt, newton, R, opt):
+        c, xc = ckpt
+        lb, ub = self.lb, self.ub
+        zN = newton.z
+        xN = newton.x
+        alpha = 1.0
+        while alpha >= opt.nms_stepsize_minimum:
+            if opt.nms_searchtype == "line":
+                zt = (1.0 - alpha) * c.z + alpha * zN
+            else:
+                zt = project((1.0 - alpha) * xc + alpha * xN, lb, ub)
+            pt = self._point(zt)
+            if pt is not None:
+                self._consider(pt.z, pt.f, pt.phi, pt.psi)
+                if pt.psi <= (1.0 - opt.nms_sigma * alpha) * min(R, max(c.psi, 1e-300) * 1e300) \
+                        and pt.psi < R:
+                    if opt.nms_searchtype == "line":
+                        x, _ = normal_map_at(pt.z, pt.f, lb, ub)
+                    else:
+                        x = (1.0 - alpha) * xc + alpha * xN
+                    return pt, x
+            alpha *= opt.nms_shrink_factor
+        return None
+
+    # ------------------------------------------------------------------ logging
+    def _crash_log(self, line):
+        if self.log_major is not None:
+            self.log_major("crash " + line)
+
+    def _log(self, code, step, cur, eps, res):
+        if self.log_major is None:
+            return
+        idx = int(np.argmax(np.abs(cur.phi))) if cur.phi.size else 0
+        pivots = res.pivots if res is not None else 0
+        c = code.value if hasattr(code, "value") else str(code)
+        self.log_major(
+            f"{self.nit:5d} {pivots:7d} {self.p.counters.nfev:6d} {self.p.counters.njev:5d} "
+            f"{cur.fbn:12.4e} {c}{step} {eps:9.2e} {np.abs(cur.phi[idx]) if cur.phi.size else 0:10.3e}"
+            f" ({self.p.row_label(idx)})")
+
+    # ------------------------------------------------------------------ driver
+    def solve(self, x0) -> Outcome:
+        opt = self.opt0
+        z0 = project(np.asarray(x0, dtype=float), self.lb, self.ub)
+        status, message = Status.NO_PROGRESS, ""
+        configs = None
+        self._last_J = None
+        try:
+            start = z0
+            while True:
+                why = self._run(start, opt)
+                if self.restarts >= self.opt0.restart_limit:
+                    status, message = Status.NO_PROGRESS, f"{why}; restart limit reached"
+                    break
+                self.restarts += 1
+                if self.log_major is not None:
+                    self.log_major(f"restart {self.restarts}: {why}")
+                if configs is None:
+                    configs = _restart_configs(self.opt0, self.best.fbn)
+                k = self.restarts - 1
+                opt = self.opt0.replace(**configs[k % len(configs)])
+                if k < len(configs):
+                    start = z0
+                elif k % 3 == 2:
+                    start = self._random_point(z0)
+                else:
+                    start = self._near_best()
+                self.basis = None
+        except _Stop as stop:
+            status, message = stop.status, stop.message
+        except KeyboardInterrupt:
+            status, message = Status.USER_INTERRUPT, "interrupted by the user (Ctrl-C)"
+        bm = self.bm
+        return Outcome(
+            status, message, self.best, nit=self.nit, minor=self.minor,
+            crash_iterations=self.crash_its, restarts=self.restarts,
+            gradient_steps=self.grad_steps, lm_steps=self.lm_steps,
+            factorizations=(bm.stats.factorizations if bm is not None else 0)
+            + self.passes["crash"].factorizations,
+            updates=bm.stats.updates if bm is not None else 0,
+            basis=self.basis, passes=self.passes,
+        )
+
+    def _near_best(self):
+        z = self.best.z
+        width = np.where(np.isfinite(self.ub - self.lb), self.ub - self.lb, 1.0 + np.abs(z))
+        return project(z + 0.1 * width * self.rng.uniform(-1, 1, z.size), self.lb, self.ub)
+
+    def _random_point(self, z0):
+        # Unbounded directions: a range that grows with the start point's magnitude.
+        spread = 10.0 * (1.0 + np.abs(z0))
+        lo = np.where(np.isfinite(self.lb), self.lb, z0 - spread)
+        hi = np.where(np.isfinite(self.ub), self.ub, z0 + spread)
+        return self.rng.uniform(lo, hi)

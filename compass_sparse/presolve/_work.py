@@ -1,0 +1,245 @@
+"""The preprocessor's working state: the problem as reduced so far.
+
+Jacobian entries are kept in the CSC order of the problem's pattern (``er``, ``ec``,
+``ev``: row, column, value at the start point; ``const``: declared constant).  The
+remaining problem is described by masks (``row_active``, ``col_active``) and by the pairing
+``partner_var[row]`` / ``partner_row[var]`` (row i is complementary to variable
+``partner_var[i]``; the identity until a free variable is re-paired).
+
+Linear information.  Row i is *linear* when every remaining entry of it is declared
+constant; then, exactly,
+
+    F_i(z) = c_i + sum_j a_ij z_j     (remaining j),
+
+because a function whose partial derivatives are constant on the box is affine, and
+entries outside the pattern are structurally zero.  c_i is obtained from one evaluation
+of F at ``base`` (removed variables at their values, remaining ones at the start point):
+c_i = F_i(base) - sum_j a_ij base_j.  Constant entries with |a_ij| <= zero_tolerance are
+treated as zero (their term is frozen at its base value).
+
+Each round recomputes the counts and constants with vectorized code (O(nnz)) and one F
+evaluation.  Inside a round a reduction marks every row and column whose counts or
+constant it changes as *touched*; later reductions of the round skip touched rows and
+columns, so reductions in one round never depend on each other (this is what lets a
+record hold a batch of reductions).
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .postsolve import FixVariables, PostsolveStack, Record
+
+logger = logging.getLogger("compass_sparse.presolve")
+
+
+class PresolveInfeasible(Exception):
+    """Raised inside a pass when a reduction proves the MCP has no solution."""
+
+    def __init__(self, diagnostic):
+        super().__init__(diagnostic.message)
+        self.diagnostic = diagnostic
+
+
+@dataclass
+class InfeasibilityDiagnostic:
+    """Why presolve proved the MCP has no solution, in the user's names."""
+
+    message: str
+    pass_name: str
+    rows: list = field(default_factory=list)
+    variables: list = field(default_factory=list)
+
+    def __str__(self):
+        return self.message
+
+
+def ranges(ptr: np.ndarray, ids: np.ndarray) -> np.ndarray:
+    """Concatenation of arange(ptr[k], ptr[k+1]) for k in ids (vectorized)."""
+    ids = np.asarray(ids, dtype=np.intp)
+    if ids.size == 0:
+        return np.zeros(0, dtype=np.intp)
+    starts = ptr[ids]
+    lens = ptr[ids + 1] - starts
+    total = int(lens.sum())
+    if total == 0:
+        return np.zeros(0, dtype=np.intp)
+    offs = np.repeat(starts - (np.cumsum(lens) - lens), lens)
+    return offs + np.arange(total)
+
+
+class Workspace:
+    def __init__(self, problem, options, J0, const_mask, warnings):
+        P = problem
+        n = P.n
+        self.problem = P
+        self.opts = options
+        self.n = n
+        self.warnings = warnings
+        self.ec = np.repeat(np.arange(n), np.diff(J0.indptr)).astype(np.intp)
+        self.er = J0.indices.astype(np.intp)
+        self.ev = J0.data.astype(float).copy()
+        self.const = const_mask.copy()
+        self.col_ptr = J0.indptr.astype(np.intp)
+        self.row_order = np.argsort(self.er, kind="stable")
+        self.row_ptr = np.zeros(n + 1, dtype=np.intp)
+        np.cumsum(np.bincount(self.er, minlength=n), out=self.row_ptr[1:])
+        self.lb = P.lb.copy()
+        self.ub = P.ub.copy()
+        self.col_active = np.ones(n, dtype=bool)
+        self.row_active = np.ones(n, dtype=bool)
+        self.partner_var = np.arange(n, dtype=np.intp)
+        self.partner_row = np.arange(n, dtype=np.intp)
+        self.base = P.x0.copy()
+        self.f_evals = 0
+        self.stack = PostsolveStack(n=n, evaluate_F=P.F_uncounted, base=self.base)
+        self.nnz_total = self.er.size
+        self.current_pass = ""
+        self.changed = 0
+        self.refresh()
+
+    # -- snapshot ----------------------------------------------------------------------
+    def evaluate(self, x):
+        self.f_evals += 1
+        return np.asarray(self.problem.F_uncounted(x), dtype=float)
+
+    def live_mask(self):
+        return self.row_active[self.er] & self.col_active[self.ec]
+
+    def live_nnz(self) -> int:
+        return int(np.count_nonzero(self.live_mask()))
+
+    def refresh(self):
+        """Recompute counts, constants and activity bounds of the remaining problem."""
+        n = self.n
+        er, ec, ev = self.er, self.ec, self.ev
+        live = self.live_mask()
+        nz = live & self.const & (np.abs(ev) > self.opts.zero_tolerance)
+        nl = live & ~self.const
+        self.nz = nz
+        self.nl = nl
+        self.row_nnz = np.bincount(er[nz], minlength=n)
+        self.row_nl = np.bincount(er[nl], minlength=n)
+        self.col_nnz = np.bincount(ec[nz], minlength=n)
+        self.col_nl = np.bincount(ec[nl], minlength=n)
+        f = self.evaluate(self.base)
+        if not np.all(np.isfinite(f[self.row_active])):
+            bad = np.flatnonzero(~np.isfinite(f) & self.row_active)
+            raise FloatingPointError(
+                f"F is not finite in row {self.problem.row_label(int(bad[0]))} at the "
+                "presolve base point")
+        self.f_base = f
+        self.c = f - np.bincount(er[nz], weights=ev[nz] * self.base[ec[nz]], minlength=n)
+        # activity bounds of linear rows over the remaining box
+        a = ev[nz]
+        lo_b, hi_b = self.lb[ec[nz]], self.ub[ec[nz]]
+        tmin = np.where(a > 0, a * lo_b, a * hi_b)
+        tmax = np.where(a > 0, a * hi_b, a * lo_b)
+        rows = er[nz]
+        self.fmin = self.c + np.bincount(rows, weights=tmin, minlength=n)
+        self.fmax = self.c + np.bincount(rows, weights=tmax, minlength=n)
+        mag = np.where(np.isfinite(tmin), np.abs(tmin), 0.0) + \
+            np.where(np.isfinite(tmax), np.abs(tmax), 0.0)
+        self.scale = 1.0 + np.abs(self.c) + np.bincount(rows, weights=mag, minlength=n)
+        self.linear = self.row_active & (self.row_nl == 0)
+        self.touched_row = np.zeros(n, dtype=bool)
+        self.touched_col = np.zeros(n, dtype=bool)
+
+    # -- access ------------------------------------------------------------------------
+    def row_entries(self, i: int):
+        """(columns, values) of the remaining nonzero constant entries of row i."""
+        pos = self.row_order[self.row_ptr[i]:self.row_ptr[i + 1]]
+        pos = pos[self.nz[pos]]
+        return self.ec[pos], self.ev[pos]
+
+    def col_entries(self, j: int):
+        """(rows, values) of the remaining nonzero constant entries of column j."""
+        pos = np.arange(self.col_ptr[j], self.col_ptr[j + 1])
+        pos = pos[self.nz[pos]]
+        return self.er[pos], self.ev[pos]
+
+    def free(self, j) -> bool:
+        return bool(np.isneginf(self.lb[j]) and np.isposinf(self.ub[j]))
+
+    def tol(self, i) -> float:
+        return self.opts.feasibility_tolerance * self.scale[i]
+
+    def untouched_rows(self, rows) -> bool:
+        return not self.touched_row[rows].any()
+
+    def untouched_cols(self, cols) -> bool:
+        return not self.touched_col[cols].any()
+
+    # -- mutation ------------------------------------------------------------------------
+    def _touch(self, cols, rows):
+        cols = np.asarray(cols, dtype=np.intp)
+        rows = np.asarray(rows, dtype=np.intp)
+        self.touched_col[cols] = True
+        self.touched_row[rows] = True
+        self.touched_row[self.er[ranges(self.col_ptr, cols)]] = True
+        self.touched_col[self.ec[self.row_order[ranges(self.row_ptr, rows)]]] = True
+
+    def touch(self, cols=(), rows=()):
+        """Mark rows/columns as used by a reduction of this round (no removal)."""
+        self._touch(np.asarray(cols, dtype=np.intp), np.asarray(rows, dtype=np.intp))
+
+    def remove(self, cols, rows):
+        """Remove variables ``cols`` and rows ``rows`` (same count; pairing handled by
+        the caller) and mark everything they touch."""
+        cols = np.asarray(cols, dtype=np.intp)
+        rows = np.asarray(rows, dtype=np.intp)
+        assert cols.size == rows.size
+        assert self.col_active[cols].all() and self.row_active[rows].all()
+        self._touch(cols, rows)
+        self.col_active[cols] = False
+        self.row_active[rows] = False
+        self.changed += cols.size
+
+    def fix(self, cols, values, reason: str):
+        """Fix variables at presolve-time values; remove them and their rows."""
+        cols = np.asarray(cols, dtype=np.intp)
+        if cols.size == 0:
+            return
+        values = np.asarray(values, dtype=float)
+        assert np.unique(cols).size == cols.size
+        rows = self.partner_row[cols]
+        self.remove(cols, rows)
+        self.base[cols] = values
+        self.push(FixVariables(cols=cols.copy(), values=values.copy(), reason=reason))
+
+    def repair(self, free_var, new_row):
+        """Pair the (free) variable ``free_var`` with row ``new_row``."""
+        self.partner_var[new_row] = free_var
+        self.partner_row[free_var] = new_row
+
+    def push(self, record: Record):
+        record.pass_name = self.current_pass
+        self.stack.push(record)
+
+    def infeasible(self, message, rows=(), variables=()):
+        P = self.problem
+        diag = InfeasibilityDiagnostic(
+            message=message,
+            pass_name=self.current_pass,
+            rows=[P.row_label(int(i)) for i in rows],
+            variables=[P.var_label(int(j)) for j in variables],
+        )
+        raise PresolveInfeasible(diag)
+
+    # -- labels ------------------------------------------------------------------------
+    def rl(self, i) -> str:
+        return self.problem.row_label(int(i))
+
+    def vl(self, j) -> str:
+        return self.problem.var_label(int(j))
+
+
+class Timer:
+    def __init__(self):
+        self.t0 = time.perf_counter()
+
+    def elapsed(self):
+        return time.perf_counter() - self.t0

@@ -1,0 +1,256 @@
+"""The preprocessor driver: passes iterated to a fixed point, then the reduced problem.
+
+Round structure (thesis §2.4, Ferris & Munson 2001): phase one -- fixed variables, empty
+rows, empty columns, singleton rows, column singletons (incl. doubleton rows with a
+column singleton), forcing rows, duplicate rows -- is repeated while it reduces anything;
+when a round of phase one finds nothing, phase two (fixing by the range of F) runs, and
+if it fixes something phase one starts again.  Every round starts by recomputing the
+remaining problem's counts and the constants of its linear rows (one F evaluation).
+
+``presolve`` never changes the user's problem: it returns a reduced MCP that wraps it and
+a postsolve stack.  A problem without declared linear entries still gets the passes that
+need none (fixed variables; rows and columns without pattern entries).
+"""
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from ..merit import natural_residual
+from . import (column_singletons, duplicate_rows, empty_columns, empty_rows, fixed, forcing,
+               range_fixing, singleton_rows)
+from ._work import InfeasibilityDiagnostic, PresolveInfeasible, Workspace
+from .linear import declared_constant_mask
+from .options import PresolveOptions
+from .postsolve import PostsolveStack
+from .reduced import build_reduced
+from .structural import StructuralReport, structural_rank_check
+
+logger = logging.getLogger("compass_sparse.presolve")
+
+__all__ = ["presolve", "PresolveResult", "PresolveStats", "PassStats", "solve_with_presolve",
+           "PostsolvedSolution"]
+
+PHASE_ONE = (fixed, empty_rows, empty_columns, singleton_rows, column_singletons, forcing,
+             duplicate_rows)
+PHASE_TWO = (range_fixing,)
+
+
+@dataclass
+class PassStats:
+    """Counters of one pass: how often it reduced something, what it removed, its time."""
+
+    name: str
+    enabled: bool = True
+    calls: int = 0
+    applied: int = 0  # calls that removed something
+    removed: int = 0  # rows/cols (pairs) removed
+    nnz_removed: int = 0
+    time: float = 0.0
+
+
+@dataclass
+class PresolveStats:
+    n_original: int = 0
+    n_reduced: int = 0
+    nnz_original: int = 0
+    nnz_reduced: int = 0
+    rounds: int = 0
+    time: float = 0.0
+    f_evals: int = 0
+    passes: dict = field(default_factory=dict)
+
+    @property
+    def removed(self) -> int:
+        return self.n_original - self.n_reduced
+
+    @property
+    def nnz_removed(self) -> int:
+        return self.nnz_original - self.nnz_reduced
+
+    def table(self) -> str:
+        lines = [f"{'pass':20s} {'on':>3s} {'calls':>6s} {'removed':>8s} {'nnz':>9s} "
+                 f"{'time[s]':>8s}"]
+        for s in self.passes.values():
+            lines.append(f"{s.name:20s} {'yes' if s.enabled else 'no':>3s} {s.calls:6d} "
+                         f"{s.removed:8d} {s.nnz_removed:9d} {s.time:8.4f}")
+        return "\n".join(lines)
+
+
+@dataclass
+class PresolveResult:
+    """What :func:`presolve` returns.
+
+    ``reduced``: the MCP on the remaining variables (None when presolve removed everything,
+    the problem itself when it removed nothing).  ``stack``: the postsolve stack.
+    ``stats``: per-pass counters.  ``infeasible``: an :class:`InfeasibilityDiagnostic`
+    when a reduction proved that the MCP has no solution (the reductions made before it
+    are kept).  ``warnings``: messages (unverifiable linear declarations, duplicate
+    equations).  ``structural``: the structural-rank report of the reduced problem.
+    """
+
+    original: object
+    reduced: object
+    stack: PostsolveStack
+    stats: PresolveStats
+    options: PresolveOptions
+    infeasible: InfeasibilityDiagnostic | None = None
+    warnings: list = field(default_factory=list)
+    structural: StructuralReport | None = None
+
+    @property
+    def cols(self) -> np.ndarray:
+        return self.stack.cols
+
+    @property
+    def rows(self) -> np.ndarray:
+        return self.stack.rows
+
+    def postsolve(self, x_reduced) -> np.ndarray:
+        return self.stack.postsolve(x_reduced)
+
+    def summary_line(self) -> str:
+        s = self.stats
+        line = (f"Preprocessor removed {s.removed} rows/cols and {s.nnz_removed} non-zeros; "
+                f"preprocessed size {s.n_reduced} (nnz {s.nnz_reduced}) from {s.n_original} "
+                f"(nnz {s.nnz_original}) in {s.rounds} rounds, {s.time:.3f} s")
+        if self.infeasible is not None:
+            line += f"; INFEASIBLE: {self.infeasible.message}"
+        return line
+
+    def counters_line(self) -> str:
+        """PATH-style per-reduction counters."""
+        return "Presolve: " + " ".join(
+            f"{name}={ps.removed}" for name, ps in self.stats.passes.items() if ps.removed)
+
+
+def _has_structure(problem, J0) -> bool:
+    if np.any(problem.lb == problem.ub):
+        return True
+    if problem.constant_mask is not None and problem.constant_mask.any():
+        return True
+    counts_r = np.bincount(J0.indices, minlength=problem.n)
+    return bool(np.any(counts_r == 0) or np.any(np.diff(J0.indptr) == 0))
+
+
+def presolve(problem, options: PresolveOptions | dict | None = None) -> PresolveResult:
+    """Reduce ``problem`` (an :class:`~compass_sparse.problem.MCP`); see the module docs."""
+    opts = PresolveOptions.coerce(options)
+    t0 = time.perf_counter()
+    warnings: list = []
+    J0 = problem.J(problem.x0)
+    nnz = int(J0.indptr[-1])
+    stats = PresolveStats(n_original=problem.n, nnz_original=nnz)
+    for mod in PHASE_ONE + PHASE_TWO:
+        stats.passes[mod.NAME] = PassStats(mod.NAME, enabled=getattr(opts, mod.NAME))
+    if not _has_structure(problem, J0):
+        stack = PostsolveStack(n=problem.n, evaluate_F=problem.F_uncounted,
+                               base=problem.x0.copy(), cols=np.arange(problem.n),
+                               rows=np.arange(problem.n))
+        stats.n_reduced, stats.nnz_reduced = problem.n, nnz
+        stats.time = time.perf_counter() - t0
+        return PresolveResult(problem, problem, stack, stats, opts, warnings=warnings)
+    f0 = np.asarray(problem.F_uncounted(problem.x0), dtype=float)
+    const = declared_constant_mask(problem, J0, f0, opts, warnings)
+    ws = Workspace(problem, opts, J0, const, warnings)
+    infeasible = None
+    try:
+        for rnd in range(opts.max_rounds):
+            if rnd > 0:
+                ws.refresh()
+            stats.rounds = rnd + 1
+            changed = _run_phase(ws, PHASE_ONE, stats, opts)
+            if not changed:
+                changed = _run_phase(ws, PHASE_TWO, stats, opts)
+            if not changed:
+                break
+    except PresolveInfeasible as exc:
+        infeasible = exc.diagnostic
+        logger.warning("presolve: %s", infeasible.message)
+    reduced = build_reduced(ws)
+    if len(ws.stack) == 0:
+        reduced = problem
+        ws.stack.cols = np.arange(problem.n)
+        ws.stack.rows = np.arange(problem.n)
+    stats.n_reduced = int(ws.stack.cols.size)
+    stats.nnz_reduced = ws.live_nnz()
+    stats.f_evals = ws.f_evals
+    warnings[:] = list(dict.fromkeys(warnings))
+    structural = None
+    if opts.structural_check and reduced is not None:
+        structural = structural_rank_check(reduced, include_fixed=True)
+        if not structural.ok:
+            logger.warning("presolve: %s", structural.message)
+    stats.time = time.perf_counter() - t0
+    res = PresolveResult(problem, reduced, ws.stack, stats, opts, infeasible=infeasible,
+                         warnings=warnings, structural=structural)
+    logger.info(res.summary_line())
+    return res
+
+
+def _run_phase(ws, passes, stats, opts) -> int:
+    total = 0
+    for mod in passes:
+        if not getattr(opts, mod.NAME):
+            continue
+        ps = stats.passes[mod.NAME]
+        ws.current_pass = mod.NAME
+        before = ws.changed
+        t = time.perf_counter()
+        nnz_before = None
+        try:
+            nnz_before = ws.live_nnz()
+            mod.run(ws)
+        finally:
+            ps.calls += 1
+            k = ws.changed - before
+            if k:
+                ps.applied += 1
+                ps.removed += k
+                ps.nnz_removed += nnz_before - ws.live_nnz()
+            ps.time += time.perf_counter() - t
+        total += k
+    return total
+
+
+@dataclass
+class PostsolvedSolution:
+    """What :func:`solve_with_presolve` returns: the full point ``x``, ``F`` = F(x) on the
+    original problem (fixed and removed variables' F values included), its natural
+    residual, the presolve result and the inner solver's return value (None when presolve
+    removed everything or proved infeasibility)."""
+
+    x: np.ndarray
+    F: np.ndarray
+    natural_residual: float
+    presolve: PresolveResult
+    inner: object = None
+
+    @property
+    def infeasible(self):
+        return self.presolve.infeasible
+
+
+def solve_with_presolve(problem, solve: Callable, options=None) -> PostsolvedSolution:
+    """Presolve, ``solve(reduced_problem)`` (must return an object with ``.x``), postsolve.
+
+    When presolve proves infeasibility the solver is not called and ``x`` is the
+    postsolved start point."""
+    pre = presolve(problem, options)
+    inner = None
+    if pre.reduced is None:
+        xr = np.zeros(0)
+    elif pre.infeasible is not None:
+        xr = pre.reduced.x0
+    else:
+        inner = solve(pre.reduced)
+        xr = np.asarray(inner.x, dtype=float)
+    x = pre.postsolve(xr)
+    f = np.asarray(problem.F_uncounted(x), dtype=float)
+    return PostsolvedSolution(x=x, F=f, natural_residual=natural_residual(x, f, problem.lb,
+                                                                          problem.ub),
+                              presolve=pre, inner=inner)

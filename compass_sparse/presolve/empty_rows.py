@@ -1,0 +1,44 @@
+"""Pass: empty rows.
+
+A linear row i with no remaining entry is a constant: F_i(z) = c_i for every z.  With p
+its paired variable, the complementarity condition l_p <= z_p <= u_p _|_ c_i means
+
+* c_i > 0: z_p = l_p in every solution (no solution when l_p = -inf);
+* c_i < 0: z_p = u_p in every solution (no solution when u_p = +inf);
+* c_i = 0: any z_p in [l_p, u_p] satisfies row i.  Then z_p is still determined by the
+  other rows it appears in, so it stays -- unless no remaining row depends on it, in which
+  case it is fixed at its start value (clipped into the box).
+
+"c_i > 0" means c_i > feasibility_tolerance * (1 + |c_i|).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+NAME = "empty_rows"
+
+
+def run(ws) -> None:
+    rows = np.flatnonzero(ws.linear & (ws.row_nnz == 0) & ~ws.touched_row)
+    if rows.size == 0:
+        return
+    p = ws.partner_var[rows]
+    c = ws.c[rows]
+    t = ws.opts.feasibility_tolerance * ws.scale[rows]
+    pos, neg = c > t, c < -t
+    bad = (pos & np.isneginf(ws.lb[p])) | (neg & np.isposinf(ws.ub[p]))
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        i, j = rows[k], p[k]
+        side = "positive" if pos[k] else "negative"
+        ws.infeasible(
+            f"row {ws.rl(i)} is the constant {c[k]:.6g} ({side}), so its variable "
+            f"{ws.vl(j)} would have to sit at its {'lower' if pos[k] else 'upper'} bound, "
+            "which is infinite: the MCP has no solution", rows=[i], variables=[j])
+    zero = ~pos & ~neg & (ws.col_nnz[p] == 0) & (ws.col_nl[p] == 0)
+    take = (pos | neg | zero) & ~ws.touched_col[p]
+    if not take.any():
+        return
+    vals = np.where(pos, ws.lb[p], np.where(neg, ws.ub[p], np.clip(ws.base[p], ws.lb[p],
+                                                                        ws.ub[p])))
+    ws.fix(p[take], vals[take], reason="empty row")

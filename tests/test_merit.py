@@ -1,0 +1,239 @@
+"""Merit functions and residuals: Fischer–Burmeister Phi, Psi and its gradient, the natural
+residual, the normal map and the residual report."""
+from decimal import Decimal, getcontext
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from hypothesis import given, settings, strategies as st
+
+import compass_sparse.generators as gen
+from compass_sparse.merit import (
+    fb_gradient,
+    fb_jacobian_diagonals,
+    fb_phi,
+    fb_psi,
+    fischer,
+    min_map,
+    natural_residual,
+    normal_map,
+    project,
+    residual_report,
+)
+
+INF = np.inf
+
+
+# -------------------------------------------------------------------------- fischer
+def _phi_exact(a: float, b: float) -> float:
+    getcontext().prec = 80
+    A, B = Decimal(a), Decimal(b)
+    return float((A * A + B * B).sqrt() - A - B)
+
+
+@pytest.mark.parametrize(
+    "a,b",
+    [(1e8, 1e-8), (3e5, 7e5), (1e200, 1e200), (1e-200, 3e-200), (1.0, 1e-20), (1e300, 1e290),
+     (12345.678, 0.001), (1e15, 1e15), (2.0, 3.0)],
+)
+def test_fischer_accurate_for_positive_arguments(a, b):
+    exact = _phi_exact(a, b)
+    got = float(fischer(a, b))
+    assert exact < 0
+    assert abs(got - exact) <= 4e-16 * abs(exact), (got, exact)
+    assert float(fischer(b, a)) == pytest.approx(exact, rel=4e-16)
+
+
+def test_fischer_signs_and_zeros():
+    a = np.array([0.0, 0.0, 2.0, -1.0, 0.0, -3.0, 1.0])
+    b = np.array([0.0, 5.0, 0.0, 2.0, -4.0, -3.0, 1.0])
+    phi = fischer(a, b)
+    assert np.all(phi[:3] == 0.0)
+    np.testing.assert_allclose(phi[3:], [np.sqrt(5) - 1, 8.0, 3 * np.sqrt(2) + 6,
+                                         np.sqrt(2) - 2], rtol=1e-15)
+    # well-defined for mixed huge / tiny magnitudes
+    assert np.isfinite(fischer(1e308, 1e308)) and fischer(1e308, 1e308) < 0
+    assert fischer(1e-310, 1e-310) < 0
+
+
+# ------------------------------------------------------- Phi = 0 iff natural residual = 0
+_finite = st.floats(min_value=-50, max_value=50, allow_nan=False, allow_subnormal=False)
+
+
+@st.composite
+def _points(draw):
+    """Random rows of all bound types (free, lower, upper, boxed, fixed) with z and F
+    drawn so that complementary and violating rows both occur often."""
+    n = draw(st.integers(1, 8))
+    lb, ub, z, f = (np.empty(n) for _ in range(4))
+    for i in range(n):
+        kind = draw(st.sampled_from(["free", "lower", "upper", "box", "fixed"]))
+        lo = draw(st.integers(-5, 5)) * 0.5
+        width = draw(st.integers(1, 6)) * 0.5
+        lb[i] = lo if kind in ("lower", "box", "fixed") else -INF
+        ub[i] = {"upper": lo, "box": lo + width, "fixed": lo}.get(kind, INF)
+        where = draw(st.sampled_from(["lower", "upper", "inside", "any"]))
+        if where == "lower" and np.isfinite(lb[i]):
+            z[i] = lb[i]
+        elif where == "upper" and np.isfinite(ub[i]):
+            z[i] = ub[i]
+        elif where == "inside":
+            z[i] = project(lo + 0.25 * width, lb[i], ub[i])
+        else:
+            z[i] = draw(_finite)
+        fsign = draw(st.sampled_from(["zero", "pos", "neg", "any"]))
+        mag = draw(st.floats(1e-6, 1e3))
+        f[i] = {"zero": 0.0, "pos": mag, "neg": -mag}.get(fsign, draw(_finite))
+    return z, f, lb, ub
+
+
+@settings(max_examples=400, derandomize=True, deadline=None)
+@given(_points())
+def test_phi_zero_iff_natural_residual_zero(pt):
+    z, f, lb, ub = pt
+    phi = fb_phi(z, f, lb, ub)
+    mm = min_map(z, f, lb, ub)
+    np.testing.assert_array_equal(phi == 0.0, mm == 0.0)
+    assert (np.max(np.abs(phi)) == 0.0) == (natural_residual(z, f, lb, ub) == 0.0)
+    # the normal-map residual of the report vanishes exactly at solutions too
+    rep = residual_report(z, f, lb, ub)
+    if natural_residual(z, f, lb, ub) == 0.0:
+        assert rep.normal_map_inf == 0.0 and rep.fb_norm == 0.0
+    else:
+        assert rep.fb_norm > 0.0
+
+
+def test_phi_by_bound_type_and_fixed():
+    # columns: free, lower, upper, box, fixed
+    lb = np.array([-INF, 0.0, -INF, -1.0, 2.0])
+    ub = np.array([INF, INF, 1.0, 1.0, 2.0])
+    # solutions: free with F = 0; at lower with F > 0; at upper with F < 0; box interior
+    # with F = 0; fixed with any F
+    z = np.array([3.0, 0.0, 1.0, 0.5, 2.0])
+    f = np.array([0.0, 2.0, -3.0, 0.0, 7.0])
+    assert np.all(fb_phi(z, f, lb, ub) == 0)
+    assert natural_residual(z, f, lb, ub) == 0
+    assert np.all(fb_phi(z, -f, lb, ub)[:4] == np.array([0.0, 1, 1, 0]) * fb_phi(z, -f, lb, ub)[:4])
+    bad = fb_phi(z, -f, lb, ub)
+    assert bad[0] == 0 and bad[1] != 0 and bad[2] != 0 and bad[3] == 0 and bad[4] == 0
+    # free row: Phi = -F
+    assert fb_phi(z, f + 1.5, lb, ub)[0] == -1.5
+    # fixed variable: Phi vanishes for every F
+    assert np.all(fb_phi(np.full(3, 2.0), np.array([-5.0, 0.0, 5.0]),
+                         np.full(3, 2.0), np.full(3, 2.0)) == 0)
+    # scalar bounds are accepted
+    assert np.all(fb_phi(np.array([0.0, 1.0]), np.array([1.0, 0.0]), 0.0, INF) == 0)
+
+
+@pytest.mark.parametrize("name,factory", [
+    ("pmat_mixed", lambda: gen.p_matrix_lcp(300, "grid", 1, "mixed", 0.2)),
+    ("structured", lambda: gen.structured_quadratic(500, 2, bound_mix=(1, 1, 1, 1))),
+    ("obstacle", lambda: gen.obstacle_problem(15, 4)),
+])
+def test_phi_zero_at_known_solutions_and_not_elsewhere(name, factory):
+    G = factory()
+    p, z = G.problem, G.solution
+    f = p.F(z)
+    assert np.max(np.abs(fb_phi(z, f, p.lb, p.ub))) <= 1e-12
+    rng = np.random.default_rng(0)
+    for _ in range(5):
+        y = project(z + rng.normal(scale=0.1, size=p.n), p.lb, p.ub)
+        fy = p.F(y)
+        assert np.linalg.norm(fb_phi(y, fy, p.lb, p.ub)) > 1e-6
+        assert natural_residual(y, fy, p.lb, p.ub) > 1e-6
+
+
+# ----------------------------------------------------------------------- gradient
+def _smooth_problem(n, seed):
+    rng = np.random.default_rng(seed)
+    A = sp.random(n, n, density=0.3, random_state=seed, format="csc") + sp.identity(n) * 2
+    A = sp.csc_matrix(A)
+    c = rng.uniform(-1, 1, n)
+
+    def F(z):
+        return A @ z + 0.3 * np.sin(z) + c
+
+    def J(z):
+        return sp.csc_matrix(A + sp.diags(0.3 * np.cos(z)))
+
+    kinds = np.arange(n) % 4
+    lb = np.where((kinds == 1) | (kinds == 3), rng.uniform(-1, 0, n), -INF)
+    ub = np.where(kinds == 2, rng.uniform(0, 1, n),
+                  np.where(kinds == 3, lb + rng.uniform(0.5, 2, n), INF))
+    return F, J, lb, ub, rng
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_gradient_matches_central_differences(seed):
+    n = 16
+    F, J, lb, ub, rng = _smooth_problem(n, seed)
+    psi = lambda z: fb_psi(fb_phi(z, F(z), lb, ub))  # noqa: E731
+    for _ in range(3):
+        # generic points (inside and outside the box, away from the kinks a = b = 0)
+        z = rng.uniform(-2, 2, n)
+        g = fb_gradient(z, F(z), J(z), lb, ub)
+        h = 1e-6
+        gfd = np.array([(psi(z + h * e) - psi(z - h * e)) / (2 * h) for e in np.eye(n)])
+        assert np.linalg.norm(g - gfd) <= 1e-6 * np.linalg.norm(g)
+
+
+def test_generalized_jacobian_matches_directional_difference():
+    n = 12
+    F, J, lb, ub, rng = _smooth_problem(n, 9)
+    z = rng.uniform(-2, 2, n)
+    da, db = fb_jacobian_diagonals(z, F(z), lb, ub)
+    H = sp.diags(da) + sp.diags(db) @ J(z)
+    d = rng.normal(size=n)
+    h = 1e-6
+    fd = (fb_phi(z + h * d, F(z + h * d), lb, ub) - fb_phi(z - h * d, F(z - h * d), lb, ub)) / (2 * h)
+    np.testing.assert_allclose(H @ d, fd, rtol=1e-6, atol=1e-8)
+
+
+def test_gradient_with_fixed_variables_is_finite_and_zero_rows():
+    # a fixed variable contributes Phi_i = 0, so grad Psi only sees other rows
+    lb = np.array([1.0, 0.0])
+    ub = np.array([1.0, INF])
+    z = np.array([1.0, 0.5])
+    f = np.array([3.0, 1.0])
+    Jm = sp.csc_matrix(np.array([[1.0, 0.0], [2.0, 1.0]]))
+    phi = fb_phi(z, f, lb, ub)
+    assert phi[0] == 0
+    g = fb_gradient(z, f, Jm, lb, ub)
+    assert np.all(np.isfinite(g))
+
+
+# ----------------------------------------------------------- normal map and report
+def test_normal_map_zero_at_solution():
+    G = gen.p_matrix_lcp(200, "banded", 3, "mixed", 0.1)
+    p, z = G.problem, G.solution
+    f = p.F(z)
+    x = z - f
+    np.testing.assert_array_equal(project(x, p.lb, p.ub), z)
+    fb = normal_map(x, p.F(project(x, p.lb, p.ub)), p.lb, p.ub)
+    assert np.max(np.abs(fb)) <= 1e-12
+    # not a zero elsewhere
+    y = x + 0.01
+    assert np.max(np.abs(normal_map(y, p.F(project(y, p.lb, p.ub)), p.lb, p.ub))) > 1e-4
+    rep = residual_report(z, f, p.lb, p.ub)
+    assert rep.normal_map_inf <= 1e-12 and rep.natural <= 1e-12 and rep.merit <= 1e-24
+
+
+def test_residual_report_names_worst_row():
+    n = 10
+    lb, ub = np.zeros(n), np.full(n, INF)
+    z = np.zeros(n)
+    f = np.full(n, 1.0)  # all complementary
+    f[6] = -4.0  # worst violation
+    f[2] = -1.0
+    names = [f"demand_{i}" for i in range(n)]
+    rep = residual_report(z, f, lb, ub, names=names, k_worst=3)
+    assert rep.worst_index == 6
+    assert rep.worst[0][0] == "demand_6" and rep.worst[1][0] == "demand_2"
+    assert "demand_6" in rep.summary()
+    assert rep.fb_norm == pytest.approx(np.linalg.norm(fb_phi(z, f, lb, ub)))
+    assert rep.natural == pytest.approx(4.0)
+    assert rep.fb_inf == pytest.approx(8.0)  # phi(0, -4) = 4 + 4
+    rep2 = residual_report(z, f, lb, ub, names=lambda i: f"row<{i}>")
+    assert rep2.worst[0][0] == "row<6>"
+    rep3 = residual_report(z, f, lb, ub)
+    assert rep3.worst[0][0] == "F[6]"
