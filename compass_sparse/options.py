@@ -39,9 +39,10 @@ class Options:
     major_iteration_limit: int = _opt(
         500, "maximum major (Newton) iterations; 0 only evaluates the start point", lo=0)
     minor_iteration_limit: int | None = _opt(
-        None, "maximum pivots in one pivotal path; None = max(2n, 1000)", lo=1, nullable=True)
+        None, "maximum pivots in one pivotal path; None = max(2n, 100) (PATH: 2n)", lo=1,
+        nullable=True)
     cumulative_iteration_limit: int | None = _opt(
-        None, "maximum pivots over the whole solve; None = max(10000, 20n)", lo=1,
+        None, "maximum pivots over the whole solve; None = max(100000, 100n)", lo=1,
         nullable=True)
     time_limit: float = _opt(math.inf, "wall-clock seconds for the solve", lo=0.0, lo_open=True)
 
@@ -207,10 +208,10 @@ class Options:
         return Options(**d)
 
     def minor_limit(self, n: int) -> int:
-        return self.minor_iteration_limit or max(2 * n, 1000)
+        return self.minor_iteration_limit or max(2 * n, 100)
 
     def cumulative_limit(self, n: int) -> int:
-        return self.cumulative_iteration_limit or max(10000, 20 * n)
+        return self.cumulative_iteration_limit or max(100000, 100 * n)
 
     @classmethod
     def describe(cls) -> str:

@@ -52,6 +52,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from ._path_kernels import project_slots, ratio_test
 from .basis import KIND_DENSE, KIND_M, KIND_UNIT
 
 # Basic-variable kinds of a slot.
@@ -200,7 +201,7 @@ class PivotalPath:
             res.time = time.perf_counter() - t0
             return res
         # Slot table: slot i initially holds index i's basic variable.
-        self.sk = basic.astype(np.int64)  # slot variable kind
+        self.sk = basic.astype(np.int64)  # slot variable kind (VAR_*)
         self.si = np.arange(n, dtype=np.int64)  # slot variable index
         xb = np.where(basic == VAR_Z, z, np.where(basic == VAR_W, w, v))
         xb = np.where(basic == VAR_S, w - v, xb)
@@ -312,28 +313,8 @@ class PivotalPath:
         self._project()
 
     # ------------------------------------------------------------------ pivoting
-    def _bounds_of_slots(self):
-        """Lower/upper bounds of the basic variables by slot."""
-        sk, si = self.sk, self.si
-        lo = np.zeros(self.n)
-        hi = np.full(self.n, np.inf)
-        isz = sk == VAR_Z
-        lo[isz] = self.lb[si[isz]]
-        hi[isz] = self.ub[si[isz]]
-        iss = sk == VAR_S
-        lo[iss] = -np.inf
-        ist = sk == VAR_T
-        hi[ist] = 1.0
-        isa = sk == VAR_A
-        # Artificials leave when they come back to 0 from either side.
-        a = self.xb[isa]
-        lo[isa] = np.where(a >= 0, 0.0, -np.inf)
-        hi[isa] = np.where(a >= 0, np.inf, 0.0)
-        return lo, hi
-
     def _project(self):
-        lo, hi = self._bounds_of_slots()
-        np.clip(self.xb, lo, hi, out=self.xb)
+        project_slots(self.sk, self.si, self.xb, self.lb, self.ub)
 
     def _pivot_loop(self):
         opt = self.opt
@@ -364,7 +345,7 @@ class PivotalPath:
                 entering = (ek, ei, es, ev)
             rate = -es * d  # d xb / d theta
             theta_self = self._entering_room(ek, ei, es, ev)
-            leave, theta = self._ratio_test(rate, d)
+            leave, theta, leave_up = self._ratio_test(rate, d)
             if leave < 0 and not np.isfinite(theta_self):
                 # Ray termination: the entering variable grows without bound.
                 return LinearCode.RAY, f"ray: {_VAR_NAMES[ek]}[{ei}] unbounded"
@@ -391,11 +372,8 @@ class PivotalPath:
             self.xb += theta * rate
             new_val = ev + es * theta
             lk, li = int(self.sk[leave]), int(self.si[leave])
-            lo, hi = self._bounds_of_slots()
-            leave_at_upper = rate[leave] > 0
-            leave_val = hi[leave] if leave_at_upper else lo[leave]
-            if lk == VAR_A:
-                leave_val = 0.0
+            leave_at_upper = bool(leave_up)
+            leave_val = self._bound_of(lk, li, leave_at_upper)
             status = self.bm.replace(leave, *col)
             pivots += 1
             self.pivots = pivots
@@ -444,6 +422,14 @@ class PivotalPath:
             return None, ""
         return self._factor()
 
+    def _bound_of(self, kind, index, upper):
+        """The bound a leaving basic variable stops at."""
+        if kind == VAR_Z:
+            return float(self.ub[index] if upper else self.lb[index])
+        if kind == VAR_T:
+            return 1.0 if upper else 0.0
+        return 0.0
+
     def _set_slot(self, slot, ek, ei, new_val, lk, li, leave_val):
         if lk == VAR_Z:
             self.zval[li] = leave_val
@@ -471,34 +457,10 @@ class PivotalPath:
         return np.inf
 
     def _ratio_test(self, rate, d):
-        """Two-pass (Harris) ratio test.  Returns (slot, theta) or (-1, inf)."""
-        lo, hi = self._bounds_of_slots()
-        xb = self.xb
+        """Two-pass (Harris) ratio test.  Returns (slot, theta, leaves_at_upper)."""
         scale = max(1.0, float(np.max(np.abs(d)))) if d.size else 1.0
-        piv_tol = self.opt.pivot_tolerance * scale
-        tol = self.opt.ratio_tolerance
-        up = rate > piv_tol
-        dn = rate < -piv_tol
-        room = np.full(self.n, np.inf)
-        room[up] = hi[up] - xb[up]
-        room[dn] = xb[dn] - lo[dn]
-        cand = np.isfinite(room) & (up | dn)
-        if not np.any(cand):
-            return -1, np.inf
-        idx = np.flatnonzero(cand)
-        arate = np.abs(rate[idx])
-        rm = np.maximum(room[idx], 0.0)
-        bnd = np.where(up[idx], hi[idx], lo[idx])
-        slack = tol * np.maximum(1.0, np.abs(bnd))
-        theta1 = float(np.min((rm + slack) / arate))
-        ratios = rm / arate
-        within = ratios <= theta1
-        # t reaching 1 wins every tie; then artificials; then the largest pivot.
-        sk = self.sk[idx]
-        pri = np.where(sk == VAR_T, 2, np.where(sk == VAR_A, 1, 0))
-        score = np.where(within, pri * 1e300 + arate, -np.inf)
-        k = int(np.argmax(score))
-        return int(idx[k]), float(ratios[k])
+        return ratio_test(self.sk, self.si, self.xb, rate, self.lb, self.ub,
+                          self.opt.pivot_tolerance * scale, self.opt.ratio_tolerance)
 
     def _record(self):
         if self.t > self.best[0] + 1e-15:

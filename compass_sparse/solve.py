@@ -30,7 +30,7 @@ logger = logging.getLogger("compass_sparse")
 
 __all__ = ["solve_mcp", "solve_lcp", "MCPSolver"]
 
-DENSE_BASIS_MAX_N = 0
+DENSE_BASIS_MAX_N = 300
 """Below this dimension the dense reference basis is used (0: always the sparse manager)."""
 
 
@@ -281,12 +281,14 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
                        factorizations=st.factorizations)
     bm = _manager_factory(opt)(M)
     tp = time.perf_counter()
-    path = PivotalPath(M, q, lb, ub, bm, opt)
+    # One path solves a linear problem: give it room (a Lemke path may need ~n pivots).
+    limit = opt.minor_iteration_limit or max(10 * n, 1000)
+    path = PivotalPath(M, q, lb, ub, bm, opt, minor_limit=limit)
     start_ray = opt.lemke_start in ("always", "first")
     res = path.run(x, ray_start=start_ray)
     pivots = res.pivots
     if res.code is not LinearCode.SOLVED and not start_ray:
-        res2 = PivotalPath(M, q, lb, ub, bm, opt).run(x, ray_start=True)
+        res2 = PivotalPath(M, q, lb, ub, bm, opt, minor_limit=limit).run(x, ray_start=True)
         pivots += res2.pivots
         if res2.code is LinearCode.SOLVED or res2.code is LinearCode.RAY:
             res = res2

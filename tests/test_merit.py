@@ -113,7 +113,6 @@ def test_phi_by_bound_type_and_fixed():
     f = np.array([0.0, 2.0, -3.0, 0.0, 7.0])
     assert np.all(fb_phi(z, f, lb, ub) == 0)
     assert natural_residual(z, f, lb, ub) == 0
-    assert np.all(fb_phi(z, -f, lb, ub)[:4] == np.array([0.0, 1, 1, 0]) * fb_phi(z, -f, lb, ub)[:4])
     bad = fb_phi(z, -f, lb, ub)
     assert bad[0] == 0 and bad[1] != 0 and bad[2] != 0 and bad[3] == 0 and bad[4] == 0
     # free row: Phi = -F
@@ -185,7 +184,8 @@ def test_generalized_jacobian_matches_directional_difference():
     H = sp.diags(da) + sp.diags(db) @ J(z)
     d = rng.normal(size=n)
     h = 1e-6
-    fd = (fb_phi(z + h * d, F(z + h * d), lb, ub) - fb_phi(z - h * d, F(z - h * d), lb, ub)) / (2 * h)
+    zp, zm = z + h * d, z - h * d
+    fd = (fb_phi(zp, F(zp), lb, ub) - fb_phi(zm, F(zm), lb, ub)) / (2 * h)
     np.testing.assert_allclose(H @ d, fd, rtol=1e-6, atol=1e-8)
 
 

@@ -741,8 +741,7 @@ class BasisManager:
         return y
 
     def dense_basis(self):
-        """The explicit dense B (for tests and debugging only)."""
-        self._require() if False else None
+        """The explicit dense B of the current slot table (tests and debugging only)."""
         n = self.n
         B = self._nonunit_columns(np.arange(n, dtype=_I)).toarray()
         u = np.flatnonzero(self._kinds == KIND_UNIT)

@@ -167,10 +167,10 @@ class FactorReport:
     Attributes
     ----------
     ok : bool
-        True when the factorization is valid (the basis is regular, possibly after the
-        repair listed in ``replaced``). False never leaves the manager usable; it is only
-        returned together with an exception-free failure that cannot happen in practice
-        (kept for callers that test it).
+        True when the manager holds a valid factorization of a regular basis (possibly
+        after the repair listed in ``replaced``). A basis that cannot be repaired raises
+        :class:`~compass_sparse.exceptions.SingularBasisError` instead, so ``ok`` is True
+        on every returned report; test ``rank_deficiency`` / ``replaced`` for repairs.
     replaced : list of (slot, old_kind, old_index, old_sign, new_row)
         Slots whose column made B singular (numerically or structurally, or a duplicated
         unit column) and now hold the unit column ``+e_{new_row}``.

@@ -26,7 +26,6 @@ record hold a batch of reductions).
 from __future__ import annotations
 
 import logging
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -235,11 +234,3 @@ class Workspace:
 
     def vl(self, j) -> str:
         return self.problem.var_label(int(j))
-
-
-class Timer:
-    def __init__(self):
-        self.t0 = time.perf_counter()
-
-    def elapsed(self):
-        return time.perf_counter() - self.t0

@@ -152,8 +152,12 @@ def presolve(problem, options: PresolveOptions | dict | None = None) -> Presolve
                                base=problem.x0.copy(), cols=np.arange(problem.n),
                                rows=np.arange(problem.n))
         stats.n_reduced, stats.nnz_reduced = problem.n, nnz
+        structural = structural_rank_check(problem) if opts.structural_check else None
+        if structural is not None and not structural.ok:
+            logger.warning("presolve: %s", structural.message)
         stats.time = time.perf_counter() - t0
-        return PresolveResult(problem, problem, stack, stats, opts, warnings=warnings)
+        return PresolveResult(problem, problem, stack, stats, opts, warnings=warnings,
+                              structural=structural)
     f0 = np.asarray(problem.F_uncounted(problem.x0), dtype=float)
     const = declared_constant_mask(problem, J0, f0, opts, warnings)
     ws = Workspace(problem, opts, J0, const, warnings)
@@ -182,7 +186,7 @@ def presolve(problem, options: PresolveOptions | dict | None = None) -> Presolve
     warnings[:] = list(dict.fromkeys(warnings))
     structural = None
     if opts.structural_check and reduced is not None:
-        structural = structural_rank_check(reduced, include_fixed=True)
+        structural = structural_rank_check(reduced)
         if not structural.ok:
             logger.warning("presolve: %s", structural.message)
     stats.time = time.perf_counter() - t0

@@ -61,7 +61,9 @@ def run(ws) -> None:
     rows = np.flatnonzero(cand)
     order = np.lexsort((h2[rows], h1[rows], ws.row_nnz[rows]))
     rows = rows[order]
-    same = (ws.row_nnz[rows[1:]] == ws.row_nnz[rows[:-1]]) & (h1[rows[1:]] == h1[rows[:-1]])
+    hb, ha = h2[rows[1:]], h2[rows[:-1]]
+    same = (ws.row_nnz[rows[1:]] == ws.row_nnz[rows[:-1]]) & (h1[rows[1:]] == h1[rows[:-1]]) \
+        & (np.abs(hb - ha) <= 1e-9 * (np.abs(hb) + np.abs(ha)))
     fixes_c, fixes_v = [], []
     warned = 0
     for k in np.flatnonzero(same):

@@ -108,6 +108,9 @@ class PresolveOptions:
             f"presolve options must be PresolveOptions, a dict or None, not {type(options)}")
 
     def replace(self, **changes) -> "PresolveOptions":
+        bad = sorted(set(changes) - {f.name for f in dataclasses.fields(self)})
+        if bad:
+            raise OptionError(f"unknown presolve option(s): {bad}")
         return dataclasses.replace(self, **changes)
 
 

@@ -33,6 +33,18 @@ def run(ws) -> None:
     rows = np.flatnonzero(ws.linear & (ws.row_nnz == 1) & ~ws.touched_row)
     if rows.size == 0:
         return
+    # Fast path, vectorized: j = p with a > 0 has the unique solution clip(-c/a, l, u).
+    # Those fixings are implied by every solution and satisfy their own row whatever the
+    # rest does, so a whole batch is valid at once.
+    ent = np.flatnonzero(ws.nz & (ws.row_nnz[ws.er] == 1))
+    ent = ent[np.isin(ws.er[ent], rows)]
+    er, ec, ev = ws.er[ent], ws.ec[ent], ws.ev[ent]
+    diag = (ec == ws.partner_var[er]) & (ev > 0) & ~ws.touched_col[ec]
+    if diag.any():
+        j = ec[diag]
+        v = np.clip(-ws.c[er[diag]] / ev[diag], ws.lb[j], ws.ub[j])
+        ws.fix(j, v, reason="singleton row")
+        rows = np.setdiff1d(rows, er[diag])
     fix_cols, fix_vals = [], []
     eq = {"rows": [], "cols": [], "values": [], "freed": [], "repaired": []}
     lb, ub = ws.lb, ws.ub

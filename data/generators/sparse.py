@@ -203,8 +203,6 @@ def structured_quadratic(
 
     The solution is known (``solution``); x0 is the projection of 0.
     """
-    from . import GeneratedProblem  # noqa: F401  (return type)
-
     n = int(n)
     rng = np.random.default_rng(seed)
     if structure == "grid":

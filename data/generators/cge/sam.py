@@ -20,7 +20,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 __all__ = ["SAM", "random_sam", "ras"]
 
@@ -93,7 +92,7 @@ class SAM:
         }
 
 
-def ras(D0: np.ndarray, row: np.ndarray, col: np.ndarray, *, tol: float = 1e-15,
+def ras(D0: np.ndarray, row: np.ndarray, col: np.ndarray, *, tol: float = 4e-16,
         maxiter: int = 5000) -> np.ndarray:
     """RAS / iterative proportional fitting of positive matrices, batched.
 
@@ -102,12 +101,20 @@ def ras(D0: np.ndarray, row: np.ndarray, col: np.ndarray, *, tol: float = 1e-15,
     row-sum error is below ``tol`` (relative) on return.
     """
     D = np.array(D0, dtype=float, copy=True)
+    best = np.inf
+    stall = 0
     for _ in range(maxiter):
         D *= (row / D.sum(-1))[..., None]
         D *= (col / D.sum(-2))[..., None, :]
         err = np.max(np.abs(D.sum(-1) - row) / row)
         if err <= tol:
             break
+        if err < 0.5 * best:
+            best, stall = err, 0
+        else:
+            stall += 1
+            if stall >= 5 and err < 1e-12:  # at rounding level
+                break
     return D
 
 
@@ -201,9 +208,16 @@ def random_sam(
     # 3'. gross output: X = Pi (A X + FD), i.e. (I - Pi A) X = Pi FD
     Amat = sp.csr_matrix((a, (io_r * N + io_i, io_r * N + io_j)), shape=(RN, RN))
     Pi = sp.csr_matrix((l_pi, (src, dst)), shape=(RN, RN))
-    Msys = (sp.identity(RN, format="csc") - (Pi @ Amat).tocsc()).tocsc()
-    Xs = spla.spsolve(Msys, Pi @ FD)
-    Xs = np.maximum(Xs, 0.0)
+    # fixed-point iteration: ||Pi A||_1 <= max column sum < 1, so it contracts
+    PiA = (Pi @ Amat).tocsr()
+    b = Pi @ FD
+    Xs = b.copy()
+    for _ in range(200):
+        Xn = PiA @ Xs + b
+        if np.max(np.abs(Xn - Xs)) <= 1e-14 * np.max(Xn):
+            Xs = Xn
+            break
+        Xs = Xn
 
     # 4. flows from the solved outputs; every account is then exact by definition
     Z = a * Xs[io_r * N + io_j]
@@ -225,6 +239,8 @@ def random_sam(
 
     # 7. households
     B = np.bincount(np.arange(RN) // N, FD - VA, minlength=R) - TR
+    if R == 1:
+        B[:] = 0.0  # closed economy: the imbalance is rounding noise
     omega = rng.dirichlet(np.ones(H), size=(R, F)).transpose(0, 2, 1).reshape(R * H, F) \
         if H > 1 else np.ones((R, F))
     tau = (rng.dirichlet(np.ones(H), size=R) if H > 1 else np.ones((R, 1))).ravel()

@@ -1,0 +1,295 @@
+"""One test (or a few) per reduction, on small problems built to contain it."""
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from compass_sparse.presolve import PresolveOptions, presolve, solve_1d, solve_with_presolve
+from compass_sparse.problem import MCP
+
+from ._problems import linear_mcp
+from ._ref_solver import ref_solve
+
+INF = np.inf
+
+
+def solve_ok(problem, **opts):
+    sol = solve_with_presolve(problem, ref_solve, PresolveOptions(**opts) if opts else None)
+    assert sol.infeasible is None
+    assert sol.natural_residual <= 1e-8, sol.presolve.summary_line()
+    return sol
+
+
+def kinds(res):
+    return [type(r).__name__ for r in res.stack.records]
+
+
+def test_fixed_variable_removed_and_its_F_reported():
+    M = np.array([[4.0, 1.0, 0.0], [1.0, 3.0, 1.0], [0.0, 1.0, 5.0]])
+    q = np.array([-1.0, 2.0, -3.0])
+    p = linear_mcp(M, q, [0, 0.5, 0], [INF, 0.5, INF], declare=False)
+    sol = solve_ok(p)
+    assert sol.presolve.stats.passes["fixed_variables"].removed == 1
+    assert sol.x[1] == 0.5
+    # the fixed variable's F value is reported: F_1 = x0 + 3*0.5 + x2 + 2
+    assert sol.F[1] == pytest.approx(sol.x[0] + 1.5 + sol.x[2] + 2.0)
+    assert sol.F.shape == (3,)
+
+
+@pytest.mark.parametrize("c, lb, ub, want", [(2.0, -1.0, 3.0, -1.0), (-2.0, -1.0, 3.0, 3.0)])
+def test_empty_row_sends_variable_to_the_bound_its_sign_dictates(c, lb, ub, want):
+    M = np.array([[0.0, 0.0], [1.0, 2.0]])
+    M = sp.csc_matrix(M)
+    p = linear_mcp(M, np.array([c, -1.0]), [lb, 0.0], [ub, INF])
+    res = presolve(p)
+    assert res.stats.passes["empty_rows"].removed >= 1
+    sol = solve_ok(p)
+    assert sol.x[0] == want
+
+
+def test_empty_row_with_infinite_bound_is_infeasible_and_named():
+    M = sp.csc_matrix(np.array([[0.0, 0.0], [1.0, 2.0]]))
+    p = linear_mcp(M, np.array([2.0, -1.0]), [-INF, 0.0], [INF, INF],
+                   names=["price", "output"])
+    res = presolve(p)
+    assert res.infeasible is not None
+    assert "price" in res.infeasible.message and res.infeasible.variables == ["price"]
+    assert res.infeasible.pass_name == "empty_rows"
+    assert res.infeasible.rows == ["F(price)"]
+
+
+def test_empty_row_zero_constant_keeps_variable_that_others_use():
+    # F_0 = 0 (constant): z_0 is free within its bounds but row 1 depends on it -> kept
+    M = sp.csc_matrix(np.array([[0.0, 0.0], [1.0, 2.0]]))
+    p = linear_mcp(M, np.array([0.0, -1.0]), [0.0, 0.0], [1.0, INF])
+    res = presolve(p, PresolveOptions(empty_columns=False, column_singletons=False))
+    assert 0 in res.cols
+    # with column singletons on, z_1 leaves first and then z_0 is in no row: fixed
+    res = presolve(p)
+    assert res.reduced is None and res.infeasible is None
+
+
+def test_empty_column_boxed_variable_set_by_sign_in_postsolve():
+    # column 0 empty (nothing depends on z_0); row 0 depends on z_1 (nonlinearly declared)
+    M = np.array([[0.0, 1.0], [0.0, 2.0]])
+    p = linear_mcp(M, np.array([0.0, -1.0]), [-1.0, 0.0], [1.0, INF],
+                   cubic=np.array([0.0, 0.1]))
+    res = presolve(p, PresolveOptions(singleton_rows=False, column_singletons=False,
+                                      range_fixing=False))
+    assert "EmptyColumns" in kinds(res)
+    sol = solve_ok(p, singleton_rows=False, column_singletons=False, range_fixing=False)
+    # F_0 = z_1 > 0 at the solution, so z_0 = l_0
+    assert sol.F[0] > 0 and sol.x[0] == -1.0
+
+
+def test_singleton_row_on_diagonal_fixes_the_unique_1d_solution():
+    M = np.array([[2.0, 0.0, 0.0], [1.0, 3.0, 0.5], [0.0, 1.0, 4.0]])
+    q = np.array([-3.0, -1.0, -2.0])
+    p = linear_mcp(M, q, 0.0, INF)
+    res = presolve(p, PresolveOptions(range_fixing=False))
+    fx = [r for r in res.stack.records if getattr(r, "reason", "") == "singleton row"]
+    assert fx and fx[0].cols[0] == 0 and fx[0].values[0] == pytest.approx(1.5)
+    solve_ok(p)
+
+
+def test_singleton_row_without_solution_is_infeasible():
+    # F_0 = -z_0 - 1 < 0 for z_0 >= 0 and z_0 has no upper bound
+    M = np.array([[-1.0, 0.0], [1.0, 1.0]])
+    p = linear_mcp(M, np.array([-1.0, 0.0]), [0.0, 0.0], [INF, INF], names=["a", "b"])
+    res = presolve(p)
+    assert res.infeasible is not None
+    assert res.infeasible.rows == ["F(a)"]
+
+
+def test_singleton_row_with_several_solutions_not_fixed_when_others_depend_on_it():
+    # F_0 = -z_0 + 1 on [0, 2]: solutions 0? F(0)=1>=0 yes; 2: F(2)=-1<=0 yes; 1 interior
+    M = np.array([[-1.0, 0.0], [1.0, 2.0]])
+    p = linear_mcp(M, np.array([1.0, -1.0]), [0.0, 0.0], [2.0, INF])
+    res = presolve(p, PresolveOptions(range_fixing=False, column_singletons=False))
+    assert 0 in res.cols
+    assert solve_1d(-1.0, 1.0, 0.0, 2.0)[0] == "multiple"
+
+
+def test_singleton_row_off_diagonal_with_free_partner_repairs():
+    # row 0: -5 z_1 + 3.5 = 0 (z_0 free)  => z_1 = 0.7; z_0 re-paired with row 1
+    M = np.array([[0.0, -5.0, 0.0], [5.0, 4.0, 1.0], [0.0, 1.0, 4.0]])
+    q = np.array([3.5, -1.0, -2.0])
+    p = linear_mcp(M, q, [-INF, 0.0, 0.0], [INF, INF, INF])
+    res = presolve(p, PresolveOptions(max_rounds=1))
+    assert "FixByEquation" in kinds(res)
+    assert list(res.cols) == [0, 2] and list(res.rows) == [1, 2]
+    assert res.reduced.eqn_names[0] == "F[1]" and res.reduced.var_names[0] == "x[0]"
+    sol = solve_ok(p)
+    assert sol.x[1] == pytest.approx(0.7)
+
+
+def test_singleton_row_off_diagonal_outside_bounds_is_infeasible():
+    M = np.array([[0.0, -5.0], [5.0, 4.0]])
+    p = linear_mcp(M, np.array([-3.5, 0.0]), [-INF, 0.0], [INF, INF])  # z_1 = -0.7 < 0
+    res = presolve(p)
+    assert res.infeasible is not None and "outside its bounds" in res.infeasible.message
+
+
+def test_singleton_row_off_diagonal_bounded_partner_does_nothing():
+    M = np.array([[0.0, -5.0], [5.0, 4.0]])
+    p = linear_mcp(M, np.array([3.5, 0.0]), [0.0, 0.0], [INF, INF])
+    res = presolve(p, PresolveOptions(range_fixing=False, column_singletons=False,
+                                      forcing_rows=False))
+    assert res.stats.passes["singleton_rows"].removed == 0
+
+
+def test_diagonal_column_singleton_with_nonlinear_row():
+    # z_0 appears only in row 0 (coefficient 2); row 0 is nonlinear in z_1 (cubic)
+    M = np.array([[2.0, 1.0, 0.0], [0.0, 3.0, 1.0], [0.0, 1.0, 4.0]])
+    q = np.array([-1.0, -2.0, -1.0])
+    cub = np.array([0.0, 0.3, 0.0])
+    p = linear_mcp(M, q, [-INF, -INF, 0.0], [INF, INF, INF], cubic=cub)
+    res = presolve(p, PresolveOptions(singleton_rows=False))
+    assert "DiagonalColumnSingletons" in kinds(res)
+    sol = solve_ok(p, singleton_rows=False)
+    assert abs(sol.F[0]) <= 1e-10
+
+
+def test_free_column_singleton_doubleton_equation():
+    # row 0: 3 z_1 + 4 z_0 + z_2 - 1 = 0 (z_0 free); z_1 free appears only in row 0
+    M = np.array([[4.0, 3.0, 1.0], [-3.0, 0.0, 0.0], [1.0, 0.0, 4.0]])
+    M[1, 2] = 1.0
+    q = np.array([-1.0, 2.0, -1.0])
+    p = linear_mcp(M, q, [-INF, -INF, 0.0], [INF, INF, INF])
+    res = presolve(p, PresolveOptions(singleton_rows=False))
+    assert "FreeColumnSingletons" in kinds(res)
+    sol = solve_ok(p, singleton_rows=False)
+    ref = ref_solve(p)
+    assert np.allclose(sol.x, ref.x, atol=1e-8)
+
+
+def lp_kkt(A, b, c, Q=None):
+    """KKT of min c'x + 0.5 x'Qx s.t. Ax >= b, x >= 0 as an MCP in (x, y) >= 0."""
+    m, n = A.shape
+    Q = sp.csr_matrix((n, n)) if Q is None else sp.csr_matrix(Q)
+    A = sp.csr_matrix(A)
+    M = sp.bmat([[Q, -A.T], [A, None]]).tocsc()
+    return linear_mcp(M, np.concatenate([c, -b]), 0.0, INF)
+
+
+def test_forcing_row_fixes_its_variables_and_postsolves_the_multiplier():
+    # constraint 0: -x0 - 2 x1 >= 0 with x >= 0 forces x0 = x1 = 0; its multiplier y0 is
+    # set in postsolve so that the reduced costs of x0, x1 have the right sign
+    A = np.array([[-1.0, -2.0, 0.0], [1.0, 1.0, 1.0]])
+    b = np.array([0.0, 1.0])
+    c = np.array([-1.0, -3.0, 1.0])
+    Q = np.diag([1.0, 1.0, 1.0])
+    p = lp_kkt(A, b, c, Q)
+    res = presolve(p)
+    assert "ForcingRows" in kinds(res)
+    sol = solve_ok(p)
+    assert sol.x[0] == 0 and sol.x[1] == 0
+    assert sol.F[0] >= -1e-12 and sol.F[1] >= -1e-12
+
+
+def test_duplicate_rows_fix_the_weaker_constraints_multiplier():
+    # x - 1 >= 0 and 2x - 1 >= 0: the second is implied strictly, so y2 = 0
+    A = np.array([[1.0, 1.0], [2.0, 2.0], [1.0, 0.0]])
+    b = np.array([1.0, 1.0, 0.2])
+    c = np.array([1.0, 1.0])
+    p = lp_kkt(A, b, c, np.eye(2))
+    res = presolve(p, PresolveOptions(range_fixing=False, forcing_rows=False))
+    assert res.stats.passes["duplicate_rows"].removed == 1
+    fx = [r for r in res.stack.records if getattr(r, "reason", "") == "duplicate row"]
+    assert fx[0].cols[0] == 3  # y for the row 2x1 + 2x2 >= 1
+    solve_ok(p)
+
+
+def test_duplicate_equations_are_reported():
+    M = np.array([[1.0, 1.0, 1.0], [2.0, 2.0, 2.0], [1.0, -1.0, 3.0]])
+    p = linear_mcp(M, np.array([-1.0, -2.0, 0.0]), -INF, INF)
+    res = presolve(p)
+    assert any("proportional equations" in w for w in res.warnings)
+
+
+def test_range_fixing_and_its_infeasibility():
+    M = np.array([[4.0, 1.0, 2.0], [1.0, 3.0, 0.0], [0.0, 1.0, 4.0]])
+    q = np.array([0.5, -1.0, -1.0])
+    p = linear_mcp(M, q, 0.0, INF)
+    res = presolve(p, PresolveOptions(singleton_rows=False))
+    fx = [r for r in res.stack.records if getattr(r, "reason", "") == "range of F"]
+    assert fx and 0 in fx[0].cols
+    solve_ok(p)
+    p2 = linear_mcp(M, q, [-INF, 0, 0], INF, names=["u", "v", "w"])
+    res2 = presolve(p2, PresolveOptions(singleton_rows=False))
+    # F_u >= 0.5 > 0 but u has no lower bound... unless u's range is unbounded (it is: u free)
+    assert res2.infeasible is None
+    M3 = np.array([[0.0, 1.0, 2.0], [1.0, 3.0, 0.0], [0.0, 1.0, 4.0]])
+    p3 = linear_mcp(M3, q, [-INF, 0, 0], INF, names=["u", "v", "w"])
+    res3 = presolve(p3, PresolveOptions(singleton_rows=False))
+    assert res3.infeasible is not None and res3.infeasible.variables[0].startswith("u")
+    assert "F(u)" in res3.infeasible.rows
+
+
+def test_nonlinear_entries_are_never_used():
+    # row 0 has one entry, declared nonlinear: no singleton-row fixing, no range fixing
+    M = np.array([[1.0, 0.0], [1.0, 2.0]])
+    p = linear_mcp(M, np.array([1.0, -1.0]), 0.0, INF, cubic=np.array([1.0, 0.0]))
+    res = presolve(p, PresolveOptions(column_singletons=False))
+    assert 0 in res.cols
+    solve_ok(p)
+
+
+def test_wrong_linear_declaration_is_caught_by_verification():
+    # F_0 = z_0^2 + 1 - z_1 with the (0, 0) entry falsely declared constant
+    def F(z):
+        return np.array([z[0] ** 2 + 1 - z[1], z[0] + 2 * z[1] - 1])
+
+    def J(z):
+        return sp.csc_matrix(np.array([[2 * z[0], -1.0], [1.0, 2.0]]))
+
+    p = MCP(F, J, 0.0, INF, np.array([0.3, 0.2]),
+            constant_jac=sp.csc_matrix(np.ones((2, 2))))
+    res = presolve(p)
+    assert res.warnings and "change value" in res.warnings[0]
+    assert res.stats.removed == 0
+
+
+def test_pass_switches_and_counters():
+    M = np.array([[2.0, 0.0, 0.0], [1.0, 3.0, 0.5], [0.0, 1.0, 4.0]])
+    q = np.array([-3.0, -1.0, -2.0])
+    p = linear_mcp(M, q, [0, 0, 1], [INF, INF, 1])
+    off = PresolveOptions(**{k: False for k in ("fixed_variables", "empty_rows",
+                                                 "empty_columns", "singleton_rows",
+                                                 "column_singletons", "forcing_rows",
+                                                 "duplicate_rows", "range_fixing")})
+    res = presolve(p, off)
+    assert res.stats.removed == 0 and all(not s.enabled for s in res.stats.passes.values())
+    res = presolve(p, PresolveOptions(singleton_rows=False))
+    assert res.stats.passes["singleton_rows"].removed == 0
+    assert res.stats.passes["fixed_variables"].removed == 1
+    assert res.summary_line().startswith("Preprocessor removed ")
+    with pytest.raises(ValueError):
+        PresolveOptions.from_dict({"singleton_row": False})
+
+
+def test_no_linear_structure_returns_the_problem_itself():
+    M = np.array([[2.0, 1.0], [1.0, 2.0]])
+    p = linear_mcp(M, np.array([-1.0, -1.0]), 0.0, INF, declare=False)
+    res = presolve(p)
+    assert res.reduced is p and len(res.stack) == 0
+    assert np.array_equal(res.postsolve(np.array([1.0, 2.0])), [1.0, 2.0])
+
+
+def test_everything_removed():
+    M = np.array([[2.0, 0.0], [0.0, 2.0]])
+    p = linear_mcp(M, np.array([-1.0, 1.0]), 0.0, INF)
+    sol = solve_with_presolve(p, ref_solve)
+    assert sol.presolve.reduced is None and sol.inner is None
+    assert np.allclose(sol.x, [0.5, 0.0]) and sol.natural_residual == 0
+
+
+def test_jac_true_and_finite_difference_problems_are_wrapped():
+    M = sp.csc_matrix(np.array([[2.0, 0.0, 0.0], [1.0, 3.0, 0.5], [0.0, 1.0, 4.0]]))
+    q = np.array([-3.0, -1.0, -2.0])
+    p1 = MCP(lambda z: (M @ z + q, M), True, 0.0, INF, np.zeros(3), constant_jac=M)
+    p2 = MCP(lambda z: M @ z + q, None, 0.0, INF, np.zeros(3), jac_sparsity=M,
+             constant_jac=M)
+    for p in (p1, p2):
+        sol = solve_with_presolve(p, ref_solve)
+        assert sol.natural_residual <= 1e-8
+        assert sol.presolve.stats.removed >= 1
