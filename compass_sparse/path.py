@@ -54,6 +54,7 @@ import scipy.sparse as sp
 
 from ._path_kernels import project_slots, ratio_test
 from .basis import KIND_DENSE, KIND_M, KIND_UNIT
+from .exceptions import SingularBasisError
 
 # Basic-variable kinds of a slot.
 VAR_Z, VAR_W, VAR_V, VAR_A, VAR_T, VAR_S = 0, 1, 2, 3, 4, 5
@@ -268,7 +269,10 @@ class PivotalPath:
         """Factor the current slot table; repair singularity with artificials."""
         ck, ci, cs = self._columns_for(self.sk, self.si)
         for _attempt in range(max(1, self.opt.lemke_rank_deficiency_iterations)):
-            rep = self.bm.factor(ck, ci, cs)
+            try:
+                rep = self.bm.factor(ck, ci, cs)
+            except SingularBasisError:
+                return LinearCode.SINGULAR, "the basis could not be factorized or repaired"
             if rep.ok and not rep.replaced:
                 break
             if not rep.ok:

@@ -158,18 +158,22 @@ def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> 
     passes["presolve"] = st
     work = problem
     if pre is not None:
+        st.reason = pre.summary_line()
         if getattr(pre, "infeasible", None):
             f = problem.F(problem.x0)
-            return _result(problem, Status.INFEASIBLE, f"presolve: {pre.infeasible}",
+            return _result(problem, Status.INFEASIBLE, f"preprocessor: {pre.infeasible}",
                            problem.x0, f, opt, t0, passes=passes)
-        work = pre.reduced
-        if log_major is not None or opt.verbosity >= 1:
-            logger.info(pre.summary_line())
-    if work.n == 0:
-        z = pre.stack.postsolve(np.zeros(0))
-        f = problem.F(z)
-        return _result(problem, Status.SOLVED, "solved by the preprocessor", z, f, opt, t0,
-                       passes=passes)
+        if opt.verbosity >= 1:
+            logger.warning(pre.summary_line())
+        if pre.reduced is None:
+            z = pre.postsolve(np.zeros(0))
+            f = problem.F(z)
+            return _result(problem, Status.SOLVED, "solved by the preprocessor", z, f, opt,
+                           t0, passes=passes)
+        if pre.reduced is problem:
+            pre = None  # nothing removed: no postsolve needed
+        else:
+            work = pre.reduced
     evalr = GuardedEvaluator(work)
     z0 = work.x0
     f0 = evalr.f(z0)
@@ -212,7 +216,7 @@ def _finish(problem, pre, status, message, z_red, opt, t0, passes, evalr, *, f_r
             start_z=None, **counts):
     """Postsolve and build the Result on the ORIGINAL problem."""
     if pre is not None:
-        z = pre.stack.postsolve(np.asarray(z_red, dtype=float))
+        z = pre.postsolve(np.asarray(z_red, dtype=float))
         f = problem.F(z)
     else:
         z = z_red

@@ -97,8 +97,8 @@ class CESGroups:
         self.any_gen = bool(self.gen_e.any())
         self.any_leo = bool(self.leo_e.any())
         self.expo_gen = 1.0 - self.sig_e[self.gen_e]
-        self.inv_gen = 1.0 / (1.0 - self.sigma_grp)
-        self.inv_gen[self.cd_grp] = 1.0
+        den = 1.0 - self.sigma_grp
+        self.inv_gen = 1.0 / np.where(self.cd_grp, 1.0, den)
 
     def value(self, x):
         """c (per group)."""
