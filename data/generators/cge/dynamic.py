@@ -205,9 +205,9 @@ class _RamseyEvaluator:
             self.blocks[b] = slice(off, off + sizes[b])
             off += sizes[b]
         self.n = off
-        self.shapes = {b: ((T, N) if sizes[b] == TN else (T,) if sizes[b] == T and b in
-                           ("C", "PL", "PU") else (N,) if b in ("TK", "PKT") else (1,))
-                       for b in BLOCKS}
+        self.shapes = {b: (T, N) for b in ("Y", "I", "K", "P", "RK", "PK")}
+        self.shapes.update({"C": (T,), "PL": (T,), "PU": (T,), "TK": (N,), "PKT": (N,),
+                            "HA": (1,)})
         g, r, dl = data["gamma"], data["rbar"], data["delta"]
         t = np.arange(T)
         self.qref = (1.0 + g) ** t
@@ -554,7 +554,7 @@ class _RamseyEvaluator:
         }
         model = CGEModel(problem=problem, benchmark=x0.copy(), names=names, row_names=row_names,
                          blocks=dict(self.blocks), block_shapes=dict(self.shapes), degree=degree,
-                         ray=ray, info=info)
+                         ray=ray, info=info, _jac_fn=self.eval_J)
         spec = dict(numeraire=numeraire, price_lb=price_lb, income_free=income_free)
 
         def rebuild(shock=None, start=None, numeraire="keep", value=None, scale=None):

@@ -51,6 +51,7 @@ class CGEModel:
     ray: np.ndarray
     info: dict
     _rebuild: Callable = field(repr=False, default=None)
+    _jac_fn: Callable = field(repr=False, default=None)
 
     # -- basic access --------------------------------------------------------------------
     @property
@@ -75,7 +76,7 @@ class CGEModel:
 
     def J(self, z):
         """J(z) (CSC, fixed pattern) without touching the evaluation counters."""
-        return self.problem._jac(np.array(z, dtype=float, copy=True)).tocsc()
+        return self._jac_fn(np.array(z, dtype=float, copy=True)).tocsc()
 
     def index(self, name: str) -> int:
         """Position of the variable called ``name``."""
@@ -116,6 +117,8 @@ class CGEModel:
         """
         if self._rebuild is None:
             raise NotImplementedError("this model cannot be rebuilt")
+        if not shock:
+            raise ValueError("no shock given")
         z0 = self.benchmark if start is None else np.asarray(start, dtype=float)
         return self._rebuild(shock=shock, start=z0)
 

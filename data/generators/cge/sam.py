@@ -254,11 +254,9 @@ def random_sam(
     # 8. household demand by RAS (exact column sums, row sums to ~1e-15)
     D0 = rng.uniform(0.2, 1.0, size=(R, H, N))
     D = ras(D0, M.reshape(R, H), FD.reshape(R, N)).reshape(R * H, N)
-    # redefine incomes as exact expenditures (the change is at rounding level)
-    Mexact = D.sum(1)
-    # absorb the rounding difference in the imbalance share of each household (R > 1) or
-    # in its factor shares otherwise; both are O(1e-15) relative
-    M = Mexact
+    # incomes are redefined as the exact expenditures D.sum(1): they differ from the income
+    # accounts only at rounding level (relative ~1e-15)
+    M = D.sum(1)
 
     info = {"k": k, "m": m, "colsum_range": colsum_range, "home_bias": home_bias}
     sam = SAM(

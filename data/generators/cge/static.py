@@ -473,7 +473,8 @@ class _StaticEvaluator:
                     raise ValueError("numeraire must be 'auto', None, ('price', name) or "
                                      "('income', name)")
                 num_idx = names.index(name)
-                blk = [b for b in BLOCKS if self.blocks[b].start <= num_idx < self.blocks[b].stop][0]
+                blk = next(b for b in BLOCKS
+                           if self.blocks[b].start <= num_idx < self.blocks[b].stop)
                 if kind == "price" and blk not in ("P", "PA", "W", "PU"):
                     raise ValueError(f"{name} is not a price")
                 if kind == "income" and blk != "M":
@@ -505,7 +506,7 @@ class _StaticEvaluator:
         }
         model = CGEModel(problem=problem, benchmark=x0.copy(), names=names, row_names=row_names,
                          blocks=dict(self.blocks), block_shapes=dict(self.shapes),
-                         degree=degree, ray=ray, info=info)
+                         degree=degree, ray=ray, info=info, _jac_fn=self.eval_J)
         spec = dict(numeraire=numeraire, price_lb=price_lb, income_free=income_free)
 
         def rebuild(shock=None, start=None, numeraire="keep", value=None, scale=None):
