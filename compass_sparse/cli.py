@@ -14,7 +14,8 @@ import numpy as np
 
 
 def _opts(args):
-    d = {"verbosity": args.verbose, "convergence_tolerance": args.tol}
+    # The command prints the summary itself; -v adds the major-iteration log.
+    d = {"verbosity": 2 if args.verbose else 0, "convergence_tolerance": args.tol}
     if args.time_limit:
         d["time_limit"] = args.time_limit
     return d
@@ -37,7 +38,7 @@ def _demo(args) -> int:
     kind = args.problem
     t0 = time.perf_counter()
     if kind == "obstacle":
-        m = int(round(np.sqrt(args.n or 250_000)))
+        m = int(round(np.sqrt(args.n or 40_000)))
         g = gen.obstacle_problem(m, seed=args.seed)
         M, q, lb, ub = g.lcp
         build = time.perf_counter() - t0
@@ -132,13 +133,14 @@ def main(argv=None) -> int:
         p.add_argument("--tol", type=float, default=1e-6,
                        help="convergence tolerance on ||Phi_FB||_2 (default 1e-6)")
         p.add_argument("--time-limit", type=float, default=None, help="seconds")
-        p.add_argument("-v", "--verbose", action="count", default=1,
-                       help="-v: major-iteration log; -vv: more")
+        p.add_argument("-v", "--verbose", action="count", default=0,
+                       help="print the crash and major-iteration log")
 
     d = sub.add_parser("demo", help="solve a bundled default problem and print the summary")
-    d.add_argument("--problem", default="obstacle",
+    d.add_argument("--problem", default="structured",
                    choices=["obstacle", "structured", "thesis", "kojshin", "cge"],
-                   help="default: obstacle problem on a 500x500 grid (n = 250000)")
+                   help="default: 'structured', a nonlinear MCP on a 2-D grid with long-range "
+                   "couplings and mixed bounds, n = 100000, with a known solution")
     d.add_argument("--n", type=int, default=None, help="problem size")
     common(d)
     c = sub.add_parser("cge", help="run a CGE scenario: benchmark replication, then a shock")

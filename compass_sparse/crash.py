@@ -33,6 +33,9 @@ from .merit import fb_phi, project
 
 __all__ = ["CrashResult", "crash", "normal_map_at"]
 
+CRASH_MEMORY = 4
+CRASH_START_FACTOR = 2.0
+
 
 @dataclass
 class CrashResult:
@@ -100,6 +103,10 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
     J = J0
     it = 0
     eps_scale = 1e-8
+    # Non-monotone reference: the full projected Newton step is tried against the largest
+    # of the last few residuals (x2 at the start), so that the active set can change by
+    # many indices at once instead of creeping one front per halved step.
+    recent = [CRASH_START_FACTOR * nm_norm]
     for it in range(1, opt.crash_iteration_limit + 1):
         if deadline is not None and time.perf_counter() > deadline:
             reason = "time limit"
@@ -116,7 +123,20 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
                 reason = "domain error in J"
                 it -= 1
                 break
-        active = ((z <= lb) & (f >= 0)) | ((z >= ub) & (f <= 0))
+        # Active set of the minimum map: indices whose normal-map point z - F(z) lies
+        # beyond a bound.  (The thesis' rule (2.5.2) only fixes indices already at a
+        # bound with F of the right sign; on grid problems it releases one front of
+        # the contact set per iteration — 31 iterations on a 300 x 300 obstacle problem
+        # — where this rule, a semismooth Newton step on the minimum map, moves the
+        # whole front at once.)
+        # Rows are scaled by |J_ii| so that F and z are compared in the same units (the
+        # minimum map of the row-scaled problem has the same solutions).
+        dg = np.abs(J.diagonal())
+        dg = np.where(dg > 0, dg, 1.0)
+        xm = z - f / dg
+        act_l = xm <= lb
+        act_u = (xm >= ub) & ~act_l
+        active = act_l | act_u
         changes = z.size if prev_active is None else int(np.count_nonzero(active != prev_active))
         if prev_active is not None and changes < opt.crash_nbchange_limit:
             reason = "no basis change"
@@ -124,10 +144,19 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
             break
         prev_active = active
         inact = np.flatnonzero(~active)
+        # Newton target: active indices go to their bound; the inactive ones solve
+        # F_I(z) + J_II d_I + J_IA d_A = 0 for the step d = z - z_new.
         d = np.zeros_like(z)
+        d[act_l] = z[act_l] - lb[act_l]
+        d[act_u] = z[act_u] - ub[act_u]
         if inact.size:
-            Jii = J[inact][:, inact]
-            di, eps, nf = _solve_reduced(Jii.tocsc(), f[inact], opt.crash_perturb,
+            Jc = J[inact]
+            rhs = f[inact]
+            act = np.flatnonzero(active)
+            if act.size:
+                rhs = rhs - Jc[:, act] @ d[act]
+            Jii = Jc[:, inact]
+            di, eps, nf = _solve_reduced(Jii.tocsc(), rhs, opt.crash_perturb,
                                          eps_scale * max(1.0, nm_norm))
             nfact += nf
             if di is None:
@@ -144,7 +173,7 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
             if ft is not None:
                 xt, nmt = normal_map_at(zt, ft, lb, ub)
                 nmt_norm = float(np.linalg.norm(nmt))
-                if nmt_norm <= (1.0 - opt.crash_sigma * alpha) * nm_norm:
+                if nmt_norm <= (1.0 - opt.crash_sigma * alpha) * max(recent):
                     accepted = True
                     break
             alpha *= 0.5
@@ -156,6 +185,7 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
         if log is not None:
             log(f"{it:5d} {changes:8d} {inact.size:9d} {nmt_norm:12.4e} {alpha:9.2e}")
         z, f, x, nm_norm = zt, ft, xt, nmt_norm
+        recent = (recent + [nm_norm])[-CRASH_MEMORY:]
         J = None
     return CrashResult(z, f, x, max(it, 0), float(np.linalg.norm(fb_phi(z, f, lb, ub))),
                        reason, time.perf_counter() - t0, nfact, rows)

@@ -20,7 +20,8 @@ Sources
   costs c_i: F_i(q) = c_i - p(Q) - q_i p'(Q); equilibrium q_i = (a - 2 c_i + c_j)/(3b).
 * Nash–Cournot oligopoly of Murphy, Sherali & Soyster (1982) (MCPLIB ``nash``, 5 firms):
   p(Q) = 5000^(1/gamma) Q^(-1/gamma), gamma = 1.1, costs
-  C_i(q) = c_i q + beta_i/(beta_i + 1) L_i^(-1/beta_i) q^((beta_i + 1)/beta_i);
+  C_i(q) = c_i q + beta_i/(beta_i + 1) L_i^(1/beta_i) q^((beta_i + 1)/beta_i), L_i = 5
+  (marginal cost c_i + (L_i q)^(1/beta_i));
   published equilibrium q = (15.4293, 12.4986, 9.6635, 7.1651, 5.1326) (4 decimals).
 * A separable box-constrained VI, F_i(x) = x_i^3 - c_i on [l_i, u_i]: solution
   x_i = clip(cbrt(c_i), l_i, u_i) (strictly monotone, unique).
@@ -197,7 +198,7 @@ def nash_cournot_mss(x0=None) -> KnownProblem:
         with np.errstate(all="ignore"):
             p = k * Q ** (-1.0 / g)
             dp = -(1.0 / g) * p / Q
-            mc = c + (q / L) ** (1.0 / beta)
+            mc = c + (L * q) ** (1.0 / beta)
         return mc - p - q * dp
 
     def J(q):
@@ -206,7 +207,7 @@ def nash_cournot_mss(x0=None) -> KnownProblem:
             p = k * Q ** (-1.0 / g)
             dp = -(1.0 / g) * p / Q
             d2p = (1.0 / g) * (1.0 / g + 1.0) * p / Q**2
-            dmc = (1.0 / beta) * (q / L) ** (1.0 / beta - 1.0) / L
+            dmc = (1.0 / beta) * L ** (1.0 / beta) * q ** (1.0 / beta - 1.0)
         # dF_i/dq_j = delta_ij dmc_i - dp - delta_ij dp - q_i d2p
         Jm = np.empty((5, 5))
         Jm[:] = -dp
