@@ -462,12 +462,17 @@ class NMSSolver:
                 if configs is None:
                     configs = _restart_configs(self.opt0, self.best.fbn)
                 k = self.restarts - 1
-                opt = self.opt0.replace(**configs[k % len(configs)])
                 if k < len(configs):
+                    # PATH's configurations, from the user's start point.
+                    opt = self.opt0.replace(**configs[k])
                     start = z0
-                elif k % 3 == 2:
+                elif k % 2 == 0:
+                    # Multi-start: crash + NMS from a new point in the box.
+                    opt = self.opt0.replace(crash_method="pnewton", crash_minimum_dimension=1)
                     start = self._random_point(z0)
                 else:
+                    # Near the best point, with the perturbation of PATH's first restart.
+                    opt = self.opt0.replace(**configs[0])
                     start = self._near_best()
                 self.basis = None
         except _Stop as stop:

@@ -124,8 +124,9 @@ class Options:
 
     # --- restarts -------------------------------------------------------------------
     restart_limit: int = _opt(
-        10, "restarts when progress stops: PATH's three configurations, then restarts "
-        "near the best point and (when stuck repeatedly) from new points", lo=0)
+        20, "restarts when progress stops: PATH's three configurations, then alternately "
+        "crash + NMS from a random point of the box and a perturbed restart near the best "
+        "point", lo=0)
     return_best_point: bool = _opt(True, "return the best point found on failure")
     seed: int = _opt(0, "seed of the random restart points", lo=0)
 

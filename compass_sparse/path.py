@@ -95,6 +95,7 @@ class PathResult:
     breakpoints: list = field(default_factory=list)  # (t, x) with t increasing
     basis: WarmBasis | None = None
     ray_start: bool = False
+    unbounded: bool = False  #: RAY because the entering variable grows without bound
     time: float = 0.0
     message: str = ""
 
@@ -358,11 +359,12 @@ class PivotalPath:
                 theta = theta_self
                 self.xb += theta * rate
                 self._project()
-                pivots += 1
-                self.pivots = pivots
                 if ek == VAR_T:
+                    # t reaches 1 with the basis unchanged: no pivot was made.
                     self.t = 1.0
                     return LinearCode.SOLVED, ""
+                pivots += 1
+                self.pivots = pivots
                 if ek == VAR_Z:
                     # Bound flip: z_i moves to its other bound; its other slack enters.
                     newv = self.ub[ei] if es > 0 else self.lb[ei]
@@ -525,5 +527,6 @@ class PivotalPath:
             breakpoints=getattr(self, "breakpoints", []),
             basis=WarmBasis(basic), ray_start=ray_start, message=msg,
         )
+        res.unbounded = code is LinearCode.RAY and msg.startswith("ray:")
         res.time = time.perf_counter() - t0
         return res

@@ -251,7 +251,7 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     def F(z):
         return M @ z + q
 
-    problem = MCP(F, lambda z: M, lb, ub, x0, var_names=var_names, constant_jac=M)
+    problem = MCP(F, lambda z: M, lb, ub, x0, n=n, var_names=var_names, constant_jac=M)
     log_major = _setup_logging(opt)
     evalr = GuardedEvaluator(problem)
     passes = {"presolve": PassStats(reason="linear problems go straight to the path")}
@@ -308,14 +308,18 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
                       basis=res.basis, **counts)
         if out.success:
             return out
-    if res.code is LinearCode.RAY and res.ray_start:
+    # Only a genuine ray (the entering variable unbounded) from the Lemke start says
+    # something about infeasibility, and a bounded box always has a solution.
+    bounded = bool(np.all(np.isfinite(lb)) and np.all(np.isfinite(ub)))
+    if (res.code is LinearCode.RAY and res.ray_start and res.unbounded and not bounded
+            and _is_monotone(M)):
         zs = res.z
         fs = problem.F(zs)
         if np.linalg.norm(fb_phi(z, f, lb, ub)) < np.linalg.norm(fb_phi(zs, fs, lb, ub)):
             zs, fs = z, f
         return _result(problem, Status.INFEASIBLE,
-                       "ray termination from a Lemke start: no solution exists if M is "
-                       "copositive-plus", zs, fs, opt, t0, **counts)
+                       "ray termination from a Lemke start on a positive semidefinite M: "
+                       "the problem has no solution", zs, fs, opt, t0, **counts)
     # The path cycled, hit a limit or lost accuracy: the stabilized Newton method takes over.
     general = _solve_problem(problem.with_start(z), opt.replace(presolve=False))
     general.passes = {**passes, **{k: v for k, v in general.passes.items() if k != "presolve"}}
@@ -323,6 +327,26 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     general.crash_iterations += crash_its
     general.time = time.perf_counter() - t0
     return general
+
+
+def _is_monotone(M, tol=1e-10) -> bool:
+    """True when (M + M^T)/2 is positive semidefinite (then M is copositive-plus and a ray
+    from the Lemke start proves infeasibility).  Dense eigenvalues up to n = 3000, the
+    smallest eigenvalue by Lanczos above; False when undecided."""
+    S = ((M + M.T) * 0.5).tocsc()
+    n = S.shape[0]
+    scale = max(1.0, float(abs(S).max())) if S.nnz else 1.0
+    try:
+        if n <= 3000:
+            lam = float(np.linalg.eigvalsh(S.toarray())[0])
+        else:
+            from scipy.sparse.linalg import eigsh
+
+            lam = float(eigsh(S, k=1, which="SA", return_eigenvectors=False, tol=1e-8,
+                              maxiter=5000)[0])
+    except Exception:
+        return False
+    return lam >= -tol * scale
 
 
 # ---------------------------------------------------------------------------- object API

@@ -161,7 +161,7 @@ def mathiesen(x0=None) -> KnownProblem:
 
 
 # ----------------------------------------------------------------------------- Nash–Cournot
-def cournot_duopoly(a=10.0, b=1.0, c=(1.0, 2.0), x0=None) -> KnownProblem:
+def cournot_duopoly(x0=None, a=10.0, b=1.0, c=(1.0, 2.0)) -> KnownProblem:
     c = np.asarray(c, dtype=float)
 
     def F(q):
@@ -271,7 +271,7 @@ def billups(x0=None) -> KnownProblem:
     )
 
 
-def log_ncp(c=(-3.0, -2.0, 0.5, 1.0), x0=None, *, raise_errors=True) -> KnownProblem:
+def log_ncp(x0=None, c=(-3.0, -2.0, 0.5, 1.0), *, raise_errors=True) -> KnownProblem:
     """F_i = log(x_i) - c_i, x >= 0: undefined at x_i = 0 (raises ValueError when
     ``raise_errors``, else returns -inf/NaN).  Solution x = exp(c) (interior)."""
     c = np.asarray(c, dtype=float)

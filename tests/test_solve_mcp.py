@@ -1,0 +1,468 @@
+"""solve_mcp and MCPSolver end to end on problems with known solutions.
+
+Every success is checked independently: the natural residual
+||z - clip(z - F(z), l, u)||_inf is recomputed from the problem's own formulas (never from
+the solver's report), and compared with the known solutions of tests/known_problems.py.
+"""
+from __future__ import annotations
+
+import os
+import sys
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import compass_sparse.generators as gen
+from compass_sparse import (MCP, EvaluationError, IntermediateResult, MCPSolver, OptionError,
+                            Options, PointStatus, StartPointError, Status, solve_mcp)
+from compass_sparse.generators.sparse import draw_bounds
+
+sys.path.insert(0, os.path.dirname(__file__))
+import known_problems as kp  # noqa: E402
+
+TOL = 1e-6  # the default convergence tolerance, applied to the natural residual
+
+
+def nat_res(F, x, lb, ub):
+    x = np.asarray(x, dtype=float)
+    f = np.asarray(F(x.copy()), dtype=float)
+    return float(np.max(np.abs(x - np.clip(x - f, lb, ub))))
+
+
+def fd_jacobian(F, x, h=1e-7):
+    f0 = F(x)
+    return np.column_stack([(F(x + h * e) - f0) / h for e in np.eye(x.size)])
+
+
+def check_success(r, F, lb, ub, tol=TOL):
+    assert r.success, f"{r.status.name}: {r.message}"
+    assert r.status is Status.SOLVED
+    assert r.point_status is PointStatus.SOLUTION
+    nat = nat_res(F, r.x, lb, ub)
+    assert nat <= tol, nat
+    assert np.all(r.x >= lb) and np.all(r.x <= ub)
+    assert r.residual.natural == pytest.approx(nat, rel=1e-6, abs=1e-14)
+    np.testing.assert_allclose(r.fun, F(r.x.copy()), rtol=1e-12, atol=1e-12)
+    return nat
+
+
+# ----------------------------------------------------------------------------- the module itself
+ALL_KNOWN = {**kp.ALL_SOLVABLE, "double_root": kp.degenerate_root, "billups": kp.billups,
+             "log_ncp": kp.log_ncp, "sqrt_ncp": kp.sqrt_ncp}
+
+
+@pytest.mark.parametrize("name", list(ALL_KNOWN))
+def test_known_problems_are_consistent(name):
+    """The analytic Jacobians match finite differences; the known solutions solve."""
+    p = ALL_KNOWN[name]()
+    rng = np.random.default_rng(1)
+    x = rng.uniform(1.2, 2.0, p.n)  # inside every domain
+    J = p.J(x)
+    J = J.toarray() if sp.issparse(J) else np.asarray(J)
+    np.testing.assert_allclose(J, fd_jacobian(p.F, x), rtol=1e-5, atol=1e-5)
+    for s in p.solutions:
+        # published to 4 decimals for nash5; exact (up to rounding) for the others
+        assert nat_res(p.F, s, p.lb, p.ub) <= (1e-3 if name == "nash5" else 1e-12)
+
+
+def test_mathiesen_solution_continuum():
+    p = kp.mathiesen()
+    for lam in (0.0, 0.5, 1.7, 3.0):
+        assert nat_res(p.F, np.array([lam, 0, 0, 0]), p.lb, p.ub) == 0.0
+    assert nat_res(p.F, np.array([3.5, 0, 0, 0]), p.lb, p.ub) > 0.1
+
+
+# ----------------------------------------------------------------------------- known problems
+KNOWN_RUNS = [
+    ("kojshin", None), ("kojshin", np.ones(4)), ("kojshin", np.array([2.0, 0.5, 0.0, 1.0])),
+    ("josephy", None), ("josephy", np.ones(4)),
+    ("mathiesen", None), ("mathiesen", np.array([2.0, 1.0, 0.5, 0.5])),
+    ("cournot2", None), ("cournot2", np.array([8.0, 8.0])),
+    ("nash5", None), ("nash5", np.ones(5)),
+    ("boxvi", None), ("boxvi", np.array([3.0, 1.0, 2.0, -1.0, 3.0, 4.0])),
+]
+
+
+@pytest.mark.parametrize("tol", [1e-6, 1e-10])
+@pytest.mark.parametrize("name,x0", KNOWN_RUNS)
+def test_known_problem_solved(name, x0, tol):
+    p = kp.ALL_SOLVABLE[name](x0)
+    r = solve_mcp(p.F, p.J, p.lb, p.ub, p.x0, options={"convergence_tolerance": tol})
+    nat = check_success(r, p.F, p.lb, p.ub, tol=TOL if tol == 1e-6 else 1e-9)
+    # which solution: nash5's reference is published to 4 decimals
+    dist_tol = 1e-3 if name == "nash5" else (1e-4 if tol == 1e-6 else 1e-8)
+    assert p.distance_to_solutions(r.x) <= dist_tol, (r.x, nat)
+
+
+def test_kojima_shindo_finds_a_listed_solution_from_many_starts():
+    p = kp.kojima_shindo()
+    rng = np.random.default_rng(7)
+    found = set()
+    for _ in range(6):
+        x0 = rng.uniform(0.0, 3.0, 4)
+        r = solve_mcp(p.F, p.J, p.lb, p.ub, x0)
+        check_success(r, p.F, p.lb, p.ub)
+        d = [np.max(np.abs(r.x - s)) for s in p.solutions]
+        assert min(d) <= 1e-4
+        found.add(int(np.argmin(d)))
+    assert found  # at least one of the two solutions, every time
+
+
+def test_degenerate_double_root():
+    """(x - 1)^2 = 0, x free: a singular Jacobian at the root; linear convergence."""
+    p = kp.degenerate_root()
+    for x0 in (3.0, -2.0, 1.5):
+        r = solve_mcp(p.F, p.J, p.lb, p.ub, np.array([x0]))
+        check_success(r, p.F, p.lb, p.ub)
+        assert abs(r.x[0] - 1.0) <= 2e-3  # |F| = (x - 1)^2 <= 1e-6
+    r = solve_mcp(p.F, p.J, p.lb, p.ub, np.array([3.0]), options={"convergence_tolerance": 1e-10})
+    check_success(r, p.F, p.lb, p.ub, tol=1e-9)
+
+
+@pytest.mark.parametrize("x0", [0.0, 0.5, 1.0, 3.0])
+def test_billups_never_a_wrong_success(x0):
+    """From x0 = 0 PATH fails on billups; we either solve it or say we did not."""
+    p = kp.billups(np.array([x0]))
+    xstar = p.solutions[0][0]
+    r = solve_mcp(p.F, p.J, p.lb, p.ub, p.x0)
+    nat = nat_res(p.F, r.x, p.lb, p.ub)
+    if r.success:
+        assert nat <= TOL
+        assert abs(r.x[0] - xstar) <= 1e-5
+    else:
+        assert r.status is not Status.SOLVED
+        assert r.point_status in (PointStatus.BEST_POINT, PointStatus.START_POINT)
+        start = nat_res(p.F, p.x0, p.lb, p.ub)
+        assert r.residual.fb_norm > r.tolerance
+        assert nat <= start + 1e-12  # the best point is no worse than the start
+    assert r.x[0] >= 0.0
+
+
+# ----------------------------------------------------------------------------- domain errors
+@pytest.mark.parametrize("raise_errors", [True, False])
+def test_log_domain_errors_rejected(raise_errors):
+    """F = log(x) - c: the first Newton steps land outside the domain (x_i = 0 after
+    projection); those points are rejected, counted, and the solve still succeeds."""
+    p = kp.log_ncp(raise_errors=raise_errors)
+    # a full Newton step from x0 = 2 in the first component (c = -3) leaves the domain
+    f0, J0 = p.F(p.x0), p.J(p.x0).toarray()
+    assert p.x0[0] - f0[0] / J0[0, 0] < 0
+    r = solve_mcp(p.F, p.J, p.lb, p.ub, p.x0)
+    check_success(r, p.F, p.lb, p.ub)
+    assert r.domain_errors > 0
+    np.testing.assert_allclose(r.x, p.solutions[0], rtol=1e-5)
+
+
+def test_sqrt_domain_errors_rejected():
+    p = kp.sqrt_ncp(np.array([50.0]))
+    r = solve_mcp(p.F, p.J, p.lb, p.ub, p.x0)
+    check_success(r, p.F, p.lb, p.ub)
+    assert r.domain_errors > 0
+    assert abs(r.x[0] - 2.0) <= 1e-6
+
+
+def test_nash_oligopoly_domain_from_small_start():
+    """nash5 is undefined at Q = 0; from a start near zero the iterates must stay defined."""
+    p = kp.nash_cournot_mss(np.full(5, 0.1))
+    r = solve_mcp(p.F, p.J, p.lb, p.ub, p.x0)
+    check_success(r, p.F, p.lb, p.ub)
+    assert np.max(np.abs(r.x - kp.MSS_SOLUTION)) <= 1e-3
+
+
+def test_nonfinite_start_is_an_input_error():
+    p = kp.log_ncp()
+    with pytest.raises(EvaluationError):
+        solve_mcp(p.F, p.J, p.lb, p.ub, np.array([0.0, 1.0, 1.0, 1.0]))
+    with pytest.raises(StartPointError):
+        solve_mcp(p.F, p.J, p.lb, p.ub, np.array([np.nan, 1.0, 1.0, 1.0]))
+
+
+# ----------------------------------------------------------------------------- manufactured
+class BandedNonlinear:
+    """F(z) = A z + a sin(z) + 0.1 z^3 with A tridiagonal, diagonally dominant; J in CSC with
+    a fixed pattern (data changes only at the diagonal positions)."""
+
+    def __init__(self, n, seed):
+        rng = np.random.default_rng(seed)
+        i = np.arange(n)
+        rows = np.concatenate([i, i[:-1], i[1:]])
+        cols = np.concatenate([i, i[1:], i[:-1]])
+        vals = np.concatenate([3.0 + rng.uniform(0, 1, n), rng.uniform(-1, 1, 2 * (n - 1))])
+        A = sp.csc_matrix((vals, (rows, cols)), shape=(n, n))
+        A.sort_indices()
+        self.A = A
+        self.n = n
+        self.dpos = np.flatnonzero(A.indices == np.repeat(i, np.diff(A.indptr)))
+        self.a = rng.uniform(0.1, 0.5, n)
+
+    def F(self, z):
+        return self.A @ z + self.a * np.sin(z) + 0.1 * z**3
+
+    def J(self, z):
+        d = self.A.data.copy()
+        d[self.dpos] += self.a * np.cos(z) + 0.3 * z**2
+        return sp.csc_matrix((d, self.A.indices, self.A.indptr), shape=(self.n, self.n))
+
+    def FJ(self, z):
+        return self.F(z), self.J(z)
+
+
+def manufactured_case(n, seed, degenerate=0.0, bound_mix=(0.25, 0.25, 0.25, 0.25)):
+    base = BandedNonlinear(n, seed)
+    lb, ub, _ = draw_bounds(n, np.random.default_rng(1000 + seed), bound_mix)
+    g = gen.manufacture(base.F, base.J, None, lb, ub, seed, degenerate_fraction=degenerate,
+                        x0=np.clip(np.zeros(n), lb, ub))
+    info = g.info
+    shift = info["w_star"] - info["v_star"] - info["F_star"]
+
+    def F_indep(z):  # F~ rebuilt here from the base F and the recorded data
+        return base.F(z) + shift
+
+    return g, base, F_indep, g.problem.lb, g.problem.ub
+
+
+@pytest.mark.parametrize("n,seed,deg", [(20, 0, 0.0), (20, 1, 0.3), (60, 2, 0.0),
+                                        (60, 3, 0.5), (200, 4, 0.0), (200, 5, 0.2)])
+def test_manufactured_nonlinear(n, seed, deg):
+    g, base, F, lb, ub = manufactured_case(n, seed, deg)
+    kinds = np.isfinite(lb).astype(int) + 2 * np.isfinite(ub).astype(int)
+    assert set(kinds.tolist()) == {0, 1, 2, 3}  # free, lower, upper and boxed variables
+    assert nat_res(F, g.solution, lb, ub) <= 1e-12
+    r = solve_mcp(g.problem)
+    check_success(r, F, lb, ub)
+    # strongly monotone F (diagonally dominant A + monotone terms): the solution is unique
+    assert np.max(np.abs(r.x - g.solution)) <= 1e-4
+    r = solve_mcp(g.problem, options={"convergence_tolerance": 1e-10})
+    check_success(r, F, lb, ub, tol=1e-9)
+    assert np.max(np.abs(r.x - g.solution)) <= 1e-8
+
+
+@pytest.mark.parametrize("n,seed,structure", [(50, 0, "grid"), (120, 1, "banded"),
+                                              (200, 2, "grid")])
+def test_manufactured_structured_quadratic(n, seed, structure):
+    g = gen.structured_quadratic(n, seed, structure=structure, degenerate_fraction=0.1)
+    D, A, b = g.info["D"], g.info["A"], g.info["b"]
+    shift = g.info["w_star"] - g.info["v_star"] - g.info["F_star"]
+
+    def F(z):
+        return D * z * z + A @ z + b + shift
+
+    p = g.problem
+    assert nat_res(F, g.solution, p.lb, p.ub) <= 1e-12
+    r = solve_mcp(p)
+    check_success(r, F, p.lb, p.ub)
+    r = solve_mcp(p, options={"convergence_tolerance": 1e-10, "crash_method": "none"})
+    check_success(r, F, p.lb, p.ub, tol=1e-9)
+
+
+def test_manufactured_with_fixed_variables_goes_through_presolve():
+    n = 40
+    base = BandedNonlinear(n, 11)
+    lb, ub, _ = draw_bounds(n, np.random.default_rng(11))
+    zstar = np.clip(np.random.default_rng(12).uniform(-1, 1, n), lb, ub)
+    fix = np.arange(0, n, 5)
+    lb, ub = lb.copy(), ub.copy()
+    lb[fix] = ub[fix] = zstar[fix]
+    g = gen.manufacture(base.F, base.J, zstar, lb, ub, 3, x0=np.clip(np.zeros(n), lb, ub))
+    shift = g.info["w_star"] - g.info["v_star"] - g.info["F_star"]
+
+    def F(z):
+        return base.F(z) + shift
+
+    r = solve_mcp(g.problem)
+    check_success(r, F, lb, ub)
+    np.testing.assert_array_equal(r.x[fix], zstar[fix])
+    assert r.passes["presolve"].ran
+
+
+# ----------------------------------------------------------------------------- Jacobian forms
+def test_jac_true_and_fd_forms():
+    p = kp.kojima_shindo()
+    ref = solve_mcp(p.F, p.J, p.lb, p.ub, p.x0)
+    check_success(ref, p.F, p.lb, p.ub)
+    r = solve_mcp(lambda x: (p.F(x), p.J(x)), True, p.lb, p.ub, p.x0)
+    check_success(r, p.F, p.lb, p.ub)
+    assert p.distance_to_solutions(r.x) <= 1e-4
+    r = solve_mcp(p.F, None, p.lb, p.ub, p.x0, jac_sparsity=np.ones((4, 4)))
+    check_success(r, p.F, p.lb, p.ub)
+    assert p.distance_to_solutions(r.x) <= 1e-4
+    assert r.nfev > ref.nfev  # finite differences cost extra evaluations
+
+
+def test_jac_forms_on_sparse_manufactured():
+    g, base, F, lb, ub = manufactured_case(80, 21)
+    shift = F(np.zeros(80)) - base.F(np.zeros(80))
+    x0 = np.clip(np.zeros(80), lb, ub)
+    r1 = solve_mcp(lambda z: (base.F(z) + shift, base.J(z)), True, lb, ub, x0)
+    check_success(r1, F, lb, ub)
+    pattern = base.J(np.zeros(80))
+    r2 = solve_mcp(F, None, lb, ub, x0, jac_sparsity=pattern)
+    check_success(r2, F, lb, ub)
+    # the tridiagonal pattern needs only 3 colours: few extra evaluations per Jacobian
+    assert r2.nfev <= 4 * (r2.njev + 1) + r1.nfev + 50
+    assert np.max(np.abs(r1.x - g.solution)) <= 1e-4
+    assert np.max(np.abs(r2.x - g.solution)) <= 1e-4
+
+
+# ----------------------------------------------------------------------------- limits & stops
+def test_major_iteration_limit_returns_best_point():
+    p = kp.kojima_shindo()  # needs several major iterations from 0
+    full = solve_mcp(p.F, p.J, p.lb, p.ub, p.x0)
+    check_success(full, p.F, p.lb, p.ub)
+    assert full.nit > 1
+    start_fb = solve_mcp(p.F, p.J, p.lb, p.ub, p.x0,
+                         options={"major_iteration_limit": 0}).residual.fb_norm
+    for k in (1, 2):
+        r = solve_mcp(p.F, p.J, p.lb, p.ub, p.x0, options={"major_iteration_limit": k})
+        assert r.status is Status.MAJOR_ITERATION_LIMIT
+        assert not r.success
+        assert r.nit == k
+        assert r.point_status in (PointStatus.BEST_POINT, PointStatus.START_POINT)
+        # the best point by merit: no worse than the start
+        assert r.residual.fb_norm <= start_fb + 1e-12
+        assert r.residual.natural == pytest.approx(nat_res(p.F, r.x, p.lb, p.ub), rel=1e-9)
+
+
+def test_major_iteration_limit_zero():
+    p = kp.josephy(np.ones(4))
+    r = solve_mcp(p.F, p.J, p.lb, p.ub, p.x0, options={"major_iteration_limit": 0})
+    assert r.status is Status.MAJOR_ITERATION_LIMIT
+    assert r.point_status is PointStatus.START_POINT
+    np.testing.assert_array_equal(r.x, p.x0)
+    assert r.nit == 0
+    assert r.residual.natural == pytest.approx(nat_res(p.F, p.x0, p.lb, p.ub))
+
+
+def test_time_limit():
+    p = kp.kojima_shindo()
+    r = solve_mcp(p.F, p.J, p.lb, p.ub, p.x0, options={"time_limit": 1e-9})
+    assert r.status is Status.TIME_LIMIT
+    assert not r.success
+    assert r.residual.fb_norm > r.tolerance
+    g, base, F, lb, ub = manufactured_case(200, 31)
+    r = solve_mcp(g.problem, options={"time_limit": 1e-9, "crash_method": "none"})
+    assert r.status is Status.TIME_LIMIT
+
+
+def test_callback_stop():
+    p = kp.kojima_shindo()
+    seen = []
+
+    def cb(info):
+        assert isinstance(info, IntermediateResult)
+        seen.append(info)
+        return True
+
+    r = solve_mcp(p.F, p.J, p.lb, p.ub, p.x0, callback=cb)
+    assert r.status is Status.CALLBACK_STOP
+    assert not r.success
+    assert len(seen) == 1
+    assert r.status.path_code() == 6
+
+
+def test_callback_stop_iteration_and_information():
+    p = kp.kojima_shindo()
+    seen = []
+
+    def cb(info):
+        # the intermediate point is consistent: fun = F(x), residual = ||Phi||
+        np.testing.assert_allclose(info.fun, p.F(info.x), rtol=1e-12, atol=1e-12)
+        seen.append(info.nit)
+        if len(seen) == 3:
+            raise StopIteration
+
+    r = solve_mcp(p.F, p.J, p.lb, p.ub, p.x0, callback=cb)
+    assert r.status is Status.CALLBACK_STOP
+    assert seen == sorted(seen) and len(seen) == 3
+    # a callback that never stops changes nothing
+    r = solve_mcp(p.F, p.J, p.lb, p.ub, p.x0, callback=lambda info: False)
+    check_success(r, p.F, p.lb, p.ub)
+
+
+def test_warm_start_from_solution_zero_major_iterations():
+    p = kp.josephy()
+    r = solve_mcp(p.F, p.J, p.lb, p.ub, p.x0)
+    check_success(r, p.F, p.lb, p.ub)
+    assert r.nit > 0
+    again = solve_mcp(p.F, p.J, p.lb, p.ub, r.x, basis=r.basis)
+    check_success(again, p.F, p.lb, p.ub)
+    assert again.nit == 0
+    assert again.minor_iterations == 0
+    g, base, F, lb, ub = manufactured_case(100, 41)
+    r = solve_mcp(g.problem, options={"crash_method": "none"})
+    check_success(r, F, lb, ub)
+    again = solve_mcp(g.problem, x0=r.x, basis=r.basis)
+    check_success(again, F, lb, ub)
+    assert again.nit == 0
+
+
+def test_mcpsolver_object_api_warm_start():
+    p = kp.kojima_shindo()
+    solver = MCPSolver(MCP(p.F, p.J, p.lb, p.ub, p.x0))
+    r1 = solver.solve()
+    check_success(r1, p.F, p.lb, p.ub)
+    assert r1.nit > 0
+    r2 = solver.solve()
+    check_success(r2, p.F, p.lb, p.ub)
+    assert r2.nit == 0
+    np.testing.assert_allclose(r2.x, r1.x, atol=1e-12)
+    r3 = solver.solve(x0=p.x0, warm_start=False)  # cold again
+    check_success(r3, p.F, p.lb, p.ub)
+    assert r3.nit > 0
+    with pytest.raises(TypeError):
+        MCPSolver(p.F)
+
+
+def test_mcpsolver_scenario_loop():
+    """Change the data the closure reads; the warm-started solves stay correct."""
+    n = 60
+    base = BandedNonlinear(n, 51)
+    lb, ub, _ = draw_bounds(n, np.random.default_rng(51))
+    data = {"b": np.random.default_rng(52).uniform(-1, 1, n)}
+
+    def F(z):
+        return base.F(z) + data["b"]
+
+    solver = MCPSolver(MCP(F, base.J, lb, ub, np.clip(np.zeros(n), lb, ub)),
+                       options={"convergence_tolerance": 1e-8})
+    for k in range(4):
+        data["b"] = data["b"] + 0.05 * k
+        r = solver.solve()
+        check_success(r, F, lb, ub, tol=1e-8)
+
+
+# ----------------------------------------------------------------------------- options
+def test_options_unknown_key_raises():
+    p = kp.josephy()
+    with pytest.raises(OptionError, match="convergence_tolerance"):
+        solve_mcp(p.F, p.J, p.lb, p.ub, p.x0, options={"convergence_tolerence": 1e-8})
+    with pytest.raises(OptionError):
+        solve_mcp(p.F, p.J, p.lb, p.ub, p.x0, options={"no_such_option": 1})
+    with pytest.raises(OptionError):
+        solve_mcp(p.F, p.J, p.lb, p.ub, p.x0, options={"convergence_tolerance": -1.0})
+    with pytest.raises(ValueError):  # OptionError is a ValueError
+        Options(major_iteration_limit=-1)
+
+
+# ----------------------------------------------------------------------------- thesis family
+def test_thesis_family_one_n10():
+    """Family 1 of the thesis (dense random quadratic, bounded boxes), n = 10, seeds 0..9:
+    at least 9 of 10 must solve (residual recomputed from the raw data)."""
+    solved = []
+    for seed in range(10):
+        g = gen.thesis_family(10, 1, seed)
+        D, A, b = g.info["D"], g.info["A"], g.info["b"]
+        lb, ub = g.info["lb"], g.info["ub"]
+
+        def F(z, D=D, A=A, b=b):
+            return D * z * z + A @ z + b
+
+        r = solve_mcp(g.problem)
+        nat = nat_res(F, r.x, lb, ub)
+        if r.success:
+            assert nat <= 1.7072 * r.tolerance  # ||min-map|| <= ||Phi|| / (2 - sqrt 2)
+        else:
+            assert r.residual.fb_norm > r.tolerance
+        solved.append(bool(r.success and nat <= TOL))
+    assert sum(solved) >= 9, solved
