@@ -223,6 +223,10 @@ def _finish(problem, pre, status, message, z_red, opt, t0, passes, evalr, *, f_r
         f = f_reduced if f_reduced is not None else problem.F(z)
     res = _result(problem, status, message, z, f, opt, t0, start_z=start_z,
                   passes=passes, domain_errors=evalr.domain_errors, **counts)
+    work = evalr.problem
+    if work is not problem:  # the reduced problem counts its own evaluations
+        res.nfev += work.counters.nfev
+        res.njev += work.counters.njev
     return res
 
 

@@ -1,0 +1,101 @@
+"""Fallback steps (LM with CHOLMOD or SuperLU, projected gradient), options, statuses, CLI."""
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import compass_sparse as cs
+from compass_sparse._evaluate import GuardedEvaluator
+from compass_sparse.fallback import cholmod_available, gradient_steps, lm_step, spd_solve
+from compass_sparse.merit import fb_phi, fb_psi
+from compass_sparse.generators import structured_quadratic
+
+
+def _spd(n, seed):
+    rng = np.random.default_rng(seed)
+    B = sp.random(n, n, density=5 / n, random_state=seed, format="csc")
+    return (B.T @ B + sp.identity(n) * rng.uniform(0.5, 1.0)).tocsc()
+
+
+@pytest.mark.suitesparse
+@pytest.mark.skipif(not cholmod_available(),
+                    reason="optional suitesparse extra (scikit-sparse/CHOLMOD) not installed")
+def test_spd_solve_uses_cholmod_and_agrees_with_dense():
+    import sksparse.cholmod  # noqa: F401  (the extra is really importable)
+
+    A = _spd(300, 1)
+    b = np.random.default_rng(2).normal(size=300)
+    x = spd_solve(A, b)
+    assert np.linalg.norm(A @ x - b) <= 1e-10 * np.linalg.norm(b)
+    assert np.allclose(x, np.linalg.solve(A.toarray(), b), rtol=1e-9, atol=1e-12)
+
+
+def test_spd_solve_without_cholmod_matches(monkeypatch):
+    import builtins
+
+    real_import = builtins.__import__
+
+    def no_sksparse(name, *a, **k):
+        if name.startswith("sksparse"):
+            raise ImportError("hidden for this test")
+        return real_import(name, *a, **k)
+
+    monkeypatch.setattr(builtins, "__import__", no_sksparse)
+    A = _spd(200, 3)
+    b = np.ones(200)
+    x = spd_solve(A, b)
+    assert np.linalg.norm(A @ x - b) <= 1e-10 * np.linalg.norm(b)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_lm_and_gradient_steps_decrease_psi(seed):
+    g = structured_quadratic(400, seed=seed)
+    p = g.problem
+    rng = np.random.default_rng(seed)
+    z = np.clip(g.solution + rng.normal(scale=0.5, size=p.n), p.lb, p.ub)
+    ev = GuardedEvaluator(p)
+    f = ev.f(z)
+    psi0 = fb_psi(fb_phi(z, f, p.lb, p.ub))
+    opt = cs.Options()
+    out = lm_step(ev, z, f, None, p.lb, p.ub, opt)
+    assert out is not None
+    zt, ft, phit, psit, mu = out
+    assert np.all(zt >= p.lb) and np.all(zt <= p.ub)
+    assert psit < psi0 and np.isclose(psit, fb_psi(fb_phi(zt, p.F(zt), p.lb, p.ub)))
+    g_out = gradient_steps(ev, z, f, None, p.lb, p.ub, opt)
+    assert g_out is not None and g_out[3] < psi0
+
+
+def test_options_validation_and_dict():
+    o = cs.Options.from_dict({"convergence_tolerance": 1e-8, "crash_method": "none"})
+    assert o.convergence_tolerance == 1e-8 and o.crash_method == "none"
+    with pytest.raises(cs.OptionError, match="did you mean 'convergence_tolerance'"):
+        cs.Options.from_dict({"convergence_tolerence": 1e-8})
+    with pytest.raises(cs.OptionError, match="must be > 0"):
+        cs.Options(convergence_tolerance=0.0)
+    with pytest.raises(cs.OptionError, match="expected one of"):
+        cs.Options(crash_method="newton")
+    with pytest.raises(cs.OptionError, match="integer"):
+        cs.Options(major_iteration_limit=2.5)
+    with pytest.raises(cs.OptionError):
+        o.replace(no_such_option=1)
+    assert "nms_memory_size" in cs.Options.describe()
+
+
+def test_status_codes_match_path():
+    assert [int(s) for s in list(cs.Status)[:10]] == list(range(1, 11))
+    assert cs.Status.CALLBACK_STOP.path_code() == 6
+    assert cs.Status.SOLVED.path_code() == 1
+
+
+def test_cli_help_and_demo(capsys):
+    from compass_sparse.cli import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["--help"])
+    assert e.value.code == 0
+    assert "demo" in capsys.readouterr().out
+    assert main(["demo", "--problem", "kojshin"]) == 0
+    out = capsys.readouterr().out
+    assert "SOLVED" in out and "recomputed" in out
+    assert main(["demo", "--problem", "structured", "--n", "2000"]) == 0
+    assert main(["options"]) == 0
