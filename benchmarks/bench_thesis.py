@@ -206,7 +206,7 @@ def summarize_tolerances(rows, out=print):
     out(f"\nTime against achieved error ({len(inst)} instances: "
         + ", ".join(f"family {f} n={n} seed {s}" for f, n, s in inst) + ")\n")
     header = ["solver", "convergence_tolerance", "reported solved", "natural <= tol",
-              "median time", "median achieved FB norm", "median achieved natural",
+              "median time", "total time", "median achieved FB norm", "median achieved natural",
               "max achieved natural"]
     table = []
     for s in SOLVERS:
@@ -216,6 +216,7 @@ def summarize_tolerances(rows, out=print):
             table.append([s, f"{tol:.0e}", f"{sum(bool(r['reported_success']) for r in rr)}/{len(rr)}",
                           f"{sum(r['natural'] <= tol for r in rr)}/{len(rr)}",
                           fmt_time(median([r["time"] for r in rr])),
+                          fmt_time(sum(r["time"] for r in rr if math.isfinite(r["time"]))),
                           fmt_e(median([r["fb_norm"] for r in rr])),
                           fmt_e(median(fin)) if fin else "inf",
                           fmt_e(max(fin)) if fin else "inf"])
