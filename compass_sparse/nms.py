@@ -389,8 +389,8 @@ class NMSSolver:
                 stall = 0
             else:
                 stall += 1
-                if stall >= 10:
-                    return "no progress in 10 major iterations"
+                if stall >= opt.restart_stationary_limit:
+                    return f"no progress in {stall} major iterations"
 
     def _descent_ok(self, cur, cand, R, opt):
         # The directional derivative of Psi at z_k uses the Jacobian of this major iteration.
