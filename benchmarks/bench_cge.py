@@ -51,7 +51,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, CsvLog, machine_info, print_machine, write_json  # noqa: E402
+from _common import RESULTS, CsvLog, machine_info, print_machine  # noqa: E402
 
 SUCCESS_TOL = 1e-6
 
@@ -326,23 +326,29 @@ STRESS_FIELDS = ["test", "variant", "n", "success", "status", "reported_success"
 
 def _scaled_problem(prob, d, s):
     """The same MCP in new units: z = d * y, rows s * F(y).  G(z) = s F(z / d),
-    J_G = diag(s) J diag(1/d); bounds d*lb, d*ub; start d*x0."""
+    J_G = diag(s) J diag(1/d) (scaled entry by entry, so explicit zeros of the fixed
+    pattern are kept); bounds d*lb, d*ub; start d*x0."""
     import scipy.sparse as sp
 
     from compass_sparse import MCP
 
-    Dinv = sp.diags(1.0 / d)
-    S = sp.diags(s)
+    dinv = 1.0 / d
+
+    def scale(A):
+        A = sp.csc_matrix(A, copy=True)
+        cols = np.repeat(np.arange(A.shape[1]), np.diff(A.indptr))
+        A.data = A.data * s[A.indices] * dinv[cols]
+        return A
 
     def G(z):
-        return s * prob.F_uncounted(z / d)
+        return s * prob.F_uncounted(z * dinv)
 
     def JG(z):
-        return (S @ prob.J(z / d) @ Dinv).tocsc()
+        return scale(prob.J(z * dinv))
 
     C = getattr(prob, "_constant_spec", None)
-    Cs = None if C is None else (S @ sp.csc_matrix(C) @ Dinv).tocsc()
-    return MCP(G, JG, prob.lb * d, prob.ub * d, prob.x0 * d, constant_jac=Cs)
+    return MCP(G, JG, prob.lb * d, prob.ub * d, prob.x0 * d,
+               constant_jac=None if C is None else scale(C))
 
 
 def task_scaling(n_target, kind, k, time_limit, seed=7):
@@ -376,7 +382,7 @@ def task_scaling(n_target, kind, k, time_limit, seed=7):
     return row
 
 
-def task_degenerate(n_target, variant, time_limit):
+def task_degenerate(n_target, variant, time_limit, homotopy=False):
     from compass_sparse import solve_mcp
 
     m, _ = make_model("static", n_target)
@@ -393,11 +399,27 @@ def task_degenerate(n_target, variant, time_limit):
         p = np.ones((R, N))
         p[0, j] = phi
         shock = dict(productivity=p)
-    ms = m.with_shock(**shock)
-    prob = ms.problem
     t0 = time.perf_counter()
+    steps = ""
+    if homotopy and variant.startswith("outtax"):  # warm-started continuation in the rate
+        z = m.benchmark
+        for r_ in (0.5, 0.9, 0.97, 0.99, 0.999, 0.9999, 0.999999):
+            if r_ >= rate:
+                break
+            tt = np.zeros((R, N))
+            tt[0, j] = r_
+            mi = m.with_shock(start=z, output_tax=tt)
+            ri = solve_mcp(mi.problem, options={"time_limit": float(time_limit)})
+            steps += f"{r_:g}:{ri.status.name}/{ri.nit} "
+            z = ri.x
+        ms = m.with_shock(start=z, **shock)
+    else:
+        ms = m.with_shock(**shock)
+    prob = ms.problem
     res = solve_mcp(prob, options={"time_limit": float(time_limit)})
     wall = time.perf_counter() - t0
+    if steps:
+        variant = f"{variant} homotopy"
     f = ms.F(res.x)
     nat = nat_res(res.x, f, prob.lb, prob.ub)
     Y = ms.block(res.x, "Y")[0, j]
@@ -410,7 +432,8 @@ def task_degenerate(n_target, variant, time_limit):
                passes="+".join(kk for kk, v in (res.passes or {}).items() if v.ran),
                detail=(f"Y[r1,s1]={Y:.3g} P[r1,s1]={P:.3g} F_Y[r1,s1]="
                        f"{f[ms.blocks['Y']][j]:.2e}; sectors with Y<1e-8: "
-                       f"{int(np.sum(yl < 1e-8))}; domain_errors={res.domain_errors}"))
+                       f"{int(np.sum(yl < 1e-8))}; domain_errors={res.domain_errors}"
+                       + (f"; steps {steps}" if steps else "")))
     row["success"] = bool(nat <= SUCCESS_TOL)
     return row
 
@@ -459,22 +482,27 @@ def task_numeraire(family, n_target, variant, time_limit):
 def part_stress(args, info):
     log = CsvLog(RESULTS / f"cge_stress{args.suffix}.csv", STRESS_FIELDS)
     rows = []
-    tl = min(args.time_limit, 120.0)
+    tl = args.stress_time_limit
     tasks = []
     for kind in ("D", "S", "DS"):
         for k in (2, 4, 6):
             tasks.append((task_scaling, dict(n_target=args.stress_n, kind=kind, k=k,
                                               time_limit=tl)))
     tasks.append((task_scaling, dict(n_target=args.stress_n, kind="DS", k=0, time_limit=tl)))
-    for v in ("outtax=0.5", "outtax=0.9", "outtax=0.99", "outtax=0.999999",
-              "productivity=1e-3", "productivity=1e-6", "productivity=0"):
+    degen = (("outtax=0.9", "outtax=0.99", "productivity=1e-3") if args.quick else
+             ("outtax=0.5", "outtax=0.9", "outtax=0.99", "outtax=0.999999",
+              "productivity=1e-3", "productivity=1e-6", "productivity=0"))
+    for v in degen:
         tasks.append((task_degenerate, dict(n_target=args.stress_n, variant=v, time_limit=tl)))
+    for v in ("outtax=0.99",) if args.quick else ("outtax=0.99", "outtax=0.999999"):
+        tasks.append((task_degenerate, dict(n_target=args.stress_n, variant=v, time_limit=tl,
+                                            homotopy=True)))
     for fam in ("static", "dynamic"):
         for v in ("none-benchmark", "none-shock", "scale1.1-shock"):
             tasks.append((task_numeraire, dict(family=fam, n_target=args.stress_n, variant=v,
                                                time_limit=tl)))
     for fn, kw in tasks:
-        row = run_forked(fn, 3 * tl + 120, **kw)
+        row = run_forked(fn, 8 * tl + 120, **kw)
         row.setdefault("test", fn.__name__.replace("task_", ""))
         row.setdefault("variant", str(kw))
         row.setdefault("success", False)
@@ -690,6 +718,83 @@ def part_path(args, info):
     return rows
 
 
+# =========================================================================== report
+def report(suffix: str):
+    """Markdown tables from the CSV files of a run (printed)."""
+    from _common import fmt_e, fmt_time, md_table, read_csv
+
+    def g(r, k, f=str):
+        v = r.get(k, "")
+        if v == "" or v is None:
+            return "–"
+        try:
+            return f(v)
+        except Exception:
+            return str(v)
+
+    p = RESULTS / f"cge_main{suffix}.csv"
+    if p.exists():
+        rows = read_csv(p)
+        print("\n### Benchmark replication\n")
+        print(md_table(["model", "n", "nnz(J)", "case", "status", "natural res.", "major",
+                        "time"],
+                       [[r["family"], g(r, "n"), g(r, "nnz"), r["case"], g(r, "status"),
+                         g(r, "natural", fmt_e), g(r, "major"), g(r, "time", fmt_time)]
+                        for r in rows if str(r["case"]).startswith("bench")]))
+        print("\n### Counterfactuals\n")
+        print(md_table(["model", "n", "nnz(J)", "shock", "ok", "status", "natural res.",
+                        "time (median)", "reps", "major", "crash", "pivots", "fact.", "F/J evals",
+                        "passes", "splu", "fact. equiv.", "nnz(L+U)", "peak RSS +MB",
+                        "max change"],
+                       [[r["family"], g(r, "n"), g(r, "nnz"), r["case"], g(r, "success"),
+                         g(r, "status"), g(r, "natural", fmt_e), g(r, "time", fmt_time),
+                         g(r, "repeats"), g(r, "major"), g(r, "crash"), g(r, "minor"),
+                         g(r, "factorizations"), f"{g(r, 'nfev')}/{g(r, 'njev')}",
+                         g(r, "passes"), g(r, "splu_time", fmt_time),
+                         g(r, "fact_equiv", lambda v: f"{v:.1f}"), g(r, "lu_nnz", fmt_e),
+                         g(r, "rss_delta_mb", lambda v: f"{v:.0f}"),
+                         g(r, "max_change", lambda v: f"{v:.2f}")]
+                        for r in rows if not str(r["case"]).startswith("bench")]))
+        errs = [r for r in rows if r.get("error") not in ("", None)]
+        for r in errs:
+            print(f"\n- {r['family']} n={r.get('n', r['n_target'])} {r['case']}: {r['error']}")
+    p = RESULTS / f"cge_tolerance{suffix}.csv"
+    if p.exists():
+        rows = read_csv(p)
+        print("\n### Time against error\n")
+        print(md_table(["n", "convergence_tolerance", "status", "||Phi_FB||", "natural res.",
+                        "ok (<= 1e-6)", "major", "fact.", "time"],
+                       [[g(r, "n"), g(r, "tolerance", fmt_e), g(r, "status"),
+                         g(r, "fb_norm", fmt_e), g(r, "natural", fmt_e), g(r, "success"),
+                         g(r, "major"), g(r, "factorizations"), g(r, "time", fmt_time)]
+                        for r in rows]))
+    p = RESULTS / f"cge_stress{suffix}.csv"
+    if p.exists():
+        rows = read_csv(p)
+        print("\n### Stress\n")
+        print(md_table(["test", "variant", "n", "ok", "status", "natural res. (orig.)",
+                        "err vs ref.", "major", "pivots", "fact.", "restarts", "time", "detail"],
+                       [[r["test"], r["variant"], g(r, "n"), g(r, "success"), g(r, "status"),
+                         g(r, "natural", fmt_e), g(r, "err_vs_ref", fmt_e), g(r, "major"),
+                         g(r, "minor"), g(r, "factorizations"), g(r, "restarts"),
+                         g(r, "time", fmt_time), g(r, "detail") + " " + g(r, "error")]
+                        for r in rows]))
+    p = RESULTS / f"cge_path{suffix}.csv"
+    if p.exists():
+        rows = read_csv(p)
+        print("\n### Side by side with PATH (one-sector LPR Ramsey)\n")
+        print(md_table(["T", "n", "capital tax", "solver", "ok", "status", "natural res.",
+                        "time", "major", "minor", "crash", "F/J evals", "max rel. diff",
+                        "dK(t=5)", "dK(T-1)"],
+                       [[g(r, "T"), g(r, "n"), g(r, "tax"), r["solver"], g(r, "success"),
+                         g(r, "status"), g(r, "natural", fmt_e), g(r, "time", fmt_time),
+                         g(r, "major"), g(r, "minor"), g(r, "crash"),
+                         f"{g(r, 'nfev')}/{g(r, 'njev')}", g(r, "max_rel_diff", fmt_e),
+                         g(r, "K5_change", lambda v: f"{100 * v:+.2f}%"),
+                         g(r, "K_last_change", lambda v: f"{100 * v:+.2f}%")]
+                        for r in rows]))
+
+
 # =========================================================================== main
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -700,12 +805,18 @@ def main(argv=None):
     ap.add_argument("--time-limit", type=float, default=None, help="per-solve seconds")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--suffix", default=None, help="CSV name suffix (default '' / '_quick')")
+    ap.add_argument("--report", action="store_true",
+                    help="only print markdown tables from the CSV files of a run")
     args = ap.parse_args(argv)
+    if args.report:
+        report(args.suffix if args.suffix is not None else ("_quick" if args.quick else ""))
+        return
     if args.sizes is None:
         args.sizes = [1e3, 3e3] if args.quick else [1e3, 3e3, 1e4, 3e4, 1e5]
     args.sizes = [int(s) for s in args.sizes]
     if args.time_limit is None:
-        args.time_limit = 60.0 if args.quick else 600.0
+        args.time_limit = 60.0 if args.quick else 300.0
+    args.stress_time_limit = min(args.time_limit, 10.0 if args.quick else 30.0)
     if args.suffix is None:
         args.suffix = "_quick" if args.quick else ""
     args.tol_n = 3000 if args.quick else 10000
@@ -716,13 +827,12 @@ def main(argv=None):
     t0 = time.perf_counter()
     warm_up()
     print(f"# warm-up {time.perf_counter() - t0:.1f} s", flush=True)
-    out = {"machine": info, "args": vars(args)}
+    out = {}
     for part in args.parts:
         print(f"## part {part}", flush=True)
         tp = time.perf_counter()
         out[part] = globals()[f"part_{part}"](args, info)
         print(f"## part {part} done in {time.perf_counter() - tp:.1f} s", flush=True)
-    write_json(RESULTS / f"cge{args.suffix}.json", out)
     print(f"# total {time.perf_counter() - t0:.1f} s", flush=True)
 
 

@@ -40,12 +40,12 @@ from compass_sparse.merit import natural_residual
 from compass_sparse.presolve import PresolveOptions, presolve, solve_with_presolve
 from compass_sparse.problem import MCP
 
-USE_SOLVE_MCP = False  # HOOK: flip once solve_mcp is wired in
+USE_SOLVE_MCP = True  # compass_sparse.solve_mcp; False: the tests' reference solver
 
 
 def solver_hook():
     """Return a callable problem -> object with .x used for the timing comparison."""
-    if USE_SOLVE_MCP:  # pragma: no cover - not available yet
+    if USE_SOLVE_MCP:
         from compass_sparse import solve_mcp
 
         def solve(problem):

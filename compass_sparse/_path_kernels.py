@@ -23,6 +23,15 @@ def _slot_bounds(kind, idx, val, lb, ub):
     return 0.0, np.inf
 
 
+@njit(cache=True, inline="always")
+def _room(kind, idx, val, r, lb, ub):
+    """(room to the bound the slot moves towards at rate r, that bound)."""
+    lo, hi = _slot_bounds(kind, idx, val, lb, ub)
+    if r > 0.0:
+        return max(hi - val, 0.0), hi
+    return max(val - lo, 0.0), lo
+
+
 @njit(cache=True)
 def ratio_test(sk, si, xb, rate, lb, ub, piv_tol, tol):
     """Harris two-pass ratio test.  Returns (slot, theta, leaves_at_upper) or (-1, inf, 0).
@@ -36,20 +45,9 @@ def ratio_test(sk, si, xb, rate, lb, ub, piv_tol, tol):
         r = rate[k]
         if -piv_tol <= r <= piv_tol:
             continue
-        lo, hi = _slot_bounds(sk[k], si[k], xb[k], lb, ub)
-        if r > 0.0:
-            bnd = hi
-            room = hi - xb[k]
-        else:
-            bnd = lo
-            room = xb[k] - lo
-        if not np.isfinite(bnd):
-            continue
-        if room < 0.0:
-            room = 0.0
-        th = (room + tol * max(1.0, abs(bnd))) / abs(r)
-        if th < theta1:
-            theta1 = th
+        room, bnd = _room(sk[k], si[k], xb[k], r, lb, ub)
+        if np.isfinite(bnd):
+            theta1 = min(theta1, (room + tol * max(1.0, abs(bnd))) / abs(r))
     if not np.isfinite(theta1):
         return -1, np.inf, 0
     best = -1
@@ -61,28 +59,14 @@ def ratio_test(sk, si, xb, rate, lb, ub, piv_tol, tol):
         r = rate[k]
         if -piv_tol <= r <= piv_tol:
             continue
-        lo, hi = _slot_bounds(sk[k], si[k], xb[k], lb, ub)
-        if r > 0.0:
-            bnd = hi
-            room = hi - xb[k]
-        else:
-            bnd = lo
-            room = xb[k] - lo
-        if not np.isfinite(bnd):
-            continue
-        if room < 0.0:
-            room = 0.0
-        ratio = room / abs(r)
-        if ratio > theta1:
+        room, bnd = _room(sk[k], si[k], xb[k], r, lb, ub)
+        if not np.isfinite(bnd) or room / abs(r) > theta1:
             continue
         kind = sk[k]
         pri = 2 if kind == VAR_T else (1 if kind == VAR_A else 0)
-        piv = abs(r)
-        if pri > best_pri or (pri == best_pri and piv > best_piv):
-            best = k
-            best_pri = pri
-            best_piv = piv
-            best_ratio = ratio
+        if pri > best_pri or (pri == best_pri and abs(r) > best_piv):
+            best, best_pri, best_piv = k, pri, abs(r)
+            best_ratio = room / abs(r)
             best_up = 1 if r > 0.0 else 0
     return best, best_ratio, best_up
 

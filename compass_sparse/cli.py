@@ -59,8 +59,6 @@ def _demo(args) -> int:
         build = time.perf_counter() - t0
         res = solve_mcp(model.with_shock(output_tax=0.0).problem, options=_opts(args))
     else:  # kojshin
-        from scipy import sparse as sp
-
         def F(x):
             x1, x2, x3, x4 = x
             return np.array([3 * x1**2 + 2 * x1 * x2 + 2 * x2**2 + x3 + 3 * x4 - 6,

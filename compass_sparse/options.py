@@ -11,8 +11,8 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping
 
+from ._options_base import OptionsMixin
 from .exceptions import OptionError
 
 __all__ = ["Options"]
@@ -27,7 +27,7 @@ def _opt(default, doc: str, *, lo=None, hi=None, choices=None, lo_open=False, nu
 
 
 @dataclass(frozen=True)
-class Options:
+class Options(OptionsMixin):
     """Options of :func:`compass_sparse.solve_mcp` and :func:`compass_sparse.solve_lcp`.
 
     Every field: ``name = default`` — meaning [valid range].  See ``Options.describe()``.
@@ -176,41 +176,6 @@ class Options:
                 raise OptionError(f"option {f.name}={v!r}: must be {op} {lo}")
             if hi is not None and v > hi:
                 raise OptionError(f"option {f.name}={v!r}: must be <= {hi}")
-
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "Options":
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(d) - names)
-        if unknown:
-            import difflib
-
-            hints = []
-            for u in unknown:
-                close = difflib.get_close_matches(u, names, n=1)
-                hints.append(f"{u!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
-            raise OptionError("unknown option(s): " + ", ".join(hints))
-        return cls(**dict(d))
-
-    @classmethod
-    def coerce(cls, options) -> "Options":
-        """None, a dict or an Options -> Options."""
-        if options is None:
-            return cls()
-        if isinstance(options, cls):
-            return options
-        if isinstance(options, Mapping):
-            return cls.from_dict(options)
-        raise OptionError(f"options must be an Options, a dict or None, not {type(options)}")
-
-    def replace(self, **changes) -> "Options":
-        """A copy with some fields changed (unknown names raise OptionError)."""
-        d = dataclasses.asdict(self)
-        names = set(d)
-        bad = sorted(set(changes) - names)
-        if bad:
-            raise OptionError(f"unknown option(s): {bad}")
-        d.update(changes)
-        return Options(**d)
 
     def minor_limit(self, n: int) -> int:
         return self.minor_iteration_limit or max(2 * n, 100)

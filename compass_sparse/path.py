@@ -303,7 +303,6 @@ class PivotalPath:
 
     def _recompute_values(self):
         """x_B = B^{-1} (r - q - M_N z_N - t r) for the nonbasic values (no drift)."""
-        n = self.n
         zn = self.zval.copy()
         zb = self.sk == VAR_Z
         zn[self.si[zb]] = 0.0
@@ -323,7 +322,6 @@ class PivotalPath:
 
     def _pivot_loop(self):
         opt = self.opt
-        n = self.n
         entering = (VAR_T, 0, 1.0, 0.0)  # (kind, index, direction, start value)
         enter_count = {}
         pivots = 0

@@ -9,15 +9,15 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
-from typing import Any, Mapping
 
+from .._options_base import OptionsMixin
 from ..exceptions import OptionError
 
 __all__ = ["PresolveOptions"]
 
 
 @dataclass(frozen=True)
-class PresolveOptions:
+class PresolveOptions(OptionsMixin):
     """Switches and tolerances of :func:`compass_sparse.presolve.presolve`.
 
     Pass switches (all ``True`` by default; each pass is described in its module):
@@ -84,34 +84,12 @@ class PresolveOptions:
                 raise OptionError(f"presolve option {name}={v!r}: expected a finite number "
                                   f"{'>' if lo_open else '>='} 0")
 
+    _what = "presolve option"
+
     @property
     def pass_switches(self) -> dict:
         return {name: getattr(self, name) for name in PASS_NAMES}
 
-    @classmethod
-    def from_dict(cls, d: Mapping[str, Any]) -> "PresolveOptions":
-        names = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(d) - names)
-        if unknown:
-            raise OptionError(f"unknown presolve option(s): {unknown}")
-        return cls(**dict(d))
-
-    @classmethod
-    def coerce(cls, options) -> "PresolveOptions":
-        if options is None:
-            return cls()
-        if isinstance(options, cls):
-            return options
-        if isinstance(options, Mapping):
-            return cls.from_dict(options)
-        raise OptionError(
-            f"presolve options must be PresolveOptions, a dict or None, not {type(options)}")
-
-    def replace(self, **changes) -> "PresolveOptions":
-        bad = sorted(set(changes) - {f.name for f in dataclasses.fields(self)})
-        if bad:
-            raise OptionError(f"unknown presolve option(s): {bad}")
-        return dataclasses.replace(self, **changes)
 
 
 PASS_NAMES = (
