@@ -153,10 +153,11 @@ def run(sizes, solve_max, repeats=3):
         print("        " + res.counters_line())
         out.append((nx, res))
     solve = solver_hook()
-    print("\nwith / without presolve (reference solver; dense, small sizes only)")
+    label = "compass_sparse.solve_mcp" if USE_SOLVE_MCP else "the tests' dense reference solver"
+    print(f"\nwith / without presolve ({label})")
     print(f"{'n':>6s} {'n_red':>6s} {'t_off[s]':>9s} {'res_off':>9s} {'t_on[s]':>9s} "
           f"{'res_on':>9s} {'speedup':>8s}")
-    for nx in [k for k in (50, 100, 200, 400) if k <= solve_max]:
+    for nx in [k for k in (50, 100, 200, 400, 1000, 10000, 100000) if k <= solve_max]:
         p = qp_kkt(nx, seed=1)
         t = time.perf_counter()
         r = solve(p)

@@ -46,6 +46,9 @@ logger = logging.getLogger("compass_sparse")
 
 __all__ = ["NMSSolver", "Outcome", "Linearizer"]
 
+PROGRESS_AFTER = 1.0
+"""Seconds after which ``progress=True`` starts its one-line display."""
+
 
 class _Stop(Exception):
     def __init__(self, status: Status, message: str):
@@ -181,6 +184,22 @@ class NMSSolver:
             raise _Stop(Status.MINOR_ITERATION_LIMIT,
                         f"cumulative pivot limit ({opt.cumulative_limit(self.n)}) reached")
 
+    def _progress(self, cur: Point, opt, final=False):
+        """One-line progress display on stderr for solves longer than a second."""
+        if not opt.progress:
+            return
+        elapsed = time.perf_counter() - self._t_start
+        if elapsed < PROGRESS_AFTER and not final:
+            return
+        import sys
+
+        sys.stderr.write(f"\r[compass_sparse] major {self.nit:5d}  pivots {self.minor:8d}  "
+                         f"residual {cur.fbn:10.3e}  best {self.best.fbn:10.3e}  "
+                         f"restarts {self.restarts:3d}  {elapsed:8.1f} s")
+        if final:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
     def _callback(self, cur: Point):
         if self.callback is None:
             return
@@ -308,6 +327,7 @@ class NMSSolver:
         while True:
             self._check_limits(opt)
             self._callback(cur)
+            self._progress(cur, opt)
             res, J, code = self._newton_point(cur, x, eps, opt)
             self.nit += 1
             if res is None:
@@ -445,6 +465,7 @@ class NMSSolver:
     # ------------------------------------------------------------------ driver
     def solve(self, x0) -> Outcome:
         opt = self.opt0
+        self._t_start = time.perf_counter()
         z0 = project(np.asarray(x0, dtype=float), self.lb, self.ub)
         status, message = Status.NO_PROGRESS, ""
         configs = None
@@ -479,6 +500,8 @@ class NMSSolver:
             status, message = stop.status, stop.message
         except KeyboardInterrupt:
             status, message = Status.USER_INTERRUPT, "interrupted by the user (Ctrl-C)"
+        if self.best is not None and time.perf_counter() - self._t_start >= PROGRESS_AFTER:
+            self._progress(self.best, self.opt0, final=True)
         bm = self.bm
         return Outcome(
             status, message, self.best, nit=self.nit, minor=self.minor,

@@ -178,8 +178,6 @@ def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> 
             f = problem.F(problem.x0)
             return _result(problem, Status.INFEASIBLE, f"preprocessor: {pre.infeasible}",
                            problem.x0, f, opt, t0, passes=passes)
-        if opt.verbosity >= 1:
-            logger.warning(pre.summary_line())
         if pre.reduced is None:
             z = pre.postsolve(np.zeros(0))
             f = problem.F(z)

@@ -99,3 +99,16 @@ def test_cli_help_and_demo(capsys):
     assert "SOLVED" in out and "recomputed" in out
     assert main(["demo", "--problem", "structured", "--n", "2000"]) == 0
     assert main(["options"]) == 0
+
+
+def test_progress_line_on_stderr(monkeypatch, capsys):
+    import compass_sparse.nms as nms
+    from compass_sparse.generators import thesis_family
+
+    monkeypatch.setattr(nms, "PROGRESS_AFTER", 0.0)
+    g = thesis_family(20, family=1, seed=3)
+    r = cs.solve_mcp(g.problem, options={"progress": True, "crash_method": "none"})
+    err = capsys.readouterr().err
+    assert "[compass_sparse] major" in err and "residual" in err
+    assert err.endswith("\n")
+    assert r.nit >= 1
