@@ -26,6 +26,14 @@ Restarts when progress stops use PATH's three configurations (proximal perturbat
 step; crash with more basis changes and arc searches), then — as the thesis proposes —
 restarts near the best point and, when stuck repeatedly, from new points in the box.
 The best point is kept through everything and every exit returns it.
+
+Major-iteration log (verbosity >= 2), fixed-width columns as in PATH:
+``major minor func grad residual type prox inorm (label)`` — minor = pivots of this
+path, func/grad = cumulative F/J evaluations, residual = ||Phi_FB||_2, type = two
+letters: the path's code (S solved, R ray, C cycle, I pivot limit, N singular basis,
+T tolerance lost, E error) and the step (D d-step, M m-step, O both tests passed,
+W watchdog, G projected gradient, L Levenberg–Marquardt), prox = eps, inorm = ||Phi||_inf
+with the worst row's name.  Crash lines: ``crash iter changes size residual step``.
 """
 from __future__ import annotations
 
@@ -268,12 +276,14 @@ class NMSSolver:
             if lm is not None:
                 self.lm_steps += 1
                 out = Point(lm[0], lm[1], lm[2], lm[3])
+                self._last_fallback = "L"
         if out is None:
             g = gradient_steps(self.ev, b.z, b.f, None, self.lb, self.ub, opt,
                                on_point=self._consider)
             if g is not None:
                 self.grad_steps += g[4]
                 out = Point(g[0], g[1], g[2], g[3])
+                self._last_fallback = "G"
         st = self.passes["fallback"]
         st.ran = True
         st.time += time.perf_counter() - t0
@@ -308,7 +318,7 @@ class NMSSolver:
             if cr.iterations > 0 and np.all(np.isfinite(cr.f)):
                 pt = self._point(cr.z, cr.f)
                 self._consider(pt.z, pt.f, pt.phi, pt.psi)
-                if pt.psi <= cur.psi * 4.0 or pt.psi <= opt.nms_initial_reference_factor * cur.psi:
+                if pt.psi <= opt.nms_initial_reference_factor * cur.psi:
                     cur, x = pt, cr.x
         elif self.passes["crash"].reason == "":
             self.passes["crash"].reason = (
@@ -330,16 +340,12 @@ class NMSSolver:
             self._progress(cur, opt)
             res, J, code = self._newton_point(cur, x, eps, opt)
             self.nit += 1
-            if res is None:
-                step = "E"
+            if res is None:  # J could not be evaluated at z_k
                 fb = self._fallback(opt)
                 if fb is None:
                     return "evaluation failure and no fallback progress"
-                cur = fb
-                x, _ = normal_map_at(cur.z, cur.f, lb, ub)
-                memory = [cur.psi]
-                ckpt, ckpt_newton = (cur, x), None
-                self._log(code, "G", cur, eps, res)
+                cur, x, memory, ckpt, ckpt_newton = self._fresh_checkpoint(fb)
+                self._log(code, self._last_fallback, cur, eps, res)
                 continue
             if cur is ckpt[0]:
                 ckpt_newton = res
@@ -396,13 +402,10 @@ class NMSSolver:
                     if fb is None:
                         self._log(res.code, "G", self.best, eps, res)
                         return "no descent from the best point"
-                    cur = fb
-                    x, _ = normal_map_at(cur.z, cur.f, lb, ub)
-                    memory = [cur.psi]
-                    ckpt, ckpt_newton = (cur, x), None
+                    cur, x, memory, ckpt, ckpt_newton = self._fresh_checkpoint(fb)
                     n_d = 0
                     watchdogs = 0
-                    self._log(res.code, "G", cur, eps, res)
+                    self._log(res.code, self._last_fallback, cur, eps, res)
             # Stationarity: restart when the best merit has not improved for a while.
             if self.best.psi < best_seen * (1.0 - 1e-3):
                 best_seen = self.best.psi
@@ -411,6 +414,12 @@ class NMSSolver:
                 stall += 1
                 if stall >= opt.restart_stationary_limit:
                     return f"no progress in {stall} major iterations"
+
+    def _fresh_checkpoint(self, pt: Point):
+        """After a fallback step the new point starts a monotone phase: it is the only
+        checkpoint and the reference value is its own merit."""
+        x, _ = normal_map_at(pt.z, pt.f, self.lb, self.ub)
+        return pt, x, [pt.psi], (pt, x), None
 
     def _descent_ok(self, cur, cand, R, opt):
         # The directional derivative of Psi at z_k uses the Jacobian of this major iteration.
