@@ -311,15 +311,18 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     tp = time.perf_counter()
     # One path solves a linear problem: give it room (a Lemke path may need ~n pivots).
     limit = opt.minor_iteration_limit or max(10 * n, 1000)
-    path = PivotalPath(M, q, lb, ub, bm, opt, minor_limit=limit)
+    deadline = t0 + opt.time_limit if np.isfinite(opt.time_limit) else None
+    path = PivotalPath(M, q, lb, ub, bm, opt, minor_limit=limit, deadline=deadline)
     start_ray = opt.lemke_start in ("always", "first")
-    res = path.run(x, ray_start=start_ray)
-    pivots = res.pivots
-    if res.code is not LinearCode.SOLVED and not start_ray:
-        res2 = PivotalPath(M, q, lb, ub, bm, opt, minor_limit=limit).run(x, ray_start=True)
-        pivots += res2.pivots
-        if res2.code is LinearCode.SOLVED or res2.code is LinearCode.RAY:
-            res = res2
+    with _blas_threads(n):
+        res = path.run(x, ray_start=start_ray)
+        pivots = res.pivots
+        if res.code is not LinearCode.SOLVED and not start_ray:
+            res2 = PivotalPath(M, q, lb, ub, bm, opt, minor_limit=limit,
+                               deadline=deadline).run(x, ray_start=True)
+            pivots += res2.pivots
+            if res2.code is LinearCode.SOLVED or res2.code is LinearCode.RAY:
+                res = res2
     passes["path"] = PassStats(ran=True, time=time.perf_counter() - tp, iterations=1,
                                pivots=pivots, factorizations=bm.stats.factorizations)
     counts = dict(nit=1, minor_iterations=pivots, crash_iterations=crash_its,
