@@ -466,3 +466,39 @@ def test_thesis_family_one_n10():
             assert r.residual.fb_norm > r.tolerance
         solved.append(bool(r.success and nat <= TOL))
     assert sum(solved) >= 9, solved
+
+
+def test_problem_that_needs_a_restart():
+    """Thesis family 1, n = 10, seed 10: the first run stalls at a local minimizer of the
+    merit function; a restart (PATH's configurations, then multi-start) solves it."""
+    from compass_sparse.generators import thesis_family
+
+    g = thesis_family(10, family=1, seed=10)
+    stuck = solve_mcp(g.problem, options={"restart_limit": 0})
+    assert not stuck.success and stuck.status is Status.NO_PROGRESS
+    assert stuck.point_status is not PointStatus.SOLUTION
+    r = solve_mcp(g.problem)
+    assert r.success and r.restarts >= 1
+    p = g.problem
+    f = p.F_uncounted(r.x)
+    assert np.max(np.abs(r.x - np.clip(r.x - f, p.lb, p.ub))) <= 1e-6
+    # the best point is never lost: the failed run returned its best merit, not the start
+    assert stuck.residual.fb_norm <= solve_mcp(
+        g.problem, options={"major_iteration_limit": 0}).residual.fb_norm
+
+
+def test_keyboard_interrupt_returns_best_point():
+    from compass_sparse.generators import thesis_family
+
+    g = thesis_family(20, family=1, seed=5)
+    calls = []
+
+    def interrupt(info):
+        calls.append(info.residual)
+        if len(calls) == 2:
+            raise KeyboardInterrupt
+
+    r = solve_mcp(g.problem, callback=interrupt, options={"crash_method": "none"})
+    assert r.status is Status.USER_INTERRUPT and not r.success
+    assert r.x.shape == (20,) and np.all(np.isfinite(r.x))
+    assert r.residual.fb_norm <= min(calls) + 1e-12
