@@ -200,7 +200,7 @@ MAIN_FIELDS = ["family", "n_target", "n", "nnz", "dims", "case", "success", "sta
                "gen_time", "error"]
 
 
-def task_main(family, n_target, case, time_limit, repeats):
+def task_main(family, n_target, case, time_limit, repeats, splu_max_n=10**9):
     from compass_sparse import solve_mcp
     from compass_sparse.generators.cge import homogeneity_check, walras_check
 
@@ -242,7 +242,9 @@ def task_main(family, n_target, case, time_limit, repeats):
     row["ray_norm"] = homogeneity_check(ms, res.x)["ray_norm"]
     wv = walras_check(ms, res.x)["value"]
     row["walras"] = float("nan") if wv is None else float(wv)
-    if case != "bench-mil0" and np.all(np.isfinite(res.x)):
+    if case != "bench-mil0" and np.all(np.isfinite(res.x)) and m.n > splu_max_n:
+        row["error"] = f"splu skipped (n > {splu_max_n})"
+    elif case != "bench-mil0" and np.all(np.isfinite(res.x)):
         st = splu_stats(ms.J(res.x), lb, ub, reps=3)
         row.update(st)
         if st["splu_error"]:
@@ -252,16 +254,21 @@ def task_main(family, n_target, case, time_limit, repeats):
 
 
 def part_main(args, info):
-    log = CsvLog(RESULTS / f"cge_main{args.suffix}.csv", MAIN_FIELDS)
+    log = CsvLog(RESULTS / f"cge_main{args.suffix}.csv", MAIN_FIELDS, append=args.append)
     rows = []
     for n in args.sizes:
         for family, cases in (("static", ("bench-mil0", "bench-solve", "tariff25", "notax")),
                               ("dynamic", ("bench-mil0", "bench-solve", "ksub10", "ktax25"))):
+            if family not in args.families:
+                continue
             for case in cases:
+                if args.cases and case not in args.cases:
+                    continue
                 reps = 1 if case == "bench-mil0" else args.repeats
                 hard = args.time_limit * (reps + 1) + 120 + n / 500
                 row = run_forked(task_main, hard, family=family, n_target=int(n), case=case,
-                                 time_limit=args.time_limit, repeats=reps)
+                                 time_limit=args.time_limit, repeats=reps,
+                                 splu_max_n=args.splu_max_n)
                 row.setdefault("family", family)
                 row.setdefault("n_target", int(n))
                 row.setdefault("case", case)
@@ -501,6 +508,9 @@ def part_stress(args, info):
         for v in ("none-benchmark", "none-shock", "scale1.1-shock"):
             tasks.append((task_numeraire, dict(family=fam, n_target=args.stress_n, variant=v,
                                                time_limit=tl)))
+    if args.stress_tests:
+        tasks = [(fn, kw) for fn, kw in tasks if fn.__name__.replace("task_", "") in
+                 args.stress_tests]
     for fn, kw in tasks:
         row = run_forked(fn, 8 * tl + 120, **kw)
         row.setdefault("test", fn.__name__.replace("task_", ""))
@@ -805,6 +815,14 @@ def main(argv=None):
     ap.add_argument("--time-limit", type=float, default=None, help="per-solve seconds")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--suffix", default=None, help="CSV name suffix (default '' / '_quick')")
+    ap.add_argument("--families", nargs="+", default=["static", "dynamic"])
+    ap.add_argument("--cases", nargs="+", default=None, help="subset of the part-1 cases")
+    ap.add_argument("--splu-max-n", type=int, default=10**9,
+                    help="skip the reference splu above this n (it took > 10 min for the "
+                         "dynamic model at n = 1e5)")
+    ap.add_argument("--append", action="store_true", help="append to the part-1 CSV")
+    ap.add_argument("--stress-tests", nargs="+", default=None,
+                    choices=["scaling", "degenerate", "numeraire"], help="subset of part 3")
     ap.add_argument("--report", action="store_true",
                     help="only print markdown tables from the CSV files of a run")
     args = ap.parse_args(argv)

@@ -412,7 +412,12 @@ class NMSSolver:
                 stall = 0
             else:
                 stall += 1
-                if stall >= opt.restart_stationary_limit:
+                # The user's start and PATH's three configurations get PATH's patience (10);
+                # the multi-start phase gives up sooner and tries more points.
+                patience = opt.restart_stationary_limit
+                if self.restarts <= 3:
+                    patience = max(patience, 10)
+                if stall >= patience:
                     return f"no progress in {stall} major iterations"
 
     def _fresh_checkpoint(self, pt: Point):
