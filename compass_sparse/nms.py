@@ -412,12 +412,7 @@ class NMSSolver:
                 stall = 0
             else:
                 stall += 1
-                # The user's start and PATH's three configurations get PATH's patience (10);
-                # the multi-start phase gives up sooner and tries more points.
-                patience = opt.restart_stationary_limit
-                if self.restarts <= 3:
-                    patience = max(patience, 10)
-                if stall >= patience:
+                if stall >= opt.restart_stationary_limit:
                     return f"no progress in {stall} major iterations"
 
     def _fresh_checkpoint(self, pt: Point):
