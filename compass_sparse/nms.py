@@ -54,6 +54,10 @@ logger = logging.getLogger("compass_sparse")
 
 __all__ = ["NMSSolver", "Outcome", "Linearizer"]
 
+LOCAL_FACTOR = 1e-3
+"""Below this fraction of a run's starting residual the NMS accepts only steps that do not
+raise the merit (d-steps included); larger steps go to the watchdog's backtracking."""
+
 PROGRESS_AFTER = 1.0
 """Seconds after which ``progress=True`` starts its one-line display."""
 
@@ -334,6 +338,7 @@ class NMSSolver:
         eps = opt.proximal_perturbation
         stall = 0
         best_seen = self.best.psi
+        fbn_start = cur.fbn
         while True:
             self._check_limits(opt)
             self._callback(cur)
@@ -360,9 +365,18 @@ class NMSSolver:
                 if cand is not None:
                     self._consider(cand.z, cand.f, cand.phi, cand.psi)
                     R = max(memory)
+                    large = 100.0  # d-steps may raise the merit up to 100 R far away
+                    if cur.fbn <= LOCAL_FACTOR * fbn_start:
+                        # Close to a solution the iteration turns monotone: a Newton step
+                        # that raises the merit there (a singular or non-Lipschitz
+                        # Jacobian, e.g. a sector shutting down in a CGE model) goes to
+                        # the watchdog's backtracking search instead of being accepted
+                        # against the old, large reference values.
+                        R = min(R, cur.psi)
+                        large = 1.0
                     dist = float(np.max(np.abs(zN - cur.z))) if zN.size else 0.0
                     if n_d < opt.nms_mstep_frequency and dist <= delta and \
-                            cand.psi <= 100.0 * max(R, 1e-300):
+                            cand.psi <= large * max(R, 1e-300):
                         step, new = "D", cand
                         n_d += 1
                         delta = max(delta * opt.nms_delta_shrink_factor, opt.nms_delta_min)
@@ -390,7 +404,10 @@ class NMSSolver:
                 found = None
                 if watchdogs <= opt.nms_maximum_watchdogs and ckpt_newton is not None and (
                         ckpt_newton.code is LinearCode.SOLVED or ckpt_newton.t > 0):
-                    found = self._watchdog_search(ckpt, ckpt_newton, max(memory), opt)
+                    R = max(memory)
+                    if ckpt[0].fbn <= LOCAL_FACTOR * fbn_start:
+                        R = min(R, ckpt[0].psi)  # monotone near a solution, as above
+                    found = self._watchdog_search(ckpt, ckpt_newton, R, opt)
                 if found is not None:
                     cur, x = found
                     memory = (memory + [cur.psi])[-opt.nms_memory_size:]
