@@ -292,6 +292,22 @@ class MCP:
         """F(x) without touching the counters (for independent residual checks)."""
         return self._call_F(x)[0]
 
+    def J_uncounted(self, x) -> sp.csc_matrix:
+        """J(x) without touching the counters (for wrappers that count on their own)."""
+        saved = (self.counters.nfev, self.counters.njev, self.counters.nfev_fd)
+        try:
+            return self.J(x)
+        finally:
+            self.counters.nfev, self.counters.njev, self.counters.nfev_fd = saved
+
+    def FJ_uncounted(self, x):
+        """(F(x), J(x)) without touching the counters."""
+        saved = (self.counters.nfev, self.counters.njev, self.counters.nfev_fd)
+        try:
+            return self.FJ(x)
+        finally:
+            self.counters.nfev, self.counters.njev, self.counters.nfev_fd = saved
+
     def F(self, x) -> np.ndarray:
         """F(x) as a float array of shape (n,).  Counts one evaluation."""
         self.counters.nfev += 1

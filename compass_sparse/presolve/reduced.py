@@ -58,7 +58,7 @@ def build_reduced(ws):
 
     if mode is True:
         def F_red(y):
-            f, J = P.FJ(fill(y))
+            f, J = P.FJ_uncounted(fill(y))  # the reduced problem counts its own calls
             return f[rows], red_J_from(J)
         jac = True
     else:
@@ -68,7 +68,7 @@ def build_reduced(ws):
             jac = None
         else:
             def jac(y):
-                return red_J_from(P.J(fill(y)))
+                return red_J_from(P.J_uncounted(fill(y)))
     return MCP(
         F_red, jac, lb=P.lb[cols], ub=P.ub[cols], x0=P.x0[cols],
         jac_sparsity=pattern,
