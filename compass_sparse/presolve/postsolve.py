@@ -20,6 +20,7 @@ that was still present when R was made has its final value.
 """
 from __future__ import annotations
 
+import abc
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -39,18 +40,20 @@ __all__ = [
 ]
 
 
-class Record:
-    """Base class of postsolve records."""
+class Record(abc.ABC):
+    """Base class of postsolve records: each reduction type undoes itself."""
 
     kind = "record"
     pass_name = ""
 
-    def undo(self, x: np.ndarray, stack: "PostsolveStack") -> None:  # pragma: no cover
-        raise NotImplementedError
+    @abc.abstractmethod
+    def undo(self, x: np.ndarray, stack: "PostsolveStack") -> None:
+        """Write the removed variables' values into the full-length x."""
 
     @property
-    def removed_cols(self) -> np.ndarray:  # pragma: no cover
-        raise NotImplementedError
+    @abc.abstractmethod
+    def removed_cols(self) -> np.ndarray:
+        """Original indices of the variables this record removed."""
 
 
 @dataclass
