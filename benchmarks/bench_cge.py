@@ -393,7 +393,6 @@ def task_degenerate(n_target, variant, time_limit, homotopy=False):
     from compass_sparse import solve_mcp
 
     m, _ = make_model("static", n_target)
-    sh = m.info
     R, N = m.block_shapes["Y"]
     j = 0  # sector s1 of region r1
     if variant.startswith("outtax"):

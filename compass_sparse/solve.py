@@ -197,7 +197,6 @@ def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> 
     z0 = work.x0
     f0 = evalr.f(z0)
     if f0 is None:
-        f0 = problem.F(problem.x0) if pre is None else None
         return _finish(problem, pre, Status.DOMAIN_ERROR, f"F failed at the start point: "
                        f"{evalr.last_error}", work.x0, opt, t0, passes, evalr)
     phi0 = fb_phi(z0, f0, work.lb, work.ub)
