@@ -18,7 +18,7 @@ import compass_sparse.generators as gen
 from compass_sparse import Options, Status, solve_lcp
 from compass_sparse._dense_basis import DenseBasis
 from compass_sparse.basis import BasisManager
-from compass_sparse.path import LinearCode, PivotalPath, WarmBasis, components
+from compass_sparse.path import LinearCode, PivotalPath, WarmBasis, components, default_basis
 
 MANAGERS = {"sparse": BasisManager, "dense": DenseBasis}
 HYP = settings(derandomize=True, max_examples=30, deadline=None,
@@ -351,7 +351,9 @@ def test_cycle_limit_returns_best_t_point(name, n, seed):
     g = gen.p_matrix_lcp(n, "grid", seed, "box")
     M, q, lb, ub = g.lcp
     x0 = start_of(lb, ub)
-    res = run_path(g.lcp, name, x=x0, options=Options(lemke_cycle_limit=1))
+    # From the all-slack basis (the sign-guessed start basis needs no re-entries here).
+    slack = WarmBasis(default_basis(components(x0, lb, ub)[0], lb, ub))
+    res = run_path(g.lcp, name, x=x0, options=Options(lemke_cycle_limit=1), warm=slack)
     assert res.code is LinearCode.CYCLE, res.code
     assert 0.0 < res.t < 1.0
     assert_valid_triple(res, lb, ub)
@@ -362,7 +364,7 @@ def test_cycle_limit_returns_best_t_point(name, n, seed):
     best_x = max(res.breakpoints, key=lambda b: b[0])[1]
     assert np.max(np.abs(best_x - res.x)) <= 1e-9
     # the same problem needs re-entries, and solves with the default limit
-    full = run_path(g.lcp, name, x=x0)
+    full = run_path(g.lcp, name, x=x0, warm=slack)
     assert full.code is LinearCode.SOLVED
     assert np.max(np.abs(full.z - g.solution)) <= 1e-9
 
