@@ -493,7 +493,9 @@ class PivotalPath:
         if self.t > self.best[0] + 1e-15:
             x = self._current_x()
             self.best = (self.t, x)
-            if len(self.breakpoints) < 200:
+            # Breakpoints keep copies of x: at most 200, and at most ~5e6 numbers in all
+            # (a long path at n = 1e6 would otherwise hold gigabytes).
+            if len(self.breakpoints) < min(200, max(1, 5_000_000 // self.n)):
                 self.breakpoints.append((self.t, x))
 
     def _current_point(self):

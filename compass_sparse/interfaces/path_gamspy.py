@@ -495,6 +495,15 @@ def _matvec(A, x: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------- #
 # one-shot entry points
 # --------------------------------------------------------------------------- #
+def _session_for(n: int, quadratic: bool, session: PathSession | None) -> PathSession:
+    """The given session if it fits (size and model form), else a new one."""
+    if session is None:
+        return PathSession(n, quadratic=quadratic)
+    if session.n != n or session.quadratic != quadratic:
+        raise ValueError("session does not match (size or quadratic flag)")
+    return session
+
+
 def solve_lcp_with_path(
     M,
     q,
@@ -516,10 +525,7 @@ def solve_lcp_with_path(
     """
     qv = np.asarray(q, dtype=float).reshape(-1)
     n = qv.size
-    if session is None:
-        session = PathSession(n, quadratic=False)
-    elif session.n != n or session.quadratic:
-        raise ValueError("session does not match (size or quadratic flag)")
+    session = _session_for(n, False, session)
     return session.solve(
         M, qv, lb, ub, x0,
         convergence_tolerance=convergence_tolerance, options=options, time_limit=time_limit,
@@ -542,10 +548,7 @@ def solve_quadratic_mcp_with_path(
     """Solve MCP(F, [lb, ub]) with ``F_i(z) = D_i z_i**2 + (A z)_i + b_i`` with PATH."""
     bv = np.asarray(b, dtype=float).reshape(-1)
     n = bv.size
-    if session is None:
-        session = PathSession(n, quadratic=True)
-    elif session.n != n or not session.quadratic:
-        raise ValueError("session does not match (size or quadratic flag)")
+    session = _session_for(n, True, session)
     return session.solve(
         A, bv, lb, ub, x0, Ddiag,
         convergence_tolerance=convergence_tolerance, options=options, time_limit=time_limit,

@@ -51,13 +51,20 @@ class Record(abc.ABC):
         """Write the removed variables' values into the full-length x."""
 
     @property
-    @abc.abstractmethod
     def removed_cols(self) -> np.ndarray:
-        """Original indices of the variables this record removed."""
+        """Original indices of the variables this record removed (``cols`` by default)."""
+        return self.cols
+
+
+class _AssignValues:
+    """Undo for records whose removed variables have values known at presolve time."""
+
+    def undo(self, x, stack):
+        x[self.cols] = self.values
 
 
 @dataclass
-class FixVariables(Record):
+class FixVariables(_AssignValues, Record):
     """Variables fixed at values known at presolve time (l = u, bound implied by the sign
     of F, the unique solution of a one-dimensional MCP, ...).  Their rows are removed; the
     F values of those rows are still reported (evaluated at the postsolved point)."""
@@ -68,16 +75,9 @@ class FixVariables(Record):
     pass_name: str = ""
     kind = "fix"
 
-    def undo(self, x, stack):
-        x[self.cols] = self.values
-
-    @property
-    def removed_cols(self):
-        return self.cols
-
 
 @dataclass
-class FixByEquation(Record):
+class FixByEquation(_AssignValues, Record):
     """Singleton row i: F_i = a z_j + c = 0 with row i's own variable z_p free, so z_j is
     fixed at -c/a (strictly inside its bounds) and z_p is re-paired with z_j's old row."""
 
@@ -88,13 +88,6 @@ class FixByEquation(Record):
     repaired_rows: np.ndarray  # their new rows (the old rows of z_j)
     pass_name: str = ""
     kind = "fix_by_equation"
-
-    def undo(self, x, stack):
-        x[self.cols] = self.values
-
-    @property
-    def removed_cols(self):
-        return self.cols
 
 
 @dataclass
@@ -116,10 +109,6 @@ class EmptyColumns(Record):
         v = np.where(f > 0, self.lb, np.where(f < 0, self.ub, v))
         x[self.cols] = v
 
-    @property
-    def removed_cols(self):
-        return self.cols
-
 
 @dataclass
 class DiagonalColumnSingletons(Record):
@@ -140,10 +129,6 @@ class DiagonalColumnSingletons(Record):
         g = f - self.coefs * x[self.cols]
         x[self.cols] = solve_1d_vector(self.coefs, g, self.lb, self.ub, x[self.cols])
 
-    @property
-    def removed_cols(self):
-        return self.cols
-
 
 @dataclass
 class FreeColumnSingletons(Record):
@@ -163,10 +148,6 @@ class FreeColumnSingletons(Record):
         f = stack.evaluate(x)[self.rows]
         g = f - self.coefs * x[self.cols]
         x[self.cols] = -g / self.coefs
-
-    @property
-    def removed_cols(self):
-        return self.cols
 
 
 @dataclass
