@@ -48,7 +48,7 @@ from .crash import crash, normal_map_at
 from .fallback import gradient_steps, lm_step
 from .merit import fb_gradient, fb_phi, fb_psi, project
 from .path import LinearCode, PivotalPath, WarmBasis
-from .result import PassStats, Status
+from .result import Iteration, PassStats, Status
 
 logger = logging.getLogger("compass_sparse")
 
@@ -156,6 +156,7 @@ class NMSSolver:
         self.callback = callback
         self.deadline = deadline
         self.log_major = log_major
+        self.history = []  # Iteration records, read by solve.py into Result.history
         self.tol = options.convergence_tolerance
         self.best: Point | None = None
         self.nit = 0
@@ -478,11 +479,13 @@ class NMSSolver:
             self.log_major("crash " + line)
 
     def _log(self, code, step, cur, eps, res):
+        pivots = res.pivots if res is not None else 0
+        c = code.value if hasattr(code, "value") else str(code)
+        self.history.append(Iteration(self.nit, cur.fbn, f"{c}{step}", pivots, eps,
+                                      time.perf_counter() - self._t_start))
         if self.log_major is None:
             return
         idx = int(np.argmax(np.abs(cur.phi))) if cur.phi.size else 0
-        pivots = res.pivots if res is not None else 0
-        c = code.value if hasattr(code, "value") else str(code)
         self.log_major(
             f"{self.nit:5d} {pivots:7d} {self.p.counters.nfev:6d} {self.p.counters.njev:5d} "
             f"{cur.fbn:12.4e} {c}{step} {eps:9.2e} {np.abs(cur.phi[idx]) if cur.phi.size else 0:10.3e}"

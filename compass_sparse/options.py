@@ -15,7 +15,21 @@ from dataclasses import dataclass, field
 from ._options_base import OptionsMixin
 from .exceptions import OptionError
 
-__all__ = ["Options"]
+__all__ = ["Options", "PATH_NAMES"]
+
+# PATH 5.2's name of every option whose name is not PATH's own (None: PATH has no such
+# option).  Every other field carries PATH's name; the option table in the docs and
+# ``Options.path_name`` read this one map.
+PATH_NAMES: dict[str, str | None] = {
+    "pivot_tolerance": "expand_pivot_tolerance",  # the same role in PATH's EXPAND ratio test
+    "ratio_tolerance": "expand_delta",  # PATH's working feasibility tolerance of EXPAND
+    "presolve": "preprocess",
+    "verbosity": "output",  # PATH: on/off; our levels select the summary and the logs
+    "lm_fallback": None,
+    "lm_initial_mu": None,
+    "seed": None,
+    "progress": None,
+}
 
 
 def _opt(default, doc: str, *, lo=None, hi=None, choices=None, lo_open=False, nullable=False):
@@ -183,6 +197,12 @@ class Options(OptionsMixin):
 
     def cumulative_limit(self, n: int) -> int:
         return self.cumulative_iteration_limit or max(100000, 100 * n)
+
+    @classmethod
+    def path_name(cls, name: str) -> str | None:
+        """PATH 5.2's name of option ``name`` (None when PATH has no such option)."""
+        cls._check_names([name])
+        return PATH_NAMES.get(name, name)
 
     @classmethod
     def describe(cls) -> str:

@@ -23,7 +23,7 @@ import numpy as np
 
 from .merit import ResidualReport, natural_residual, residual_report
 
-__all__ = ["Status", "PointStatus", "PassStats", "Result", "IntermediateResult"]
+__all__ = ["Status", "PointStatus", "PassStats", "Result", "IntermediateResult", "Iteration"]
 
 
 class Status(enum.IntEnum):
@@ -86,6 +86,25 @@ class IntermediateResult:
     minor_iterations: int
 
 
+@dataclass(frozen=True)
+class Iteration:
+    """One major iteration as the log prints it (``Result.history`` keeps them all).
+
+    ``residual`` is ||Phi_FB||_2 of the iterate accepted in this major iteration, measured
+    on the problem the Newton method works on (after the preprocessor); ``step`` is the
+    log's two-letter type (the path's code and the step: e.g. ``SD``, ``SM``, ``RW``);
+    iteration 0 is the start point (after the preprocessor, before the crash), with an
+    empty type.  ``time`` counts seconds from the start of the solve.
+    """
+
+    nit: int
+    residual: float
+    step: str
+    pivots: int
+    prox: float
+    time: float
+
+
 @dataclass
 class PassStats:
     """What one pass cost.  ``ran`` is False when the pass decided it was not needed."""
@@ -129,6 +148,9 @@ class Result:
     lb: np.ndarray | None = None
     ub: np.ndarray | None = None
     tolerance: float = 1e-6
+    #: every major iteration (:class:`Iteration`), when the stabilized Newton method ran;
+    #: ``compass_sparse.plot.convergence`` draws it
+    history: list | None = None
 
     @property
     def worst_rows(self):

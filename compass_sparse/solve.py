@@ -23,7 +23,7 @@ from .nms import NMSSolver
 from .options import Options
 from .path import LinearCode, PivotalPath, WarmBasis
 from .problem import MCP
-from .result import PassStats, PointStatus, Result, Status
+from .result import Iteration, PassStats, PointStatus, Result, Status
 from ._evaluate import GuardedEvaluator
 
 logger = logging.getLogger("compass_sparse")
@@ -225,10 +225,20 @@ def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> 
                   crash_iterations=out.crash_iterations, restarts=out.restarts,
                   gradient_steps=out.gradient_steps, lm_steps=out.lm_steps,
                   factorizations=out.factorizations, basis_updates=out.updates,
-                  basis=out.basis)
+                  basis=out.basis, history=_history(solver, out, phi0))
     if opt.verbosity >= 1:
         logger.warning(res.summary())
     return res
+
+
+def _history(solver, out, phi0):
+    """The start point, every logged major iteration, and the final point when the solve
+    stopped inside a major iteration (a solution found during a search: empty type)."""
+    hist = [Iteration(0, float(np.linalg.norm(phi0)), "", 0, 0.0, 0.0)] + solver.history
+    if out.best is not None and hist[-1].nit < out.nit:
+        hist.append(Iteration(out.nit, out.best.fbn, "", 0, 0.0,
+                              time.perf_counter() - solver._t_start))
+    return hist
 
 
 def _finish(problem, pre, status, message, z_red, opt, t0, passes, evalr, *, f_reduced=None,
