@@ -1,7 +1,7 @@
 """The ``compass-sparse`` command.
 
     compass-sparse demo [--problem obstacle|structured|thesis|kojshin|cge] [--n N] [-v]
-    compass-sparse cge  [--regions R --sectors N --households H --shock ...]
+    compass-sparse cge  [--regions R --sectors N --households H --shock ...] [--csv FILE]
     compass-sparse options          list every solver option with its default
 """
 from __future__ import annotations
@@ -117,6 +117,16 @@ def _cge(args) -> int:
     print(f"shock: {shock}")
     res = solve_mcp(shocked.problem, options=_opts(args))
     _print_result("counterfactual", shocked.problem.n, res, shocked.problem)
+    from .generators.cge import economics_report
+
+    econ = economics_report(shocked, shocked.benchmark, res.x)
+    print()
+    print("economics of the counterfactual" + ("" if res.success else
+                                               " (NOT an equilibrium: the best point found)"))
+    print(econ.table(top=args.top))
+    if args.csv:
+        econ.to_csv(args.csv)
+        print(f"\nwrote every variable and household to {args.csv}")
     return 0 if res.success else 1
 
 
@@ -150,6 +160,11 @@ def main(argv=None) -> int:
     c.add_argument("--tariff", type=float, default=None, help="import tariff of region 0")
     c.add_argument("--productivity", type=float, default=None, help="productivity factor")
     c.add_argument("--endowment", type=float, default=None, help="endowment factor")
+    c.add_argument("--top", type=int, default=10,
+                   help="largest price, quantity and income changes to print (default 10)")
+    c.add_argument("--csv", default=None, metavar="FILE",
+                   help="write the whole economics report (every variable, every household) "
+                   "as CSV")
     common(c)
     sub.add_parser("options", help="list every solver option with its default")
     args = ap.parse_args(argv)
