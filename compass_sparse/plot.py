@@ -81,7 +81,8 @@ def profile_curve(costs: np.ndarray, taus: np.ndarray) -> np.ndarray:
     with np.errstate(invalid="ignore", divide="ignore"):
         ratio = np.where(np.isfinite(costs), costs / best[:, None], np.inf)
     ratio = np.where(np.isfinite(best)[:, None], ratio, np.inf)
-    return np.array([np.mean(ratio <= tau, axis=0) for tau in taus])
+    solved = np.isfinite(ratio)
+    return np.array([np.mean(solved & (ratio <= tau), axis=0) for tau in taus])
 
 
 def performance_profile(costs, labels, *, ax=None, tau_max=None, title=None,

@@ -45,7 +45,7 @@ def test_history_is_none_when_the_newton_method_never_ran():
 def test_profile_curve_matches_a_hand_computed_profile():
     # Three instances, two solvers; solver B fails instance 3.
     costs = np.array([[1.0, 2.0], [3.0, 1.0], [2.0, np.inf]])
-    rho = profile_curve(costs, np.array([1.0, 2.0, 3.0, 1e9]))
+    rho = profile_curve(costs, np.array([1.0, 2.0, 3.0, np.inf]))
     np.testing.assert_allclose(rho[:, 0], [2 / 3, 2 / 3, 1.0, 1.0])
     np.testing.assert_allclose(rho[:, 1], [1 / 3, 2 / 3, 2 / 3, 2 / 3])
 
