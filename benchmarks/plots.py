@@ -63,6 +63,7 @@ def _paired_costs(rows, key):
 def profiles(plt, out):
     from compass_sparse.plot import performance_profile
 
+    # One run, both solvers side by side on each instance: times compared under one load.
     thesis = _rows("thesis_final.csv")
     # Default options only (the study's no-crash configuration is not a user's setting).
     lcp = [r for r in _rows("lcp.csv") if r["part"] == "B" and r["config"] == "default"]
@@ -83,7 +84,9 @@ def profiles(plt, out):
 
 
 def success(plt, out):
-    rows = _rows("thesis_final.csv")
+    # Our rows of the final code with PATH's rows of the side-by-side run (same seeds):
+    # the table of thesis.md and the README.
+    rows = _rows("thesis_combined.csv")
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.5), sharey=True)
     for ax, fam in zip(axes, ("1", "2")):
         for solver, label in ((OURS, "compass_sparse"), (PATH, "PATH 5.2")):
