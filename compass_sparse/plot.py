@@ -7,7 +7,8 @@ never needs it.
   and against time, on a log scale, with the convergence tolerance as a dashed line.
 * :func:`performance_profile` draws Dolan–Moré performance profiles: for solver s and
   instance p with cost t_{p,s} (inf = failure), the ratio r_{p,s} = t_{p,s} / min_s t_{p,s}
-  and the profile rho_s(tau) = |{p : r_{p,s} <= tau}| / |P|, a step function of tau >= 1.
+  and the profile rho_s(tau) = (number of p with r_{p,s} <= tau) / (number of instances),
+  a step function of tau >= 1.
   rho_s(1) is the share of instances on which s is fastest, rho_s(inf) its success rate.
 """
 from __future__ import annotations
@@ -75,7 +76,7 @@ def convergence(result, *, tolerance=None, axes=None, title=None):
 def profile_curve(costs: np.ndarray, taus: np.ndarray) -> np.ndarray:
     """Dolan–Moré profiles: ``costs`` is (instances, solvers) with inf for failures;
     returns rho, (len(taus), solvers).  Instances that every solver failed count as
-    failures for all (they stay in |P|)."""
+    failures for all (they stay in the count of instances)."""
     costs = np.asarray(costs, dtype=float)
     best = np.min(costs, axis=1)
     with np.errstate(invalid="ignore", divide="ignore"):

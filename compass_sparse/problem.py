@@ -137,7 +137,7 @@ class MCP:
     jac : callable, True, or None
         See the module docstring.  None requires ``jac_sparsity``.
     lb, ub : scalar or array (n,)
-        Bounds; +-inf (or |b| >= 1e20) for none.  Defaults: NCP bounds [0, inf).
+        Bounds; +-inf (or ``|b| >= 1e20``) for none.  Defaults: NCP bounds [0, inf).
     x0 : array (n,), optional
         Start point; projected onto [lb, ub].  Default: the projection of 0.
     n : int, optional

@@ -79,7 +79,7 @@ class EconomicsReport:
         return [c for c in self.changes if c.kind == kind]
 
     def largest(self, kind: str, k: int = 10) -> list:
-        """The k variables of a kind with the largest |percent change|."""
+        """The k variables of a kind with the largest absolute percent change."""
         rows = [c for c in self.of_kind(kind) if np.isfinite(c.percent)]
         return sorted(rows, key=lambda c: -abs(c.percent))[:k]
 
