@@ -92,9 +92,12 @@ class Iteration:
 
     ``residual`` is ||Phi_FB||_2 of the iterate accepted in this major iteration, measured
     on the problem the Newton method works on (after the preprocessor); ``step`` is the
-    log's two-letter type (the path's code and the step: e.g. ``SD``, ``SM``, ``RW``);
-    iteration 0 is the start point (after the preprocessor, before the crash), with an
-    empty type.  ``time`` counts seconds from the start of the solve.
+    log's two-letter type (the path's code and the step: e.g. ``SD``, ``SM``, ``RW``).
+    Iteration 0 is the start point (after the preprocessor, before the crash); a last
+    record with an empty type is the returned point when the solve stopped inside a major
+    iteration (a solution found during a search).  ``pivots`` are this iteration's,
+    ``prox`` the proximal perturbation for the next path, and ``time`` counts seconds from
+    the start of the stabilized Newton method (after the preprocessor).
     """
 
     nit: int
