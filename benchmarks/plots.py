@@ -109,19 +109,28 @@ def success(plt, out):
 
 
 def tolerances(plt, out):
+    # One line per (instance, solver): the same instance solved at tolerances 1e-4 .. 1e-12,
+    # so each line shows what the extra digits cost.
     rows = [r for r in _rows("thesis_tolerances.csv") if _true(r["success"])]
     fig, ax = plt.subplots(figsize=(6, 4))
-    for solver, label in ((OURS, "compass_sparse"), (PATH, "PATH 5.2")):
-        pts = [(max(_float(r["natural"]), 1e-17), _float(r["time"])) for r in rows
-               if r["solver"] == solver]
-        if pts:
-            e, t = np.array(pts).T
-            ax.scatter(e, t, s=14, alpha=0.7, label=label, color=COLORS[solver])
+    lines = defaultdict(list)
+    for r in rows:
+        lines[(r["solver"], r["family"], r["n"], r["seed"])].append(
+            (float(r["tol"]), max(_float(r["natural"]), 1e-17), _float(r["time"])))
+    labelled = set()
+    for (solver, *_), pts in sorted(lines.items()):
+        pts.sort(reverse=True)  # loose to tight tolerance
+        _, e, t = zip(*pts)
+        label = None if solver in labelled else ("compass_sparse" if solver == OURS
+                                                 else "PATH 5.2")
+        labelled.add(solver)
+        ax.plot(e, t, marker="o", markersize=3, linewidth=0.8, alpha=0.7,
+                color=COLORS[solver], label=label)
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel("achieved natural residual (recomputed)")
     ax.set_ylabel("solve time (s)")
-    ax.set_title("thesis families, n = 20, 50; tolerance 1e-4 .. 1e-12")
+    ax.set_title("thesis families, n = 20, 50; tolerance 1e-4 .. 1e-12", fontsize=10)
     ax.grid(True, alpha=0.3)
     ax.legend()
     fig.tight_layout()
