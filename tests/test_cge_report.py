@@ -81,3 +81,20 @@ def test_cge_command_prints_the_welfare_table_and_writes_csv(tmp_path, capsys):
     assert "welfare by household" in out and "largest price changes" in out
     rows = list(csv.reader(out_csv.open()))
     assert len(rows) > 20 and rows[0][0] == "kind"
+
+
+def test_report_of_a_dynamic_model_classifies_blocks_and_has_no_household_welfare():
+    from compass_sparse.generators.cge import ramsey_cge
+
+    model = ramsey_cge(periods=10)
+    shocked = model.with_shock(capital_tax=0.25)
+    res = cs.solve_mcp(shocked.problem)
+    assert res.success
+    rep = economics_report(shocked, shocked.benchmark, res.x)
+    kinds = {c.block: c.kind for c in rep.changes}
+    assert kinds["K"] == "quantity" and kinds["RK"] == "price" and kinds["HA"] == "income"
+    assert rep.welfare == []
+    # A capital tax lowers the capital stock after the first period.
+    k = [c for c in rep.changes if c.block == "K"]
+    assert all(c.after < c.before for c in k[1:])
+    assert "welfare by household" not in rep.table()

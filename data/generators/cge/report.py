@@ -20,7 +20,9 @@ equilibrium.  The Hicksian equivalent variation at the ``before`` prices is ther
 the money (numeraire units at the old prices) that, given at the old prices, would leave h
 as well off as the counterfactual.  ``ev_percent`` = 100 (U1/U0 - 1), the same measure
 relative to the old income.  For comparison the report also gives the income-based measure,
-the change of real income M/PU (equal to the EV at an exact equilibrium).
+the change of real income M/PU (equal to the EV at an exact equilibrium).  Models without
+household utility blocks (the dynamic Ramsey model, whose numeraire is the agent's income)
+get the price, quantity and income changes only.
 """
 from __future__ import annotations
 
