@@ -11,7 +11,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, os.path.join(HERE, ".."))
 sys.path.insert(0, os.path.join(HERE, "_ext"))
 
-import compass_sparse  # noqa: E402
+import compass_sparse  # noqa: E402  (after the path setup)
 
 project = "compass_sparse"
 author = "The compass_sparse developers"

@@ -30,7 +30,7 @@ PAGES = sorted(p.relative_to(DOCS).as_posix() for p in DOCS.rglob("*.rst"))
 def built(tmp_path_factory):
     pytest.importorskip("sphinx", reason="sphinx (the docs extra) is not installed")
     out = tmp_path_factory.mktemp("docs_html")
-    proc = subprocess.run(
+    proc = subprocess.run(  # noqa: PLW1510 - the return code is asserted in the test
         [sys.executable, "-m", "sphinx", "-W", "--keep-going", "-E", "-q", "-b", "html",
          str(DOCS), str(out)],
         capture_output=True, text=True, cwd=ROOT, timeout=300,

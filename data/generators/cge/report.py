@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["EconomicsReport", "Change", "Welfare", "economics_report"]
+__all__ = ["Change", "EconomicsReport", "Welfare", "economics_report"]
 
 
 @dataclass(frozen=True)
