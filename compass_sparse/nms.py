@@ -50,7 +50,8 @@ import scipy.sparse as sp
 from .crash import crash, normal_map_at
 from .fallback import gradient_steps, lm_step
 from .merit import fb_gradient, fb_phi, fb_psi, project
-from .path import LinearCode, PivotalPath, WarmBasis
+from .path import LinearCode, WarmBasis, solve_linear_mcp
+from .progress import ProgressLine
 from .result import PassStats, Status
 
 logger = logging.getLogger("compass_sparse")
@@ -61,8 +62,6 @@ LOCAL_FACTOR = 1e-3
 """Below this fraction of a run's starting residual the NMS accepts only steps that do not
 raise the merit (d-steps included); larger steps go to the watchdog's backtracking."""
 
-PROGRESS_AFTER = 1.0
-"""Seconds after which ``progress=True`` starts its one-line display."""
 
 
 class _Stop(Exception):
@@ -152,7 +151,7 @@ class NMSSolver:
     """The stabilized Newton method on one MCP (after presolve)."""
 
     def __init__(self, problem, options, *, manager_factory, callback=None,
-                 deadline=None, log_major=None):
+                 deadline=None, log_major=None, log_minor=None):
         self.p = problem
         self.ev = problem.evaluator
         self.opt0 = options
@@ -162,6 +161,7 @@ class NMSSolver:
         self.callback = callback
         self.deadline = deadline
         self.log_major = log_major
+        self.log_minor = log_minor
         self.tol = options.convergence_tolerance
         self.best: Point | None = None
         self.nit = 0
@@ -202,21 +202,9 @@ class NMSSolver:
             raise _Stop(Status.MINOR_ITERATION_LIMIT,
                         f"cumulative pivot limit ({opt.cumulative_limit(self.n)}) reached")
 
-    def _progress(self, cur: Point, opt, final=False):
-        """One-line progress display on stderr for solves longer than a second."""
-        if not opt.progress:
-            return
-        elapsed = time.perf_counter() - self._t_start
-        if elapsed < PROGRESS_AFTER and not final:
-            return
-        import sys
-
-        sys.stderr.write(f"\r[compass_sparse] major {self.nit:5d}  pivots {self.minor:8d}  "
-                         f"residual {cur.fbn:10.3e}  best {self.best.fbn:10.3e}  "
-                         f"restarts {self.restarts:3d}  {elapsed:8.1f} s")
-        if final:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
+    def _progress(self, cur: Point, final=False):
+        self.progress.update(self.nit, self.minor, cur.fbn, self.best.fbn, self.restarts,
+                             final=final)
 
     def _callback(self, cur: Point):
         if self.callback is None:
@@ -249,20 +237,11 @@ class NMSSolver:
         r = cur.f + x - cur.z  # normal map of the linearization at x
         limit = opt.minor_limit(self.n)
         t0 = time.perf_counter()
-        path = PivotalPath(M, q, self.lb, self.ub, self.bm, opt, minor_limit=limit,
-                           deadline=self.deadline)
         start_ray = opt.lemke_start == "always" or (opt.lemke_start == "first" and self.nit == 0)
-        res = path.run(x, warm=self.basis, ray_start=start_ray, r=r)
-        if (res.code is not LinearCode.SOLVED and opt.lemke_start == "automatic"
-                and res.t < 0.5 and not start_ray):
-            res2 = PivotalPath(M, q, self.lb, self.ub, self.bm, opt, minor_limit=limit,
-                               deadline=self.deadline).run(x, ray_start=True)
-            res2.pivots += res.pivots
-            res2.factorizations += res.factorizations
-            if res2.code is LinearCode.SOLVED or res2.t > res.t:
-                res = res2
-            else:
-                res.pivots = res2.pivots
+        # A warm path that stalls before half-way is retried from the Lemke start.
+        res = solve_linear_mcp(M, q, self.lb, self.ub, self.bm, opt, x, warm=self.basis, r=r,
+                               ray_start=start_ray, retry_below=0.5, minor_limit=limit,
+                               deadline=self.deadline, log=self.log_minor)
         st = self.passes["path"]
         st.ran = True
         st.time += time.perf_counter() - t0
@@ -352,7 +331,7 @@ class NMSSolver:
         while True:
             self._check_limits(opt)
             self._callback(cur)
-            self._progress(cur, opt)
+            self._progress(cur)
             res, J, code = self._newton_point(cur, x, eps, opt)
             self.nit += 1
             if res is None:  # J could not be evaluated at z_k
@@ -502,7 +481,7 @@ class NMSSolver:
     def solve(self, start: Point) -> Outcome:
         """Run from ``start``, the evaluated start point (in the box, with F and J)."""
         opt = self.opt0
-        self._t_start = time.perf_counter()
+        self.progress = ProgressLine(opt.progress)
         start0, z0 = start, start.z
         status, message = Status.NO_PROGRESS, ""
         configs = None
@@ -536,8 +515,8 @@ class NMSSolver:
             status, message = stop.status, stop.message
         except KeyboardInterrupt:
             status, message = Status.USER_INTERRUPT, "interrupted by the user (Ctrl-C)"
-        if self.best is not None and time.perf_counter() - self._t_start >= PROGRESS_AFTER:
-            self._progress(self.best, self.opt0, final=True)
+        if self.best is not None:
+            self._progress(self.best, final=True)
         bm = self.bm
         return Outcome(
             status, message, self.best, nit=self.nit, minor=self.minor,

@@ -54,7 +54,7 @@ import scipy.sparse as sp
 
 from ._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
 from .basis import KIND_DENSE, KIND_M, KIND_UNIT, UpdateStatus
-from .exceptions import SingularBasisError
+from .exceptions import ShapeError, SingularBasisError
 
 _VAR_NAMES = "zwvatS"
 
@@ -94,6 +94,8 @@ class PathResult:
     basis: WarmBasis | None = None
     ray_start: bool = False
     unbounded: bool = False  #: RAY because the entering variable grows without bound
+    ray: np.ndarray | None = None  #: unbounded: direction of z along the ray
+    ray_base: np.ndarray | None = None  #: unbounded: the z where the ray starts
     time: float = 0.0
     message: str = ""
 
@@ -120,11 +122,40 @@ def default_basis(z, lb, ub, previous: WarmBasis | None = None) -> np.ndarray:
     fixed = lb == ub
     basic[at_l] = VAR_W
     basic[at_u] = VAR_V
-    if previous is not None and previous.basic.shape == z.shape:
+    if previous is not None:
+        if previous.basic.shape != z.shape:
+            raise ShapeError(f"warm basis of shape {previous.basic.shape} for a linear MCP "
+                             f"of {z.size} variables")
         keep_z = (previous.basic == VAR_Z) & (at_l | at_u)
         basic[keep_z] = VAR_Z
     basic[fixed] = VAR_S
     return basic
+
+
+def solve_linear_mcp(M, q, lb, ub, basis, options, x, *, warm: WarmBasis | None = None,
+                     r=None, ray_start: bool = False, retry_below: float = np.inf,
+                     keep_ray: bool = False, minor_limit=None, deadline=None,
+                     log=None) -> PathResult:
+    """One linear MCP by the pivotal path from x (warm-started from ``warm``), retried
+    from the Lemke ray start when ``options.lemke_start`` is "automatic", the first path
+    failed and reached only t < ``retry_below``.  The retry's result is kept when it
+    solves, reaches a larger t, or (``keep_ray``) ends in a genuine ray, which is what
+    an infeasibility verdict needs; pivots and factorizations of both paths are counted.
+    """
+    kw = dict(minor_limit=minor_limit, deadline=deadline, log=log)
+    res = PivotalPath(M, q, lb, ub, basis, options, **kw).run(x, warm=warm,
+                                                              ray_start=ray_start, r=r)
+    if (res.code is LinearCode.SOLVED or ray_start or options.lemke_start != "automatic"
+            or res.t >= retry_below):
+        return res
+    res2 = PivotalPath(M, q, lb, ub, basis, options, **kw).run(x, ray_start=True)
+    pivots = res.pivots + res2.pivots
+    factorizations = res.factorizations + res2.factorizations
+    if (res2.code is LinearCode.SOLVED or res2.t > res.t
+            or (keep_ray and res2.code is LinearCode.RAY and res2.unbounded)):
+        res = res2
+    res.pivots, res.factorizations = pivots, factorizations
+    return res
 
 
 class PivotalPath:
@@ -186,6 +217,7 @@ class PivotalPath:
         # Per-run state, all of it set here: a path object may run more than once.
         self.art_sign = np.ones(n, dtype=np.int64)
         self.unbounded = False  # RAY because the entering variable grows without bound
+        self.ray = None  # (base z, direction dz) of that ray
         self.sk = self.si = self.xb = None  # slot table and basic values (set on factoring)
         self.t, self.t_slot = 0.0, -1  # path parameter and the slot holding t (-1: nonbasic)
         self.best = (0.0, None)  # (largest t, its x) for a path that does not reach t = 1
@@ -382,8 +414,15 @@ class PivotalPath:
             theta_self = self._entering_room(ek, ei, es, ev)
             leave, theta, leave_up = self._ratio_test(rate, d)
             if leave < 0 and not np.isfinite(theta_self):
-                # Ray termination: the entering variable grows without bound.
+                # Ray termination: the entering variable grows without bound; z moves
+                # along dz (basic z's at their rates, an entering z at its direction).
                 self.unbounded = True
+                dz = np.zeros(self.n)
+                m = self.sk == VAR_Z
+                dz[self.si[m]] = rate[m]
+                if ek == VAR_Z:
+                    dz[ei] += es
+                self.ray = (self._current_point()[0], dz)
                 return LinearCode.RAY, f"ray: {_VAR_NAMES[ek]}[{ei}] unbounded"
             if leave < 0 or theta_self <= theta:
                 # The entering variable reaches its own bound first.
@@ -403,6 +442,9 @@ class PivotalPath:
                     entering = (VAR_V, ei, 1.0, 0.0) if es > 0 else (VAR_W, ei, 1.0, 0.0)
                     self._update_t()
                     self._record()
+                    if self.log is not None:
+                        self.log(f"minor {pivots:7d} t {self.t:.6e} z[{ei}] to its other "
+                                 "bound")
                     continue
                 return LinearCode.ERROR, "bounded entering slack"  # cannot happen
             # A basic variable blocks: update values and exchange columns.
@@ -433,6 +475,9 @@ class PivotalPath:
                     return LinearCode.SOLVED, ""
                 return LinearCode.RAY, "t decreased to 0"
             self._record()
+            if self.log is not None:
+                self.log(f"minor {pivots:7d} t {self.t:.6e} in {_VAR_NAMES[ek]}[{ei}] "
+                         f"out {_VAR_NAMES[lk]}[{li}] ({status.name})")
             # Complement rule.
             if lk == VAR_W:
                 entering = (VAR_Z, li, 1.0, self.lb[li])
@@ -550,5 +595,7 @@ class PivotalPath:
             basis=WarmBasis(basic), ray_start=ray_start, message=msg,
         )
         res.unbounded = code is LinearCode.RAY and self.unbounded
+        if res.unbounded and self.ray is not None:
+            res.ray_base, res.ray = self.ray
         res.time = time.perf_counter() - t0
         return res
