@@ -255,8 +255,9 @@ def test_manufactured_structured_quadratic(n, seed, structure):
     check_success(r, F, p.lb, p.ub, tol=1e-9)
 
 
-def test_manufactured_with_fixed_variables_goes_through_presolve():
-    n = 40
+def fixed_variables_case(n=40):
+    """A manufactured nonlinear MCP in which every fifth variable is fixed (presolve
+    removes those): (generated, F with the solution's shift, lb, ub, z*, fixed)."""
     base = BandedNonlinear(n, 11)
     lb, ub, _ = draw_bounds(n, np.random.default_rng(11))
     zstar = np.clip(np.random.default_rng(12).uniform(-1, 1, n), lb, ub)
@@ -268,6 +269,12 @@ def test_manufactured_with_fixed_variables_goes_through_presolve():
 
     def F(z):
         return base.F(z) + shift
+
+    return g, F, lb, ub, zstar, fix
+
+
+def test_manufactured_with_fixed_variables_goes_through_presolve():
+    g, F, lb, ub, zstar, fix = fixed_variables_case()
 
     r = solve_mcp(g.problem)
     check_success(r, F, lb, ub)
@@ -541,17 +548,7 @@ def test_warm_basis_survives_presolve():
     from compass_sparse import ShapeError
 
     n = 40
-    base = BandedNonlinear(n, 11)
-    lb, ub, _ = draw_bounds(n, np.random.default_rng(11))
-    zstar = np.clip(np.random.default_rng(12).uniform(-1, 1, n), lb, ub)
-    fix = np.arange(0, n, 5)
-    lb, ub = lb.copy(), ub.copy()
-    lb[fix] = ub[fix] = zstar[fix]
-    g = gen.manufacture(base.F, base.J, zstar, lb, ub, 3, x0=np.clip(np.zeros(n), lb, ub))
-    shift = g.info["w_star"] - g.info["v_star"] - g.info["F_star"]
-
-    def F(z):
-        return base.F(z) + shift
+    g, F, lb, ub, zstar, fix = fixed_variables_case(n)
 
     r = solve_mcp(g.problem, options={"convergence_tolerance": 1e-8})
     check_success(r, F, lb, ub)
