@@ -15,6 +15,8 @@ Public names::
     plot                                 convergence plots (needs matplotlib)
     exceptions                           CompassError and subclasses
 """
+import logging as _logging
+
 from .exceptions import (BoundsError, CompassError, EvaluationError, JacobianPatternError,
                          OptionError, ProblemError, ShapeError, StartPointError)
 from .options import Options
@@ -23,6 +25,9 @@ from .result import IntermediateResult, Iteration, PassStats, PointStatus, Resul
 from .solve import MCPSolver, solve_lcp, solve_mcp
 
 __version__ = "0.1.0"
+
+# A library only emits log records; handlers, levels and propagation are the application's.
+_logging.getLogger("compass_sparse").addHandler(_logging.NullHandler())
 
 __all__ = [
     "solve_mcp", "solve_lcp", "MCPSolver", "MCP", "Options", "Result", "Status",
