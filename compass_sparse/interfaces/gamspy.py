@@ -238,7 +238,11 @@ class GamsMCP:
                 cols["marginal"] = [r[2] for r in recs]
                 new = pd.DataFrame(cols)
                 old = obj.records
-                if old is not None and len(old):
+                if old is not None and len(old) and not dims:  # a scalar symbol
+                    old = old.copy()
+                    old.loc[old.index[0], ["level", "marginal"]] = [recs[0][1], recs[0][2]]
+                    obj.setRecords(old)
+                elif old is not None and len(old):
                     old = old.copy()
                     key = [c for c in old.columns[:len(dims)]]
                     new.columns = key + ["level", "marginal"]

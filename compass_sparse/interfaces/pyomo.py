@@ -192,6 +192,12 @@ def _is_fixed_expr(e) -> bool:
     return e.__class__ in native_numeric_types or e.is_fixed()
 
 
+def _is_var(e) -> bool:
+    from pyomo.core.expr.numvalue import native_numeric_types
+
+    return e.__class__ not in native_numeric_types and e.is_variable_type()
+
+
 def _side(e) -> _Side:
     """``lo <= body <= up`` form of one argument of complements(a, b) (as pyomo.mpec reads it)."""
     from pyomo.core.expr.relational_expr import (EqualityExpression, InequalityExpression,
@@ -199,6 +205,8 @@ def _side(e) -> _Side:
 
     if isinstance(e, EqualityExpression):
         a, b = e.args
+        if _is_var(b) and _is_fixed_expr(a):
+            return _Side(a, b, a, True)
         if _is_fixed_expr(b):
             return _Side(b, a, b, True)
         if _is_fixed_expr(a):
@@ -206,6 +214,9 @@ def _side(e) -> _Side:
         return _Side(0.0, a - b, 0.0, True)
     if isinstance(e, InequalityExpression):
         a, b = e.args  # a <= b
+        # a fixed variable is still the body (x >= 0 with x fixed), not a bound
+        if _is_var(b) and _is_fixed_expr(a):
+            return _Side(a, b, None)
         if _is_fixed_expr(b):
             return _Side(None, a, b)
         if _is_fixed_expr(a):
@@ -217,13 +228,14 @@ def _side(e) -> _Side:
 
 
 def _single_variable(body):
-    """(v, a, c) when body = a*v + c with constants a != 0 and c (v a free-to-move Var)."""
+    """(v, a, c) when body = a*v + c with constants a != 0 and c.  A plain variable may be
+    fixed (its pair is dropped later); in a*v + c it must not be."""
     from pyomo.core.expr.numvalue import native_numeric_types
 
     if body.__class__ in native_numeric_types:
         return None
     if body.is_variable_type():
-        return (body, 1.0, 0.0) if not body.fixed else None
+        return body, 1.0, 0.0
     if not body.is_potentially_variable():
         return None
     from pyomo.repn.standard_repn import generate_standard_repn
@@ -391,8 +403,8 @@ class PyomoMCP:
                 if sv is not None and id(sv[0]) not in claimed:
                     v, a, c = sv
                     claimed[id(v)] = name
-                    w = len(pairs)
-                    pairs.append(_Pair(None, f"{name}.aux", other.body, name, s[k].lo, s[k].up))
+                    w = _Pair(None, f"{name}.aux", other.body, name, s[k].lo, s[k].up)
+                    pairs.append(w)
                     pairs.append(_Pair(v, v.name, ("aux_eq", s[k].body, w), f"{name}.aux_def",
                                        use_var_bounds=True))
                     return
@@ -468,12 +480,13 @@ class PyomoMCP:
         var_index = {id(p.var): j for j, p in enumerate(self.pairs) if p.var is not None}
         # variables that only appear in rows of dropped (fixed) pairs are fixed anyway
         conv = _ToCasadi(x, var_index, "")
+        position = {id(p): j for j, p in enumerate(self.pairs)}
         rows = []
         for j, p in enumerate(self.pairs):
             conv.where = p.row_name
             if isinstance(p.row, tuple):  # w - g(x) = 0
                 _, body, w = p.row
-                rows.append(x[w] - conv(body))
+                rows.append(x[position[id(w)]] - conv(body))
             else:
                 rows.append(conv(p.row))
         self._data = conv.data
@@ -516,13 +529,13 @@ class PyomoMCP:
         for j, p in enumerate(self.pairs):
             if p.var is not None and p.var.value is not None:
                 x0[j] = p.var.value
-        aux = [j for j, p in enumerate(self.pairs) if p.var is None]
-        if aux:  # start auxiliaries at the value of what they stand for
+        position = {id(p): j for j, p in enumerate(self.pairs)}
+        defs = [(k, position[id(q.row[2])]) for k, q in enumerate(self.pairs)
+                if isinstance(q.row, tuple)]
+        if defs:  # start auxiliaries at the value of what they stand for: w = g(x)
             self._fj.set_parameters(self.parameter_values())
             f = self._fj.F(x0)
-            for j in aux:
-                k = next(i for i, q in enumerate(self.pairs)
-                         if isinstance(q.row, tuple) and q.row[2] == j)
+            for k, j in defs:
                 x0[j] = x0[j] - f[k]
         return x0
 
