@@ -96,7 +96,10 @@ class GamsMCP:
                 raise PathLicenseError(
                     f"GAMS refused to generate model {model.name}: the free GAMSPy licence "
                     "allows at most 1000 rows/columns") from exc
-            raise
+            summary = str(exc)
+            k = summary.find("Error Summary")
+            summary = " ".join(summary[k:].split()) if k >= 0 else summary
+            raise ModelError(f"GAMS could not generate model {model.name}: {summary}") from exc
         self._open = True
         g = model.instance._gmo
         self._g = g
