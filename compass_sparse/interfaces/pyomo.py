@@ -200,6 +200,7 @@ def _is_var(e) -> bool:
 
 def _side(e) -> _Side:
     """``lo <= body <= up`` form of one argument of complements(a, b) (as pyomo.mpec reads it)."""
+    from pyomo.core.expr.numvalue import native_numeric_types
     from pyomo.core.expr.relational_expr import (EqualityExpression, InequalityExpression,
                                                  RangedExpression)
 
@@ -214,7 +215,12 @@ def _side(e) -> _Side:
         return _Side(0.0, a - b, 0.0, True)
     if isinstance(e, InequalityExpression):
         a, b = e.args  # a <= b
+        # cheap tests first (a number on one side), the expression walks of is_fixed last;
         # a fixed variable is still the body (x >= 0 with x fixed), not a bound
+        if b.__class__ in native_numeric_types and not _is_var(a):
+            return _Side(None, a, b)
+        if a.__class__ in native_numeric_types:
+            return _Side(a, b, None)
         if _is_var(b) and _is_fixed_expr(a):
             return _Side(a, b, None)
         if _is_fixed_expr(b):
@@ -237,6 +243,16 @@ def _single_variable(body):
     if body.is_variable_type():
         return body, 1.0, 0.0
     if not body.is_potentially_variable():
+        return None
+    import pyomo.core.expr.numeric_expr as N
+
+    if isinstance(body, N.MonomialTermExpression):
+        a, v = body.args
+        if a.__class__ in native_numeric_types and not v.fixed and a != 0:
+            return v, float(a), 0.0
+        return None
+    # a*v + c has at most two terms; anything larger is an expression, not a variable side
+    if not isinstance(body, (N.SumExpression, N.NegationExpression)) or body.nargs() > 2:
         return None
     from pyomo.repn.standard_repn import generate_standard_repn
 
@@ -371,6 +387,7 @@ class PyomoMCP:
             sv = _single_variable(s[k].body)
             if sv is not None and id(sv[0]) not in claimed:
                 cands.append((k, sv))
+                break
         if not cands:
             self._ranged_with_free_variable(cd, s, pairs, claimed)
             return
