@@ -67,112 +67,120 @@ def pyomo_available() -> bool:
 
 
 # --------------------------------------------------------------------------- #
-# Pyomo expression -> CasADi SX
+# Pyomo expression -> row signature and leaves (see _casadi_eval)
 # --------------------------------------------------------------------------- #
-_UNARY = {
-    "exp": "exp", "log": "log", "log10": "log10", "sqrt": "sqrt", "sin": "sin",
-    "cos": "cos", "tan": "tan", "asin": "asin", "acos": "acos", "atan": "atan",
-    "sinh": "sinh", "cosh": "cosh", "tanh": "tanh", "asinh": "asinh", "acosh": "acosh",
-    "atanh": "atanh", "ceil": "ceil", "floor": "floor",
-}
+class _Signatures:
+    """Lift the leaves out of Pyomo expressions: ``(signature, leaves)`` per row.
 
+    'x' leaves hold the Pyomo variable (or an auxiliary pair); mutable parameters and
+    fixed variables become 'p' leaves (collected in ``data``, read at every solve);
+    numbers become 'c' leaves.  Named expressions are inlined."""
 
-class _ToCasadi:
-    """Translate Pyomo expressions into CasADi SX over the MCP variables ``x`` and the data
-    vector ``p`` (mutable parameters and fixed variables, collected on the way)."""
-
-    def __init__(self, x, var_index, component_name):
-        import casadi as ca
+    def __init__(self):
         import pyomo.core.expr.numeric_expr as N
         from pyomo.core.expr.relational_expr import (EqualityExpression,
                                                      InequalityExpression)
 
-        self.ca = ca
-        self.x = x
-        self.var_index = var_index  # id(VarData) -> column
-        self.data = []  # the ParamData / fixed VarData behind each p entry
-        self._data_index = {}
-        self._p_syms = []
-        self._named = {}
-        self.where = component_name  # current component, for error messages
+        from ._casadi_eval import UNARY
+
         self._N = N
-        self._dispatch = [
-            (N.SumExpression, lambda a: _sum(ca, a)),
-            (N.ProductExpression, lambda a: a[0] * a[1]),
-            (N.DivisionExpression, lambda a: a[0] / a[1]),
-            (N.PowExpression, lambda a: a[0] ** a[1]),
-            (N.NegationExpression, lambda a: -a[0]),
-            (N.AbsExpression, lambda a: ca.fabs(a[0])),
-            (N.MaxExpression, lambda a: _fold(ca.fmax, a)),
-            (N.MinExpression, lambda a: _fold(ca.fmin, a)),
-            (N.Expr_ifExpression, lambda a: ca.if_else(a[0], a[1], a[2])),
-            (InequalityExpression, lambda a: a[0] <= a[1]),
-            (EqualityExpression, lambda a: a[0] == a[1]),
+        self._unary = set(UNARY)
+        self._order = [  # subclasses before their bases
+            (N.AbsExpression, "abs"), (N.UnaryFunctionExpression, "u"),
+            (N.ExternalFunctionExpression, "external"), (N.SumExpression, "sum"),
+            (N.DivisionExpression, "div"), (N.ProductExpression, "prod"),
+            (N.PowExpression, "pow"), (N.NegationExpression, "neg"),
+            (N.MaxExpression, "max"), (N.MinExpression, "min"),
+            (N.Expr_ifExpression, "if"), (InequalityExpression, "le"),
+            (EqualityExpression, "eq"),
         ]
-
-    def parameter(self, obj):
-        k = self._data_index.get(id(obj))
-        if k is None:
-            k = len(self.data)
-            self._data_index[id(obj)] = k
-            self.data.append(obj)
-            self._p_syms.append(self.ca.SX.sym(f"p{k}"))
-        return self._p_syms[k]
-
-    def p_vector(self):
-        return self.ca.vertcat(*self._p_syms) if self._p_syms else self.ca.SX(0, 1)
-
-    def __call__(self, e):
         from pyomo.core.expr.numvalue import native_numeric_types, value
 
-        if e.__class__ in native_numeric_types:
-            return float(e)
-        if e.is_expression_type():
-            if e.is_named_expression_type():
-                k = id(e)
-                if k not in self._named:
-                    self._named[k] = self(e.expr)
-                return self._named[k]
-            if isinstance(e, self._N.UnaryFunctionExpression) and not isinstance(
-                    e, self._N.AbsExpression):
-                name = _UNARY.get(e.getname())
-                if name is None:
-                    raise ModelError(f"{self.where}: the function {e.getname()}() is not "
-                                     "supported")
-                return getattr(self.ca, name)(self(e.args[0]))
-            if isinstance(e, self._N.ExternalFunctionExpression):
-                raise ModelError(f"{self.where}: external functions ({e.getname()}) are not "
-                                 "supported: F must be differentiable symbolically")
-            args = [self(a) for a in e.args]
-            for cls, op in self._dispatch:
-                if isinstance(e, cls):
-                    return op(args)
-            raise ModelError(f"{self.where}: unsupported expression type "
-                             f"{type(e).__name__}")
-        if e.is_variable_type():
+        self._native = native_numeric_types
+        self._value = value
+        self._ops = {}
+        self._kinds = {}
+        self._named = {}
+        self.shared = False  # a named expression occurs more than once
+        self.data = []
+        self._slot = {}
+        self.where = ""
+
+    def _op(self, cls):
+        op = self._ops.get(cls)
+        if op is None:
+            op = next((o for c, o in self._order if issubclass(cls, c)), None)
+            self._ops[cls] = op
+        return op
+
+    def parameter(self, obj) -> int:
+        k = self._slot.get(id(obj))
+        if k is None:
+            k = self._slot[id(obj)] = len(self.data)
+            self.data.append(obj)
+        return k
+
+    def __call__(self, e):
+        leaves = []
+        return self._walk(e, leaves), leaves
+
+    def _kind(self, e):
+        """What a node of this class is (cached per class: the walk is the build's hot loop)."""
+        cls = e.__class__
+        kind = self._kinds.get(cls)
+        if kind is None:
+            if cls in self._native:
+                kind = "num"
+            elif e.is_expression_type():
+                kind = "named" if e.is_named_expression_type() else self._op(cls) or "bad"
+            elif e.is_variable_type():
+                kind = "var"
+            elif e.is_parameter_type():
+                kind = "param"
+            else:
+                kind = "other"
+            self._kinds[cls] = kind
+        return kind
+
+    def _walk(self, e, leaves):
+        kind = self._kinds.get(e.__class__) or self._kind(e)
+        if kind == "num":
+            leaves.append(("c", float(e)))
+            return "c"
+        if kind == "var":
             if e.fixed:
-                return self.parameter(e)
-            j = self.var_index.get(id(e))
-            if j is None:  # pragma: no cover - every referenced variable is indexed
-                raise ModelError(f"{self.where}: variable {e.name} is not part of the MCP")
-            return self.x[j]
-        if e.is_parameter_type() or (not e.is_constant() and not e.is_potentially_variable()):
-            return self.parameter(e)
-        return float(value(e))
-
-
-def _sum(ca, args):
-    out = 0.0
-    for a in args:
-        out = out + a
-    return out
-
-
-def _fold(f, args):
-    out = args[0]
-    for a in args[1:]:
-        out = f(out, a)
-    return out
+                leaves.append(("p", self.parameter(e)))
+                return "p"
+            leaves.append(("x", e))
+            return "x"
+        if kind == "named":  # walked once, its leaves reused at every occurrence
+            hit = self._named.get(id(e))
+            if hit is not None:
+                self.shared = True
+            else:
+                sub = []
+                hit = self._named[id(e)] = (self._walk(e.expr, sub), sub)
+            leaves.extend(hit[1])
+            return hit[0]
+        if kind == "u":
+            name = e.getname()
+            if name not in self._unary:
+                raise ModelError(f"{self.where}: the function {name}() is not supported")
+            return ("u", name, self._walk(e.args[0], leaves))
+        if kind in ("external", "bad"):
+            raise ModelError(f"{self.where}: unsupported expression {type(e).__name__} "
+                             "(F must be differentiable symbolically; external functions "
+                             "are not)")
+        if kind == "param" or (kind == "other" and not e.is_constant()
+                               and not e.is_potentially_variable()):
+            leaves.append(("p", self.parameter(e)))
+            return "p"
+        if kind == "other":
+            leaves.append(("c", float(self._value(e))))
+            return "c"
+        if kind == "le" and getattr(e, "strict", False):
+            kind = "lt"
+        return (kind, tuple([self._walk(a, leaves) for a in e.args]))
 
 
 # --------------------------------------------------------------------------- #
@@ -271,13 +279,14 @@ class _Pair:
 
     var: object  # VarData, or None for an auxiliary variable
     name: str  # variable name for logs
-    row: object  # Pyomo expression of F, or ("aux_eq", body, aux_index)
+    row: object  # Pyomo expression of F, or ("aux_eq", g, auxiliary pair): the row w - g
     row_name: str
     lo: object = None  # bound expression (evaluated at each solve) or None
     up: object = None
-    scale: float = 1.0  # bounds are (lo - shift) / scale etc.: see _Bounds
+    scale: float = 1.0  # the side is scale * v + shift: bounds map through it
     shift: float = 0.0
     use_var_bounds: bool = False  # equation pairs: the variable's own bounds
+    signature: tuple | None = None  # (signature, leaves) of the row, see _Signatures
 
 
 def _value(e):
@@ -293,14 +302,19 @@ class PyomoMCP:
     parameters, fixed variables and bounds; ``load(x)`` writes a point back into the
     model's variables.  ``stale()`` tells whether the model's structure changed since the
     compilation (new or deactivated components, variables fixed or unfixed).
+
+    ``cse``: eliminate common subexpressions across rows in the compiled F and J (faster
+    evaluation, slower build); None decides by the model: on when a named ``Expression``
+    occurs in more than one place (terms shared between rows).
     """
 
-    def __init__(self, model):
-        from pyomo.core import Block, Constraint, Var  # noqa: F401
+    def __init__(self, model, *, cse: bool | None = None):
+        from pyomo.core import Block, Constraint
         from pyomo.mpec import Complementarity
 
         t0 = time.perf_counter()
         self.model = model
+        self._cse = cse
         comps = list(model.component_data_objects(Complementarity, active=True,
                                                   descend_into=Block))
         cons = list(model.component_data_objects(Constraint, active=True,
@@ -317,9 +331,13 @@ class PyomoMCP:
                     "paired with a variable; write it as complements(<inequality>, "
                     "<variable bound>) in a Complementarity")
             eqs.append((c.body - c.upper, c.name))
-        pairs += self._match_equations(eqs, pairs, claimed)
         # A fixed variable's pair is dropped (its row is not enforced).
         pairs = [p for p in pairs if p.var is None or not p.var.fixed]
+        self._sig = _Signatures()
+        for p in pairs:
+            p.signature = self._row_signature(p.row, p.row_name)
+        eq_sigs = [self._row_signature(e, nm) for e, nm in eqs]
+        pairs += self._match_equations(eqs, eq_sigs, pairs, claimed)
         if not pairs:
             raise ModelError(f"model {model.name} has no unfixed variables: nothing to solve")
         self.pairs = pairs
@@ -430,18 +448,21 @@ class PyomoMCP:
             "complements(a, b) must be a single unfixed variable (x >= 0, l <= x <= u, or x "
             "itself) not already claimed by another complementarity")
 
-    def _match_equations(self, eqs, pairs, claimed):
-        from pyomo.core.expr.visitor import identify_variables
+    def _row_signature(self, row, name):
+        self._sig.where = name
+        if isinstance(row, tuple):  # ("aux_eq", g, w): the row w - g(x)
+            sig, leaves = self._sig(row[1])
+            return ("sum", ("x", ("neg", (sig,)))), [("x", row[2])] + leaves
+        return self._sig(row)
+
+    def _match_equations(self, eqs, eq_sigs, pairs, claimed):
         from scipy.sparse.csgraph import maximum_bipartite_matching
 
         free, free_index = [], {}
         seen_vars = set()
-        exprs = [p.row for p in pairs] + [e for e, _ in eqs]
-        for e in exprs:
-            if isinstance(e, tuple):
-                e = e[1]
-            for v in identify_variables(e, include_fixed=False):
-                if id(v) in seen_vars:
+        for _, leaves in [p.signature for p in pairs] + eq_sigs:
+            for kind, v in leaves:
+                if kind != "x" or id(v) in seen_vars or isinstance(v, _Pair):
                     continue
                 seen_vars.add(id(v))
                 if id(v) not in claimed:
@@ -462,9 +483,9 @@ class PyomoMCP:
         if not eqs:
             return []
         rows, cols = [], []
-        for i, (e, _) in enumerate(eqs):
-            for v in identify_variables(e, include_fixed=False):
-                j = free_index.get(id(v))
+        for i, (_, leaves) in enumerate(eq_sigs):
+            for kind, v in leaves:
+                j = free_index.get(id(v)) if kind == "x" else None
                 if j is not None:
                     rows.append(i)
                     cols.append(j)
@@ -483,31 +504,27 @@ class PyomoMCP:
                 logger.warning(
                     "variable %s has bounds and is paired with the equation %s: the equation "
                     "holds only where %s is strictly inside its bounds", v.name, nm, v.name)
-            out.append(_Pair(v, v.name, e, nm, use_var_bounds=True))
+            pair = _Pair(v, v.name, e, nm, use_var_bounds=True)
+            pair.signature = eq_sigs[i]
+            out.append(pair)
         return out
 
     # -- compilation --------------------------------------------------------------
     def _compile(self):
-        import casadi as ca
-
         from ._casadi_eval import CompiledFJ
 
-        n = self.n
-        x = ca.SX.sym("x", n)
-        var_index = {id(p.var): j for j, p in enumerate(self.pairs) if p.var is not None}
-        # variables that only appear in rows of dropped (fixed) pairs are fixed anyway
-        conv = _ToCasadi(x, var_index, "")
-        position = {id(p): j for j, p in enumerate(self.pairs)}
+        column = {id(p.var if p.var is not None else p): j for j, p in enumerate(self.pairs)}
         rows = []
-        for j, p in enumerate(self.pairs):
-            conv.where = p.row_name
-            if isinstance(p.row, tuple):  # w - g(x) = 0
-                _, body, w = p.row
-                rows.append(x[position[id(w)]] - conv(body))
-            else:
-                rows.append(conv(p.row))
-        self._data = conv.data
-        self._fj = CompiledFJ(rows, x, conv.p_vector())
+        for p in self.pairs:
+            sig, leaves = p.signature
+            try:
+                rows.append((sig, [(k, column[id(v)]) if k == "x" else (k, v)
+                                   for k, v in leaves]))
+            except KeyError:  # pragma: no cover - every unfixed variable has a pair
+                raise ModelError(f"{p.row_name}: refers to a variable outside the MCP") from None
+        self._data = self._sig.data
+        cse = self._sig.shared if self._cse is None else self._cse
+        self._fj = CompiledFJ(rows, self.n, len(self._data), cse=cse)
 
     # -- per-solve data -----------------------------------------------------------
     def parameter_values(self) -> np.ndarray:
