@@ -213,3 +213,14 @@ def test_structurally_singular_equations_are_a_model_error():
     m.e3 = pe.Constraint(expr=m.x + m.y + m.z == 3)
     with pytest.raises(ModelError, match="structurally singular.*e[12]"):
         pe.SolverFactory("compass_sparse").solve(m)
+
+
+def test_tee_prints_the_iteration_log_and_removes_its_handler(capsys):
+    import logging
+
+    m = cournot.pyomo_model(cournot.data(1))
+    before = list(logging.getLogger("compass_sparse").handlers)
+    pe.SolverFactory("compass_sparse").solve(m, tee=True)
+    out = capsys.readouterr().out
+    assert "major" in out.lower()
+    assert logging.getLogger("compass_sparse").handlers == before
