@@ -108,3 +108,21 @@ def test_unmatched_free_variable_is_a_model_error_naming_it():
     m, _, bad_var = _bad_models()
     with pytest.raises(ModelError, match="bad_var.*Unmatched free variables = 1 y"):
         solve_gamspy(m, bad_var)
+
+
+def test_labels_with_spaces_and_commas_are_written_back_to_their_records():
+    import gamspy as gp
+
+    m = gp.Container()
+    i = gp.Set(m, "i", records=["a b", "c,d", "e"])
+    p = gp.Parameter(m, "p", domain=i, records=[("a b", 1.0), ("c,d", -2.0), ("e", 3.0)])
+    x = gp.Variable(m, "x", domain=i, type="positive")
+    e = gp.Equation(m, "e", domain=i)
+    e[i] = x[i] * x[i] * x[i] - p[i] >= gp.Number(0)
+    res = solve_gamspy(m, gp.Model(m, "labels", problem="MCP", matches={e: x}),
+                       {"convergence_tolerance": TOL})
+    assert res.success
+    lev = dict(zip(x.records.iloc[:, 0].astype(str), x.records["level"]))
+    marg = dict(zip(x.records.iloc[:, 0].astype(str), x.records["marginal"]))
+    assert lev["a b"] == pytest.approx(1.0) and lev["e"] == pytest.approx(3.0 ** (1 / 3))
+    assert lev["c,d"] == 0.0 and marg["c,d"] == pytest.approx(2.0)  # F = 0 - (-2) at the bound
