@@ -201,7 +201,7 @@ class GamsMCP:
         return sp.csc_matrix((data, self._indices, self._indptr), shape=(self.n, self.n))
 
     def mcp(self, x0=None):
-        from ..problem import MCP
+        from .. import MCP
 
         return MCP(self.F, self.J, self.lb, self.ub, self.x0 if x0 is None else x0,
                    var_names=self.var_names, eqn_names=self.eqn_names,
@@ -271,7 +271,7 @@ def solve_gamspy(container, model, options=None, *, load: bool = True):
     """Solve a GAMSPy MCP model with compass_sparse; return the
     :class:`compass_sparse.Result`.  ``options``: Options or a dict with PATH's names.
     With ``load`` the levels and marginals are written back to the model's symbols."""
-    from ..solve import solve_mcp
+    from .. import solve_mcp
 
     gm = GamsMCP(container, model)
     try:

@@ -575,7 +575,7 @@ class PyomoMCP:
 
     def mcp(self, x0=None):
         """The MCP with the model's current data (no recompilation)."""
-        from ..problem import MCP
+        from .. import MCP
 
         self._fj.set_parameters(self.parameter_values())
         lb, ub = self.bounds()
@@ -631,7 +631,7 @@ def solve_pyomo(model, options=None, *, load_solutions: bool = True, recompile: 
 def _termination(status):
     from pyomo.opt import SolverStatus, TerminationCondition as TC
 
-    from ..result import Status
+    from .. import Status
 
     table = {
         Status.SOLVED: (SolverStatus.ok, TC.optimal),
@@ -739,7 +739,7 @@ class CompassSparseSolver:
 
 
 def solve_mcp_from(pm: PyomoMCP, options):
-    from ..solve import solve_mcp
+    from .. import solve_mcp
 
     return solve_mcp(pm.mcp(), options=options)
 
