@@ -33,8 +33,8 @@ import scipy.sparse as sp
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from compass_sparse import solve_mcp  # noqa: E402
-from compass_sparse.examples import cournot, spatial  # noqa: E402
+from compass_sparse import solve_mcp
+from compass_sparse.examples import cournot, spatial
 
 SIZES = {  # n -> model data arguments (n = 5 * markets; n ~ nodes + 2.5 nodes)
     "cournot": {100: (20,), 1000: (200,), 10000: (2000,)},

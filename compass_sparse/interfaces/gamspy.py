@@ -37,7 +37,7 @@ from .path_gamspy import PathLicenseError, path_available
 
 logger = logging.getLogger("compass_sparse")
 
-__all__ = ["GamsMCP", "solve_gamspy", "gamspy_available"]
+__all__ = ["GamsMCP", "gamspy_available", "solve_gamspy"]
 
 gamspy_available = path_available  # GAMSPy with its GMO libraries (it ships PATH too)
 

@@ -52,14 +52,14 @@ from ..exceptions import ModelError
 
 logger = logging.getLogger("compass_sparse")
 
-__all__ = ["PyomoMCP", "solve_pyomo", "pyomo_available", "CompassSparseSolver"]
+__all__ = ["CompassSparseSolver", "PyomoMCP", "pyomo_available", "solve_pyomo"]
 
 
 def pyomo_available() -> bool:
     """True when Pyomo and CasADi (the evaluator) can be imported."""
     try:
         import casadi  # noqa: F401
-        import pyomo.environ  # noqa: F401
+        import pyomo.environ
         import pyomo.mpec  # noqa: F401
     except Exception:
         return False
@@ -78,8 +78,7 @@ class _Signatures:
 
     def __init__(self):
         import pyomo.core.expr.numeric_expr as N
-        from pyomo.core.expr.relational_expr import (EqualityExpression,
-                                                     InequalityExpression)
+        from pyomo.core.expr.relational_expr import EqualityExpression, InequalityExpression
 
         from ._casadi_eval import UNARY
 
@@ -209,8 +208,11 @@ def _is_var(e) -> bool:
 def _side(e) -> _Side:
     """``lo <= body <= up`` form of one argument of complements(a, b) (as pyomo.mpec reads it)."""
     from pyomo.core.expr.numvalue import native_numeric_types
-    from pyomo.core.expr.relational_expr import (EqualityExpression, InequalityExpression,
-                                                 RangedExpression)
+    from pyomo.core.expr.relational_expr import (
+        EqualityExpression,
+        InequalityExpression,
+        RangedExpression,
+    )
 
     if isinstance(e, EqualityExpression):
         a, b = e.args
@@ -436,7 +438,7 @@ class PyomoMCP:
             if other.lo is None and other.up is None:
                 sv = _single_variable(other.body)
                 if sv is not None and id(sv[0]) not in claimed:
-                    v, a, c = sv
+                    v = sv[0]
                     claimed[id(v)] = name
                     w = _Pair(None, f"{name}.aux", other.body, name, s[k].lo, s[k].up)
                     pairs.append(w)
@@ -597,7 +599,7 @@ class PyomoMCP:
         return self._fj
 
 
-_CACHE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+_CACHE: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
 
 
 def compiled(model, *, recompile: bool = False) -> PyomoMCP:
@@ -629,7 +631,8 @@ def solve_pyomo(model, options=None, *, load_solutions: bool = True, recompile: 
 # SolverFactory('compass_sparse')
 # --------------------------------------------------------------------------- #
 def _termination(status):
-    from pyomo.opt import SolverStatus, TerminationCondition as TC
+    from pyomo.opt import SolverStatus
+    from pyomo.opt import TerminationCondition as TC
 
     from .. import Status
 

@@ -5,10 +5,10 @@ import pytest
 pytest.importorskip("gamspy", reason="gamspy is not installed (optional extra: "
                     "pip install compass-sparse[gams])")
 
-from compass_sparse.interfaces.gamspy import GamsMCP, gamspy_available, solve_gamspy  # noqa: E402
-from compass_sparse.interfaces.path_gamspy import PathLicenseError  # noqa: E402
-from compass_sparse.exceptions import ModelError  # noqa: E402
-from compass_sparse.examples import cge, cournot, spatial  # noqa: E402
+from compass_sparse.examples import cge, cournot, spatial
+from compass_sparse.exceptions import ModelError
+from compass_sparse.interfaces.gamspy import GamsMCP, gamspy_available, solve_gamspy
+from compass_sparse.interfaces.path_gamspy import PathLicenseError
 
 if not gamspy_available():  # pragma: no cover
     pytest.skip("gamspy is installed but its solvers/GMO are not usable", allow_module_level=True)

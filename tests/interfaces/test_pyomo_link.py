@@ -7,13 +7,13 @@ pytest.importorskip("pyomo.environ", reason="pyomo is not installed (optional ex
 pytest.importorskip("casadi", reason="casadi is not installed (optional extra: "
                     "pip install compass-sparse[pyomo])")
 
-import pyomo.environ as pe  # noqa: E402
-from pyomo.mpec import Complementarity, complements  # noqa: E402
-from pyomo.opt import TerminationCondition  # noqa: E402
+import pyomo.environ as pe
+from pyomo.mpec import Complementarity, complements
+from pyomo.opt import TerminationCondition
 
-import compass_sparse.interfaces.pyomo as cpy  # noqa: E402
-from compass_sparse.exceptions import ModelError, OptionError  # noqa: E402
-from compass_sparse.examples import cournot, spatial  # noqa: E402
+import compass_sparse.interfaces.pyomo as cpy
+from compass_sparse.examples import cournot, spatial
+from compass_sparse.exceptions import ModelError, OptionError
 
 
 def natural_residual(x, f, lb, ub):
