@@ -224,3 +224,19 @@ def test_tee_prints_the_iteration_log_and_removes_its_handler(capsys):
     out = capsys.readouterr().out
     assert "major" in out.lower()
     assert logging.getLogger("compass_sparse").handlers == before
+
+
+def test_sub_blocks_are_read_and_deactivated_components_ignored():
+    m = pe.ConcreteModel()
+    m.b = pe.Block()
+    m.b.x = pe.Var(within=pe.NonNegativeReals)
+    m.b.c = Complementarity(expr=complements(m.b.x >= 0, m.b.x - 3 >= 0))
+    m.y = pe.Var()
+    m.e = pe.Constraint(expr=m.y - 2 * m.b.x == 0)
+    m.off = Complementarity(expr=complements(m.y >= 0, m.y + 100 >= 0))
+    m.off.deactivate()
+    opt = pe.SolverFactory("compass_sparse")
+    assert opt.available() and opt.license_is_valid() and len(opt.version()) == 3
+    pe.assert_optimal_termination(opt.solve(m))
+    assert pe.value(m.b.x) == pytest.approx(3.0) and pe.value(m.y) == pytest.approx(6.0)
+    assert cpy.compiled(m).var_names == ["b.x", "y"]
