@@ -223,6 +223,7 @@ def test_tee_prints_the_iteration_log_and_removes_its_handler(capsys):
     pe.SolverFactory("compass_sparse").solve(m, tee=True)
     out = capsys.readouterr().out
     assert "major" in out.lower()
+    assert "(profit[0," in out  # the iteration log labels rows by their Pyomo names
     assert logging.getLogger("compass_sparse").handlers == before
 
 
