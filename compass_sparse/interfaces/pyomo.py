@@ -15,8 +15,8 @@ complements(...)                      MCP pair                                  
 ``v >= lo``, ``g >= 0``               v in [lo, +inf)                              g
 ``v <= up``, ``g >= 0``               v in (-inf, up]                             -g
 ``lo <= v <= up``, ``e``              v in [lo, up]                                e
-``lo <= g <= up``, ``v``  (g no var)  auxiliary w = g in [lo, up]; v free          e_w = v,
-                                                                                  v: w - g
+``lo <= g <= up``, ``v``  (g no var)  auxiliary w in [lo, up]                      v
+                                      and v (its own bounds, normally free)       w - g
 ``g == c``, ``v``                     v with its own bounds (normally free)        g - c
 ``g == c``, anything else             an equation matched like a Constraint        g - c
 ====================================  ==========================================  ==========
@@ -52,7 +52,7 @@ from ..exceptions import ModelError
 
 logger = logging.getLogger("compass_sparse")
 
-__all__ = ["CompassSparseSolver", "PyomoMCP", "pyomo_available", "solve_pyomo"]
+__all__ = ["CompassSparseSolver", "PyomoMCP", "compiled", "pyomo_available", "solve_pyomo"]
 
 
 def pyomo_available() -> bool:
