@@ -28,6 +28,13 @@ else
   log "installing without the suitesparse extra (its tests will skip with a reason)"
   $PY -m pip install -q -e ".[dev,docs,plot]" || { log "pip install failed"; exit 1; }
 fi
+# The modelling-language links (Pyomo + CasADi, GAMSPy) are optional extras; CI installs
+# them so their tests run.
+if $PY -m pip install -q -e ".[pyomo,gams]"; then
+  log "installed the pyomo and gams extras"
+else
+  log "could not install the pyomo/gams extras (their tests will skip with a reason)"
+fi
 # Compile the numba kernels once so the first solve is not slowed by compilation.
 $PY -c "import compass_sparse, compass_sparse.basis, compass_sparse._path_kernels" || exit 1
 log "ready"
