@@ -141,6 +141,7 @@ print(b.solved_now, b.resumed)
 """
 
 
+@pytest.mark.slow
 def test_batch_killed_halfway_and_restarted_solves_every_scenario_exactly_once(tmp_path):
     out, log = str(tmp_path / "out"), str(tmp_path / "built.log")
     script = tmp_path / "run.py"
@@ -254,3 +255,18 @@ def test_progress_draws_a_bar_only_on_a_terminal(caplog):
     assert "5/10 scenarios  failed 1" in tty.getvalue() and "\r[" in tty.getvalue()
     assert pipe.getvalue() == ""
     assert any("5/10 scenarios" in r.getMessage() for r in caplog.records)
+
+
+def test_cli_cge_scenarios_writes_results_and_prints_headlines(tmp_path, capsys):
+    from compass_sparse.cli import main
+
+    out = tmp_path / "res"
+    code = main(["cge", "--regions", "2", "--sectors", "40", "--workers", "0",
+                 "--scenarios", "tariff=0:0.2:3", "--output", str(out)])
+    text = capsys.readouterr().out
+    assert code == 0
+    assert "tariff" in text and "welfare" in text and text.count("SOLVED") == 3
+    table = read_results(out)
+    assert table.num_rows == 3 and all(table.column("success").to_pylist())
+    assert main(["cge", "--regions", "1", "--workers", "0", "--scenarios",
+                 "tariff=0:0.2:3", "--output", str(out)]) == 2
