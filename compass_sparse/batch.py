@@ -399,10 +399,7 @@ def _solve_one(builder, idx, params, parent, state, task) -> dict:
             if res.basis is not None else None
     else:
         row["x"], row["basis"] = None, None
-        labels = problem.var_names
-        if labels is None:
-            raise ValueError("record= needs a model with var_names")
-        pos = {s: i for i, s in enumerate(labels)}
+        pos = {s: i for i, s in enumerate(problem.var_names or [])}
         for s in names:
             row[f"var.{s}"] = float(x[pos[s]]) if s in pos else float("nan")
     return row
@@ -525,11 +522,11 @@ class Progress:
     terminal, a log line every ``every`` seconds otherwise."""
 
     def __init__(self, total: int, done: int = 0, stream=None, every: float = 10.0,
-                 enabled: bool | None = True):
+                 live: bool = True):
         self.total, self.start_done, self.done, self.failed = total, done, done, 0
         self.stream = sys.stderr if stream is None else stream
-        self.tty = bool(enabled) and hasattr(self.stream, "isatty") and self.stream.isatty()
-        self.log = enabled is not False
+        self.tty = live and hasattr(self.stream, "isatty") and self.stream.isatty()
+        self.periodic = live and not self.tty
         self.every = every
         self.t0 = self._last = time.perf_counter()
 
@@ -551,7 +548,7 @@ class Progress:
             k = int(width * self.done / max(self.total, 1))
             self.stream.write(f"\r[{'#' * k}{'.' * (width - k)}] {self.line()}   ")
             self.stream.flush()
-        elif self.log and now - self._last >= self.every:
+        elif self.periodic and now - self._last >= self.every:
             logger.info("batch: %s", self.line())
             self._last = now
 
@@ -559,8 +556,7 @@ class Progress:
         if self.tty:
             self.stream.write("\n")
             self.stream.flush()
-        elif self.log:
-            logger.info("batch: %s", self.line())
+        logger.info("batch: %s", self.line())
 
 
 # ---------------------------------------------------------------------------- driver
@@ -624,11 +620,12 @@ def solve_batch(model, scenarios, *, options=None, executor=None, workers=None,
         scenario from the model's start point, no basis).
     predictor : refine a warm start by the first-order (implicit-function) predictor.
     record : None stores the whole solution (and the basis, for resuming warm); a list of
-        variable names stores only those (columns ``var.<name>``).
+        variable names stores only those (columns ``var.<name>``, NaN for a name the
+        problem does not have).
     chunk_size : scenarios per task (at most).
     retry_failed : on a rerun, solve again the scenarios stored as failed.
-    progress : True draws a bar on a terminal stderr (a log line otherwise); False logs only
-        the end; None nothing.
+    progress : True draws a bar on a terminal stderr (a log line every 10 s otherwise);
+        False logs only the final counts; None nothing.
     """
     t0 = time.perf_counter()
     scenarios = [dict(s) for s in scenarios]
@@ -654,7 +651,7 @@ def solve_batch(model, scenarios, *, options=None, executor=None, workers=None,
         paths = [(todo[a:a + chunk_size], 0) for a in range(0, len(todo), chunk_size)]
     # Largest subtrees first: they hold the critical path.
     paths.sort(key=lambda p: (-p[1], p[0][0]))
-    prog = Progress(N, len(rows), enabled=progress) if progress is not None else None
+    prog = Progress(N, len(rows), live=bool(progress)) if progress is not None else None
     import pickle
 
     try:
