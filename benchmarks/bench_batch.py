@@ -78,6 +78,8 @@ def stats(b, out_dir) -> dict:
             "nit_max": int(nit.max()), "failed": b.failed, "lost": len(b.rows) - on_file,
             "predicted_starts": starts.count("predicted"), "warm_starts": starts.count("warm"),
             "cold_starts": starts.count("cold"),
+            "residual_median": float(np.median(b.column("residual"))),
+            "residual_max": float(np.max(b.column("residual"))),
             "solve_time_sum_s": round(float(b.column("solve_time").sum()), 2),
             "scenario_time_sum_s": round(float(b.column("time").sum()), 2)}
 
