@@ -34,7 +34,10 @@ Tolerance: z_i is at a bound when its distance to it is at most
 ``|F_i| <= active_tol * max(1, max_j |J_ij|)``.  An index that meets both is degenerate.
 Classifying a nearly degenerate index as degenerate is safe (the linearized MCP decides its
 side); the opposite error gives a wrong one-sided derivative, so the default (1e-7) is loose
-compared with the residuals of converged solves (1e-10 and below on smooth problems).
+compared with the residuals of converged solves (1e-10 and below on smooth problems).  The
+sets are read from the point and F, not from ``Result.basis``: at a degenerate index the
+final basis only tells on which linear piece the path stopped, and after the preprocessor
+the basis is indexed by the reduced problem.
 
 :func:`tangent_predictor` is the same step used as a predictor along a scenario path: from a
 solution x of the problem at p, with F(x, p') known, the first-order prediction of z(p') on
