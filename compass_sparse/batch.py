@@ -343,6 +343,9 @@ def _solve_segment(blob: bytes, task: dict) -> list[dict]:
         rows.append(row)
         if row["success"] and row["x"] is not None:
             state = (row["x"], row["basis"])
+    if task["record"] is not None:  # only the named variables leave the worker
+        for row in rows:
+            row["x"] = row["basis"] = None
     return rows
 
 
@@ -392,15 +395,11 @@ def _solve_one(builder, idx, params, parent, state, task) -> dict:
         nit=int(res.nit), minor_iterations=int(res.minor_iterations), nfev=int(res.nfev),
         njev=int(res.njev), solve_time=float(res.time), time=time.perf_counter() - t0)
     x = np.asarray(res.x, dtype=float)
-    names = task["record"]
-    if names is None:
-        row["x"] = x
-        row["basis"] = res.basis.basic.astype(np.int8).tobytes() \
-            if res.basis is not None else None
-    else:
-        row["x"], row["basis"] = None, None
+    row["x"] = x
+    row["basis"] = res.basis.basic.astype(np.int8).tobytes() if res.basis is not None else None
+    if task["record"] is not None:
         pos = {s: i for i, s in enumerate(problem.var_names or [])}
-        for s in names:
+        for s in task["record"]:
             row[f"var.{s}"] = float(x[pos[s]]) if s in pos else float("nan")
     return row
 

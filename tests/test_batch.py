@@ -270,3 +270,11 @@ def test_cli_cge_scenarios_writes_results_and_prints_headlines(tmp_path, capsys)
     assert table.num_rows == 3 and all(table.column("success").to_pylist())
     assert main(["cge", "--regions", "1", "--workers", "0", "--scenarios",
                  "tariff=0:0.2:3", "--output", str(out)]) == 2
+
+
+def test_record_of_named_variables_does_not_lose_warm_starts_within_a_path(cge):
+    sc = grid(tariff=np.linspace(0, 0.3, 4))
+    named = solve_batch(cge, sc, workers=0, record=["U[r1,h1]"], chunk_size=4, progress=None)
+    starts = [r["start"] for r in named.rows]
+    assert starts[0] == "cold" and "cold" not in starts[1:]
+    assert all(r["x"] is None for r in named.rows)
