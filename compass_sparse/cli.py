@@ -144,6 +144,8 @@ def _cge_scenarios(args, model) -> int:
     # mean activity level, total household income (numeraire: see above).
     heads = {"welfare": ("U", np.mean), "price PA": ("PA", np.mean),
              "output Y": ("Y", np.mean), "income M": ("M", np.sum)}
+    print("region r1: welfare = mean utility index U, price PA = mean Armington price, "
+          "output Y = mean activity level, income M = household income")
     print("  ".join([f"{k:>15}" for k in names] + [f"{'status':>12}", f"{'its':>4}"]
                     + [f"{h:>10}" for h in heads]))
     rows = np.unique(np.linspace(0, len(out.rows) - 1, min(len(out.rows), 11)).astype(int))
