@@ -37,8 +37,8 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(ROOT))
 
-from compass_sparse.batch import grid, read_results, solve_batch  # noqa: E402
-from compass_sparse.generators.cge import size_for, static_cge  # noqa: E402
+from compass_sparse.batch import grid, read_results, solve_batch
+from compass_sparse.generators.cge import size_for, static_cge
 
 
 def revision() -> str:

@@ -52,8 +52,17 @@ from .result import Status
 
 logger = logging.getLogger("compass_sparse")
 
-__all__ = ["solve_batch", "BatchResult", "CGEScenarioModel", "grid", "parse_axis",
-           "read_scenarios", "scenario_key", "scenario_tree", "read_results"]
+__all__ = [
+    "BatchResult",
+    "CGEScenarioModel",
+    "grid",
+    "parse_axis",
+    "read_results",
+    "read_scenarios",
+    "scenario_key",
+    "scenario_tree",
+    "solve_batch",
+]
 
 RESULTS_FILE = "results.parquet"
 
@@ -258,8 +267,11 @@ def _mst_tree(P):
     """Minimum spanning tree of the k-nearest-neighbour graph (components joined in
     order), rooted at scenario 0."""
     import scipy.sparse as sp
-    from scipy.sparse.csgraph import breadth_first_order, connected_components, \
-        minimum_spanning_tree
+    from scipy.sparse.csgraph import (
+        breadth_first_order,
+        connected_components,
+        minimum_spanning_tree,
+    )
     from scipy.spatial import cKDTree
 
     N = P.shape[0]
@@ -285,7 +297,7 @@ def _mst_tree(P):
 def _paths(parent, todo, chunk_size):
     """Cut the tree restricted to ``todo`` into paths of at most chunk_size nodes, each
     following its largest subtree; returns [(nodes, subtree size of the head)]."""
-    todo_set = set(int(i) for i in todo)
+    todo_set = {int(i) for i in todo}
     children = {i: [] for i in todo_set}
     for i in sorted(todo_set):
         p = int(parent[i])
@@ -444,7 +456,7 @@ class ResultStore:
 
     def __init__(self, path):
         try:
-            import pyarrow  # noqa: F401
+            import pyarrow
             import pyarrow.parquet  # noqa: F401
         except ImportError:  # pragma: no cover - CI installs the extra
             raise ImportError("writing batch results needs pyarrow: pip install "

@@ -18,8 +18,13 @@ import threading
 
 import numpy as np
 
-__all__ = ["prepare_worker", "make_executor", "InProcessExecutor", "LocalPoolExecutor",
-           "DaskExecutor"]
+__all__ = [
+    "DaskExecutor",
+    "InProcessExecutor",
+    "LocalPoolExecutor",
+    "make_executor",
+    "prepare_worker",
+]
 
 
 def prepare_worker() -> int:

@@ -57,8 +57,14 @@ from .exceptions import CompassError, ShapeError
 
 logger = logging.getLogger("compass_sparse")
 
-__all__ = ["Sensitivity", "SingularSensitivityError", "sensitivity", "tangent_predictor",
-           "classify", "ACTIVE_TOL"]
+__all__ = [
+    "ACTIVE_TOL",
+    "Sensitivity",
+    "SingularSensitivityError",
+    "classify",
+    "sensitivity",
+    "tangent_predictor",
+]
 
 ACTIVE_TOL = 1e-7
 """Default tolerance of the active-set identification (see the module docstring)."""

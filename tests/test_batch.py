@@ -11,14 +11,24 @@ import subprocess
 import sys
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from compass_sparse import MCP
-from compass_sparse.batch import (CGEScenarioModel, Progress, grid, parse_axis,
-                                  read_results, read_scenarios, scenario_key, scenario_tree,
-                                  solve_batch, _paths)
+from compass_sparse.batch import (
+    CGEScenarioModel,
+    Progress,
+    _paths,
+    grid,
+    parse_axis,
+    read_results,
+    read_scenarios,
+    scenario_key,
+    scenario_tree,
+    solve_batch,
+)
 from compass_sparse.exceptions import OptionError
 
 pytest.importorskip("pyarrow", reason="the batch results need the pyarrow extra")
@@ -167,7 +177,7 @@ def test_batch_killed_halfway_and_restarted_solves_every_scenario_exactly_once(t
     keys = table.column("key").to_pylist()
     assert len(keys) == 16 and len(set(keys)) == 16
     assert all(table.column("success").to_pylist())
-    built = [float(s) for s in open(log).read().split()]
+    built = [float(s) for s in Path(log).read_text().split()]
     # every scenario was built once, except at most the one in flight when killed
     counts = {a: built.count(a) for a in set(built)}
     assert len(counts) == 16 and sum(c - 1 for c in counts.values()) <= 1
@@ -177,7 +187,7 @@ def test_record_keeps_only_the_named_variables(cge):
     names = ["U[r1,h1]", "M[r2,h1]"]
     out = solve_batch(cge, CGE_GRID[:3], workers=0, record=names, progress=None)
     r = out.rows[1]
-    assert r["x"] is None and set(f"var.{s}" for s in names) <= set(r)
+    assert r["x"] is None and {f"var.{s}" for s in names} <= set(r)
     full = solve_batch(cge, CGE_GRID[:3], workers=0, progress=None)
     assert r["var.U[r1,h1]"] == pytest.approx(full.x[1][cge.index("U[r1,h1]")], abs=1e-8)
 

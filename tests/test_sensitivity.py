@@ -9,8 +9,12 @@ import pytest
 import scipy.sparse as sp
 
 from compass_sparse import MCP, solve_lcp, solve_mcp
-from compass_sparse.sensitivity import (SingularSensitivityError, classify, sensitivity,
-                                        tangent_predictor)
+from compass_sparse.sensitivity import (
+    SingularSensitivityError,
+    classify,
+    sensitivity,
+    tangent_predictor,
+)
 
 TIGHT = {"convergence_tolerance": 1e-10}
 
