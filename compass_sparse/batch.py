@@ -690,33 +690,43 @@ def solve_batch(model, scenarios, *, options=None, executor=None, workers=None,
 
     solved_now = 0
     inflight = {}
-    pending = list(paths)
+    pending = [(nodes, sz, 0) for nodes, sz in paths]
     try:
         ref = ex.share(blob) if ex is not None else None
         limit = 2 * ex.workers + 1 if ex is not None else 0
         while pending or inflight:
             still = []
-            for nodes, sz in pending:
-                if len(inflight) >= limit:
-                    still.append((nodes, sz))
+            # A task that failed as a whole (a worker died under it, perhaps killed by
+            # another task) is tried once more, alone, so that only its own crash can
+            # fail it again.
+            isolating = any(t for _, _, t in inflight.values())
+            for nodes, sz, tries in pending:
+                if isolating or len(inflight) >= limit or (tries and inflight):
+                    still.append((nodes, sz, tries))
                     continue
                 ready, state = start_state(nodes[0])
                 if not ready:
-                    still.append((nodes, sz))
+                    still.append((nodes, sz, tries))
                     continue
                 task = dict(task_base, start=state,
                             nodes=[(i, scenarios[i]) for i in nodes],
                             parents=[int(parent[i]) for i in nodes])
-                inflight[ex.submit(_solve_segment, ref, task)] = nodes
+                inflight[ex.submit(_solve_segment, ref, task)] = (nodes, sz, tries)
+                isolating = bool(tries)
             pending = still
             if not inflight:
                 raise RuntimeError("batch scheduling stalled: a path waits for a scenario "
                                    "that is never solved")  # pragma: no cover
             for fut in ex.wait_any(inflight):
-                nodes = inflight.pop(fut)
+                nodes, sz, tries = inflight.pop(fut)
                 try:
                     new = fut.result()
-                except Exception as exc:  # a lost worker: rows with the error, go on
+                except Exception as exc:  # a lost worker: retry once, then rows with the error
+                    if tries == 0:
+                        logger.info("batch: a task of %d scenarios failed (%r); retrying it "
+                                    "alone", len(nodes), exc)
+                        pending.append((nodes, sz, 1))
+                        continue
                     new = [_failure_row({"index": i, "parent": int(parent[i]), "start": "",
                                          "predicted": False, "worker": ""}, scenarios[i],
                                         f"the task failed: {exc!r}", time.perf_counter())

@@ -74,23 +74,25 @@ class LocalPoolExecutor(InProcessExecutor):
     Workers are forked on Linux when the caller runs a single thread (they inherit the
     compiled kernels and need no ``if __name__ == "__main__"`` guard in scripts), spawned
     otherwise.  A pool broken by a dying worker is replaced (at most ``MAX_RESTARTS``
-    times): the tasks it held come back as failures, the batch goes on."""
+    times): the tasks it held come back as failures, which the batch retries once, alone."""
 
     name = "local process pool"
-    MAX_RESTARTS = 3
+    MAX_RESTARTS = 100
 
     def __init__(self, workers: int | None = None, pool: cf.Executor | None = None):
         self._own = pool is None
         self._restarts = 0
         self.workers = int(getattr(pool, "_max_workers", 1)) if pool is not None \
             else int(workers or os.cpu_count() or 1)
+        # Decided once: a replacement pool forks too (the broken pool's own management
+        # thread may still be alive then, and is no reason to switch to spawn).
+        self._method = "fork" if sys.platform == "linux" and threading.active_count() == 1 \
+            else "spawn"
         self.pool = pool if pool is not None else self._new_pool()
 
     def _new_pool(self):
-        method = "fork" if sys.platform == "linux" and threading.active_count() == 1 \
-            else "spawn"
         return cf.ProcessPoolExecutor(max_workers=self.workers,
-                                      mp_context=multiprocessing.get_context(method),
+                                      mp_context=multiprocessing.get_context(self._method),
                                       initializer=prepare_worker)
 
     def submit(self, fn, *args):

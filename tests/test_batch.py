@@ -288,3 +288,51 @@ def test_record_of_named_variables_does_not_lose_warm_starts_within_a_path(cge):
     starts = [r["start"] for r in named.rows]
     assert starts[0] == "cold" and "cold" not in starts[1:]
     assert all(r["x"] is None for r in named.rows)
+
+
+def _dies_at_two(a, b):
+    if a == 2.0:
+        os._exit(3)  # a crash of the worker process, not an exception
+    return _ncp(a, b)
+
+
+def test_worker_process_that_dies_fails_only_its_own_scenario_and_the_batch_goes_on():
+    sc = grid(a=[0.0, 1.0, 2.0, 3.0, 4.0, 5.0], b=[0.0])
+    out = solve_batch(_dies_at_two, sc, workers=2, warm_start=False, chunk_size=1,
+                      progress=None)
+    rows = {s["a"]: r for s, r in zip(sc, out.rows)}
+    assert rows[2.0]["status"] == "ERROR" and "task failed" in rows[2.0]["message"]
+    # tasks in flight in the broken pool are retried alone: every other scenario is solved
+    assert [a for a, r in rows.items() if not r["success"]] == [2.0]
+
+
+_CRASH_SCRIPT = """
+import os, sys
+sys.path.insert(0, {root!r})
+import numpy as np
+from compass_sparse import MCP
+from compass_sparse.batch import solve_batch, grid
+
+def model(a):
+    if a == 2.0:
+        os._exit(3)
+    M = np.array([[3.0, -1.0], [-1.0, 3.0]])
+    q = np.array([-1.0 - a, a])
+    return MCP(lambda z: M @ z + q, lambda z: M, 0.0, np.inf, np.zeros(2))
+
+# no `if __name__ == "__main__"` guard: the pool (and its replacement) must fork
+out = solve_batch(model, grid(a=[0.0, 1.0, 2.0, 3.0, 4.0]), workers=2, warm_start=False,
+                  chunk_size=1, progress=None)
+print(" ".join(r["status"] for r in out.rows))
+"""
+
+
+@pytest.mark.skipif(sys.platform != "linux", reason="the pool forks only on Linux")
+def test_replacement_pool_after_a_worker_crash_forks_like_the_first_in_an_unguarded_script(
+        tmp_path):
+    script = tmp_path / "crash.py"
+    script.write_text(_CRASH_SCRIPT.format(root=ROOT))
+    run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                         timeout=120)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert run.stdout.split() == ["SOLVED", "SOLVED", "ERROR", "SOLVED", "SOLVED"]
