@@ -33,7 +33,10 @@ only whole files); at the end the parts are merged into ``DIR/results.parquet``.
 run again with the same ``output`` reads the finished scenarios (identified by a hash of
 their parameters), solves only the others and starts them from the stored solutions.  A
 failed scenario (any status but SOLVED, or an exception in the model or the solver) is a
-row with its status and message; it never stops the batch.
+row with its status and message; it never stops the batch.  A task whose worker dies (a
+crash in user code, a lost Dask worker) is tried once more, alone, so that only a scenario
+that kills its worker again becomes an ERROR row; what a lost task had solved was not yet
+written and is solved again (``chunk_size`` bounds that loss).
 """
 from __future__ import annotations
 
