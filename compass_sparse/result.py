@@ -179,6 +179,13 @@ class Result:
         rep = self.check(F, lb, ub)
         return rep.natural
 
+    def sensitivity(self, problem, dF_dp, **kwargs):
+        """dx/dp at this solution of ``problem`` (an MCP) for the parameter derivative
+        ``dF_dp`` (n,) or (n, k): see :func:`compass_sparse.sensitivity.sensitivity`."""
+        from .sensitivity import sensitivity
+
+        return sensitivity(problem, self.x, dF_dp, **kwargs)
+
     def summary(self) -> str:
         lines = [
             f"status        {self.status.name} ({self.status.path_code()}): {self.message}",

@@ -35,6 +35,13 @@ if $PY -m pip install -q -e ".[pyomo,gams]"; then
 else
   log "could not install the pyomo/gams extras (their tests will skip with a reason)"
 fi
+# Scenario batches on Dask with Parquet results (the batch extra); CI installs it so the
+# batch tests run.
+if $PY -m pip install -q -e ".[batch]"; then
+  log "installed the batch extra (dask[distributed], pyarrow)"
+else
+  log "could not install the batch extra (the Dask and Parquet tests will skip with a reason)"
+fi
 # Compile the numba kernels once so the first solve is not slowed by compilation.
 $PY -c "import compass_sparse, compass_sparse.basis, compass_sparse._path_kernels" || exit 1
 log "ready"
