@@ -109,6 +109,22 @@ def _var_label(names, i: int) -> str:
     return f"variable {i}"
 
 
+_FULL_PATTERNS: dict = {}
+
+
+def _full_pattern(n: int):
+    """(indptr, indices) of the full n x n CSC pattern, built once per n (a small problem
+    with a dense Jacobian evaluates it every major iteration)."""
+    pat = _FULL_PATTERNS.get(n)
+    if pat is None:
+        if len(_FULL_PATTERNS) > 32:
+            _FULL_PATTERNS.clear()
+        indptr = np.arange(0, n * n + 1, n, dtype=np.int32)
+        indices = np.tile(np.arange(n, dtype=np.int32), n)
+        pat = _FULL_PATTERNS[n] = (indptr, indices)
+    return pat
+
+
 def _canonical_csc(J, n: int) -> sp.csc_matrix:
     if sp.issparse(J):
         if J.shape != (n, n):
@@ -119,9 +135,9 @@ def _canonical_csc(J, n: int) -> sp.csc_matrix:
         if A.shape != (n, n):
             raise ShapeError(f"the Jacobian has shape {A.shape}, expected ({n}, {n})")
         # A dense array: its pattern is the full matrix, so zeros stay stored.
-        C = sp.csc_matrix(np.ones((n, n)))
-        C.data = A.T.ravel().copy()
-        return C
+        indptr, indices = _full_pattern(n)
+        # Copies: scipy may sort or prune a matrix's index arrays in place.
+        return sp.csc_matrix((A.T.ravel().copy(), indices.copy(), indptr.copy()), shape=(n, n))
     if not C.has_canonical_format:
         C.sum_duplicates()  # sorts indices too
     C.sort_indices()
