@@ -38,9 +38,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._jit import njit
-from ._path_kernels import project_slots, ratio_test
-
-VAR_Z, VAR_W, VAR_V, VAR_A, VAR_T, VAR_S = 0, 1, 2, 3, 4, 5
+from ._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
 
 # path_loop return codes (mapped to LinearCode and messages by dense_path.py)
 RUNNING, SOLVED, RAY, CYCLE, MINOR_LIMIT, SINGULAR, TOLERANCE, ERROR = range(8)

@@ -25,12 +25,11 @@ refactorized (the sparse manager's tests, same defaults).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
-
 import numpy as np
 import scipy.sparse as sp
 
 from . import _dense_path_kernels as K
+from .basis.types import BasisStats
 
 __all__ = ["DensePathEngine", "DENSE_ENGINE_MAX_N"]
 
@@ -41,13 +40,6 @@ PIVOT_CHUNK = 1000
 """Pivots per compiled call: the time limit is checked between calls."""
 
 _NAMES = "zwvatS"
-
-
-@dataclass
-class EngineStats:
-    factorizations: int = 0
-    updates: int = 0
-    refused_updates: int = 0
 
 
 class DensePathEngine:
@@ -65,7 +57,7 @@ class DensePathEngine:
         self.update_limit = max(1, int(update_limit))
         self.pivot_tolerance = float(pivot_tolerance)
         self.rank_tolerance = float(rank_tolerance)
-        self.stats = EngineStats()
+        self.stats = BasisStats()
         self.set_matrix(M)
         n = self.n
         self.L = np.zeros((n, n), order="F")
@@ -144,6 +136,7 @@ class DensePathEngine:
                                  path.art_sign, self.displaced, istate, fstate, self.L, self.U,
                                  self.prow, self.qslot, self.rank_tolerance, lb, ub,
                                  self.work)
+        path.unbounded = msg == K.MSG_RAY_UNBOUNDED
         path.t = float(fstate[K.F_T])
         path.t_slot = int(istate[K.I_TSLOT])
         path.pivots = int(istate[K.I_PIV])

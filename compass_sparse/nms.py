@@ -21,6 +21,9 @@ point x_N.  Acceptance (merit Psi = 0.5 ||Phi_FB||^2):
   watchdog limit is reached, take a Levenberg–Marquardt step and/or projected-gradient
   steps on Psi from the best point found.
 
+With ``nms = False`` the same loop is a monotone line search: no d-steps, a memory of one
+checkpoint and the reference value Psi(z_k), so every accepted step decreases the merit.
+
 Restarts when progress stops use PATH's three configurations (proximal perturbation
 0.01 * residual without crash; no perturbation with a short memory and m-steps every
 step; crash with more basis changes and arc searches), then — as the thesis proposes —
@@ -70,10 +73,13 @@ class _Stop(Exception):
 
 @dataclass
 class Point:
+    """An evaluated point: z, F(z), Phi_FB(z), Psi(z) and, when known, J(z)."""
+
     z: np.ndarray
     f: np.ndarray
     phi: np.ndarray
     psi: float
+    J: sp.csc_matrix | None = None
 
     @property
     def fbn(self) -> float:
@@ -145,10 +151,10 @@ def _restart_configs(opt, residual):
 class NMSSolver:
     """The stabilized Newton method on one MCP (after presolve)."""
 
-    def __init__(self, problem, evalr, options, *, manager_factory, callback=None,
+    def __init__(self, problem, options, *, manager_factory, callback=None,
                  deadline=None, log_major=None):
         self.p = problem
-        self.ev = evalr
+        self.ev = problem.evaluator
         self.opt0 = options
         self.lb, self.ub = problem.lb, problem.ub
         self.n = problem.n
@@ -178,13 +184,13 @@ class NMSSolver:
         if np.sqrt(2.0 * psi) <= self.tol:
             raise _Stop(Status.SOLVED, "solution found")
 
-    def _point(self, z, f=None):
+    def _point(self, z, f=None, J=None):
         if f is None:
             f = self.ev.f(z)
             if f is None:
                 return None
         phi = fb_phi(z, f, self.lb, self.ub)
-        return Point(z, f, phi, fb_psi(phi))
+        return Point(z, f, phi, fb_psi(phi), J)
 
     def _check_limits(self, opt):
         if self.deadline is not None and time.perf_counter() > self.deadline:
@@ -228,7 +234,7 @@ class NMSSolver:
 
     # ------------------------------------------------------------------ Newton point
     def _newton_point(self, cur: Point, x, eps, opt):
-        J = self.ev.jac(cur.z, cur.f)
+        J = cur.J if cur.J is not None else self.ev.jac(cur.z, cur.f)
         self._last_J = J
         if J is None:
             return None, None, LinearCode.ERROR
@@ -295,11 +301,11 @@ class NMSSolver:
         return out
 
     # ------------------------------------------------------------------ one run
-    def _run(self, z0, opt):
-        """Crash + NMS from z0 with options opt.  Returns when stuck (for a restart)."""
+    def _run(self, start, opt):
+        """Crash + NMS from ``start`` (a point of the box, or an evaluated Point) with
+        options opt.  Returns when stuck (for a restart)."""
         lb, ub = self.lb, self.ub
-        z = project(z0, lb, ub)
-        cur = self._point(z)
+        cur = start if isinstance(start, Point) else self._point(start)
         if cur is None:
             return "domain error at the start point"
         self._consider(cur.z, cur.f, cur.phi, cur.psi)
@@ -309,7 +315,7 @@ class NMSSolver:
                 and opt.crash_iteration_limit > 0):
             t0 = time.perf_counter()
             nf0, nj0 = self.p.counters.nfev, self.p.counters.njev
-            cr = crash(self.ev, cur.z, lb, ub, opt, f0=cur.f, tol=self.tol,
+            cr = crash(self.ev, cur.z, lb, ub, opt, f0=cur.f, J0=cur.J, tol=self.tol,
                        deadline=self.deadline, log=self._crash_log)
             st = self.passes["crash"]
             st.ran = True
@@ -329,7 +335,11 @@ class NMSSolver:
                 "crash_method none" if opt.crash_method == "none"
                 else f"n < crash_minimum_dimension ({opt.crash_minimum_dimension})")
         # --- NMS
-        memory = [opt.nms_initial_reference_factor * cur.psi]
+        # nms = False: a monotone line search -- no d-steps, and the reference value is
+        # the merit of the current point (a memory of one checkpoint, no initial slack).
+        monotone = not opt.nms
+        memory_size = 1 if monotone else opt.nms_memory_size
+        memory = [cur.psi if monotone else opt.nms_initial_reference_factor * cur.psi]
         ckpt = (cur, x)
         ckpt_newton = None
         delta = 10.0 * max(1.0, float(np.max(np.abs(cur.z))) if cur.z.size else 1.0)
@@ -375,7 +385,7 @@ class NMSSolver:
                         R = min(R, cur.psi)
                         large = 1.0
                     dist = float(np.max(np.abs(zN - cur.z))) if zN.size else 0.0
-                    if n_d < opt.nms_mstep_frequency and dist <= delta and \
+                    if not monotone and n_d < opt.nms_mstep_frequency and dist <= delta and \
                             cand.psi <= large * max(R, 1e-300):
                         step, new = "D", cand
                         n_d += 1
@@ -389,7 +399,7 @@ class NMSSolver:
                 xN = res.x if new.z is res.z else normal_map_at(new.z, new.f, lb, ub)[0]
                 cur, x = new, xN
                 if step in ("M", "O") or cur.psi < min(memory):
-                    memory = (memory + [cur.psi])[-opt.nms_memory_size:]
+                    memory = (memory + [cur.psi])[-memory_size:]
                     ckpt, ckpt_newton = (cur, x), None
                     watchdogs = 0
                 eps *= opt.proximal_shrink_factor
@@ -410,7 +420,7 @@ class NMSSolver:
                     found = self._watchdog_search(ckpt, ckpt_newton, R, opt)
                 if found is not None:
                     cur, x = found
-                    memory = (memory + [cur.psi])[-opt.nms_memory_size:]
+                    memory = (memory + [cur.psi])[-memory_size:]
                     ckpt, ckpt_newton = (cur, x), None
                     n_d = 0
                     self._log(res.code, "W", cur, eps, res)
@@ -489,15 +499,15 @@ class NMSSolver:
             f" ({self.p.row_label(idx)})")
 
     # ------------------------------------------------------------------ driver
-    def solve(self, x0) -> Outcome:
+    def solve(self, start: Point) -> Outcome:
+        """Run from ``start``, the evaluated start point (in the box, with F and J)."""
         opt = self.opt0
         self._t_start = time.perf_counter()
-        z0 = project(np.asarray(x0, dtype=float), self.lb, self.ub)
+        start0, z0 = start, start.z
         status, message = Status.NO_PROGRESS, ""
         configs = None
         self._last_J = None
         try:
-            start = z0
             while True:
                 why = self._run(start, opt)
                 if self.restarts >= self.opt0.restart_limit:
@@ -512,7 +522,7 @@ class NMSSolver:
                 if k < len(configs):
                     # PATH's configurations, from the user's start point.
                     opt = self.opt0.replace(**configs[k])
-                    start = z0
+                    start = start0
                 elif k % 2 == 0:
                     # Multi-start: crash + NMS from a new point in the box.
                     opt = self.opt0.replace(crash_method="pnewton", crash_minimum_dimension=1)

@@ -14,7 +14,7 @@ import compass_sparse.generators as gen
 from compass_sparse import MCP, Options, solve_lcp, solve_mcp
 from compass_sparse import _dense_path_kernels as K
 from compass_sparse import dense_path
-from compass_sparse._dense_basis import DenseBasis
+from compass_sparse.basis.dense import DenseBasis
 from compass_sparse.dense_path import DensePathEngine
 from compass_sparse.path import LinearCode, PivotalPath
 

@@ -113,7 +113,7 @@ def test_blas_limit_reuses_one_controller():
 
 
 def test_dense_jacobian_gets_canonical_full_pattern_each_call():
-    from compass_sparse.problem import _canonical_csc
+    from compass_sparse.evaluation import canonical_csc as _canonical_csc
 
     A = np.arange(9.0).reshape(3, 3)
     C1 = _canonical_csc(A, 3)
