@@ -54,7 +54,7 @@ from _common import (  # noqa: E402
     path_available, path_session, print_machine, warm_up)
 
 FIELDS = ["group", "name", "n", "solver", "success", "status", "natural", "time", "user",
-          "wall", "major", "minor", "repeats", "error"]
+          "wall", "cpu", "user_cpu", "major", "minor", "repeats", "error"]
 
 
 # --------------------------------------------------------------------------- cases
@@ -228,42 +228,52 @@ class _Timed:
         self.fn, self.clock = fn, clock
 
     def __call__(self, x):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         try:
             return self.fn(x)
         finally:
             self.clock[0] += time.perf_counter() - t0
+            self.clock[1] += time.process_time() - c0
 
 
 def _timed_problem(problem, clock):
+    """A copy of the problem whose user callbacks are timed (the evaluation object's F
+    and J; before that object existed, the MCP's own)."""
     p = copy.copy(problem)
-    p._F = _Timed(problem._F, clock)
-    if callable(problem._jac):
-        p._jac = _Timed(problem._jac, clock)
+    ev = getattr(problem, "evaluator", None)
+    owner, f_attr, j_attr = (p, "_F", "_jac") if ev is None else (None, "_user_F", "_user_jac")
+    if ev is not None:
+        owner = p.evaluator = ev.fresh()
+    setattr(owner, f_attr, _Timed(getattr(owner, f_attr), clock))
+    if callable(getattr(owner, j_attr)):
+        setattr(owner, j_attr, _Timed(getattr(owner, j_attr), clock))
     return p
 
 
 def run_ours(case, repeats, time_limit):
     from compass_sparse import solve_mcp
 
-    clock = [0.0]
+    clock = [0.0, 0.0]
     prob = _timed_problem(case.problem, clock)
-    times, users, walls = [], [], []
+    times, users, walls, cpus, ucpus = [], [], [], [], []
     res = None
     for _ in range(repeats):
-        clock[0] = 0.0
+        clock[:] = [0.0, 0.0]
         p = prob.with_start(case.problem.x0)
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         res = solve_mcp(p, options={"time_limit": time_limit})
-        wall = time.perf_counter() - t0
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         walls.append(wall)
         users.append(clock[0])
         times.append(wall - clock[0])
+        cpus.append(cpu - clock[1])
+        ucpus.append(clock[1])
     nat = natural_residual(res.x, case.F(res.x), case.lb, case.ub)
     return dict(group=case.group, name=case.name, n=case.n, solver="compass_sparse",
                 success=nat <= SUCCESS_TOL, status=res.status.name, natural=nat,
                 time=statistics.median(times), user=statistics.median(users),
-                wall=statistics.median(walls), major=res.nit, minor=res.minor_iterations,
+                wall=statistics.median(walls), cpu=statistics.median(cpus),
+                user_cpu=statistics.median(ucpus), major=res.nit, minor=res.minor_iterations,
                 repeats=repeats, error="")
 
 
@@ -286,23 +296,33 @@ def run_path(case, repeats):
 
 
 # --------------------------------------------------------------------------- import time
-def import_time(repeats=7) -> float:
-    """Median wall time of ``import compass_sparse`` in a fresh interpreter (warm caches:
-    one discarded run first)."""
-    code = ("import time; t = time.perf_counter(); import compass_sparse; "
-            "print(time.perf_counter() - t)")
+def import_time(repeats=7):
+    """Median wall times of ``import compass_sparse`` in fresh interpreters (warm caches:
+    one discarded run first): (total, own) where own is the import after numpy and
+    scipy.sparse are already loaded (what the package itself adds)."""
+    code = ("import time; t = time.perf_counter(); import numpy, scipy.sparse; "
+            "t1 = time.perf_counter(); import compass_sparse; t2 = time.perf_counter(); "
+            "print(t2 - t, t2 - t1)")
     env = dict(os.environ)
     env["PYTHONPATH"] = str(HERE.parent)
-    out = []
+    tot, own = [], []
     for k in range(repeats + 1):
         r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                            env=env, cwd=HERE.parent)
         if k:
-            out.append(float(r.stdout.strip().splitlines()[-1]))
-    return statistics.median(out)
+            a, b = r.stdout.strip().splitlines()[-1].split()
+            tot.append(float(a))
+            own.append(float(b))
+    return statistics.median(tot), statistics.median(own)
 
 
 # --------------------------------------------------------------------------- summary
+def _ours(o) -> float:
+    """Our solver time of a row: CPU time when recorded (the machine is shared), else wall."""
+    c = o.get("cpu", "")
+    return float(c) if c not in ("", None) and not math.isnan(float(c)) else float(o["time"])
+
+
 def summarize(rows, imp=None) -> str:
     by = {}
     for r in rows:
@@ -311,16 +331,16 @@ def summarize(rows, imp=None) -> str:
     table = []
     for (g, name), d in by.items():
         o, p = d.get("compass_sparse"), d.get("PATH")
-        ratio = (o["time"] / p["time"] if o and p and p["success"] and o["success"]
+        ratio = (_ours(o) / p["time"] if o and p and p["success"] and o["success"]
                  and p["time"] > 0 else math.nan)
         table.append([g, name, o["n"] if o else p["n"],
                       ("yes" if o["success"] else "NO") if o else "–",
-                      fmt_time(o["time"]) if o else "–", fmt_time(o["user"]) if o else "–",
-                      o["minor"] if o else "–",
+                      fmt_time(_ours(o)) if o else "–", fmt_time(o["time"]) if o else "–",
+                      fmt_time(o["user"]) if o else "–", o["minor"] if o else "–",
                       ("yes" if p["success"] else "NO") if p else "–",
                       fmt_time(p["time"]) if p else "–",
                       f"{ratio:.2f}" if not math.isnan(ratio) else "–"])
-    out.append(md_table(["group", "problem", "n", "ours ok", "ours solver time", "in F/J",
+    out.append(md_table(["group", "problem", "n", "ours ok", "ours CPU", "ours wall", "in F/J",
                          "pivots", "PATH ok", "PATH time", "ratio"], table))
     out.append("")
     gt = []
@@ -330,26 +350,27 @@ def summarize(rows, imp=None) -> str:
                  and d["compass_sparse"]["success"] and d["PATH"]["success"]]
         ours_all = [d["compass_sparse"] for (gg, _), d in by.items()
                     if gg == g and "compass_sparse" in d]
-        ok_o = sum(r["success"] for r in ours_all)
-        ok_p = sum(d["PATH"]["success"] for (gg, _), d in by.items() if gg == g and "PATH" in d)
-        ratios = [o["time"] / p["time"] for o, p in pairs if p["time"] > 0]
+        ok_o = sum(bool(r["success"]) for r in ours_all)
+        ok_p = sum(bool(d["PATH"]["success"]) for (gg, _), d in by.items()
+                   if gg == g and "PATH" in d)
+        ratios = [_ours(o) / p["time"] for o, p in pairs if p["time"] > 0]
         gt.append([g, len(ours_all), ok_o, ok_p,
-                   fmt_time(statistics.median([o["time"] for o, _ in pairs])) if pairs else "–",
+                   fmt_time(statistics.median([_ours(o) for o, _ in pairs])) if pairs else "–",
                    fmt_time(statistics.median([p["time"] for _, p in pairs])) if pairs else "–",
                    f"{statistics.median(ratios):.2f}" if ratios else "–",
                    f"{max(ratios):.2f}" if ratios else "–"])
     out.append(md_table(["group", "problems", "ours solved", "PATH solved",
                          "median ours (both solved)", "median PATH", "median ratio",
                          "worst ratio"], gt))
-    small = [r for r in rows if r["solver"] == "compass_sparse" and r["n"] <= 10]
+    small = [r for r in rows if r["solver"] == "compass_sparse" and int(r["n"]) <= 10]
     if small:
         out.append("")
-        out.append(f"n <= 10 ({len(small)} problems): median solver time "
-                   f"{fmt_time(statistics.median([r['time'] for r in small]))}, worst "
-                   f"{fmt_time(max(r['time'] for r in small))}")
+        out.append(f"n <= 10 ({len(small)} problems): median solver time (CPU) "
+                   f"{fmt_time(statistics.median([_ours(r) for r in small]))}, worst "
+                   f"{fmt_time(max(_ours(r) for r in small))}")
     if imp is not None:
         out.append(f"import compass_sparse (fresh interpreter, warm caches, median of 7): "
-                   f"{imp:.3f} s")
+                   f"{imp[0]:.3f} s in all, {imp[1]:.3f} s after numpy and scipy.sparse")
     return "\n".join(out)
 
 
@@ -368,9 +389,17 @@ def main(argv=None):
     ap.add_argument("--no-path", action="store_true")
     ap.add_argument("--import-time", action="store_true", help="only measure import time")
     ap.add_argument("--suffix", default="")
+    ap.add_argument("--summarize", metavar="CSV", help="print the tables of an existing CSV")
     a = ap.parse_args(argv)
+    if a.summarize:
+        from _common import read_csv
+
+        print(summarize(read_csv(Path(a.summarize))))
+        return
     if a.import_time:
-        print(f"import compass_sparse: {import_time():.3f} s (median of 7)")
+        tot, own = import_time()
+        print(f"import compass_sparse: {tot:.3f} s in all, {own:.3f} s after numpy and "
+              f"scipy.sparse (median of 7)")
         return
     info = machine_info()
     print_machine(info)

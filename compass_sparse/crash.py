@@ -29,7 +29,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from .merit import fb_phi, project
 
@@ -68,6 +67,8 @@ def normal_map_at(z, f, lb, ub):
 def _solve_reduced(Jii, rhs, perturb, eps0):
     """Solve (J_II + eps I) d = rhs with eps = 0 first, then growing when singular."""
     eps = 0.0
+    import scipy.sparse.linalg as spla  # here, not at import: it costs ~0.3 s
+
     nf = 0
     for attempt in range(6):
         A = Jii if eps == 0.0 else (Jii + eps * sp.identity(Jii.shape[0], format="csc"))

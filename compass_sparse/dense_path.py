@@ -33,7 +33,7 @@ from .basis.types import BasisStats
 
 __all__ = ["DensePathEngine", "DENSE_ENGINE_MAX_N"]
 
-DENSE_ENGINE_MAX_N = 300
+DENSE_ENGINE_MAX_N = 500
 """Largest n solved by the compiled dense engine (above: the sparse basis manager)."""
 
 PIVOT_CHUNK = 1000

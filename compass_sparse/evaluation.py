@@ -31,6 +31,8 @@ are shared and every user call is counted exactly once, whichever problem asked 
 """
 from __future__ import annotations
 
+import functools
+
 from dataclasses import dataclass
 from typing import Callable
 
@@ -54,6 +56,13 @@ class EvalCounters:
     domain_errors: int = 0  #: guarded evaluations rejected (an exception or NaN/Inf)
 
 
+@functools.lru_cache(maxsize=16)
+def _full_pattern(n: int):
+    """(indptr, indices) of the full n x n CSC pattern (never handed out: copied)."""
+    return (np.arange(0, n * n + 1, n, dtype=np.int32),
+            np.tile(np.arange(n, dtype=np.int32), n))
+
+
 def canonical_csc(J, n: int) -> sp.csc_matrix:
     """J as a canonical (sorted, duplicate-free) float CSC copy; a dense array keeps its
     full pattern (its zeros stay stored)."""
@@ -65,11 +74,12 @@ def canonical_csc(J, n: int) -> sp.csc_matrix:
         A = np.asarray(J, dtype=float)
         if A.shape != (n, n):
             raise ShapeError(f"the Jacobian has shape {A.shape}, expected ({n}, {n})")
-        # The full pattern without building an n x n matrix of ones on every call;
-        # copies of the index arrays, since scipy may sort or prune them in place.
-        indptr = np.arange(0, n * n + 1, n, dtype=np.int32)
-        indices = np.tile(np.arange(n, dtype=np.int32), n)
-        return sp.csc_matrix((A.T.ravel().copy(), indices, indptr), shape=(n, n))
+        # The full pattern, built once per n (a small problem with a dense Jacobian
+        # evaluates it every major iteration); copies of the index arrays, since scipy
+        # may sort or prune them in place.
+        indptr, indices = _full_pattern(n)
+        return sp.csc_matrix((A.T.ravel().copy(), indices.copy(), indptr.copy()),
+                             shape=(n, n))
     if not C.has_canonical_format:
         C.sum_duplicates()  # sorts indices too
     C.sort_indices()
