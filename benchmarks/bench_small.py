@@ -374,6 +374,32 @@ def summarize(rows, imp=None) -> str:
     return "\n".join(out)
 
 
+def compare(before, after) -> str:
+    """Per-group table of two runs (e.g. before and after a change): our median CPU time,
+    successes, and PATH's median from the run that has it."""
+    def index(rows):
+        return {(r["group"], r["name"], r["solver"]): r for r in rows}
+
+    b, a = index(before), index(after)
+    out = []
+    for g in dict.fromkeys(r["group"] for r in after):
+        names = [k[1] for k in a if k[0] == g and k[2] == "compass_sparse"]
+        ob = [b[(g, nm, "compass_sparse")] for nm in names if (g, nm, "compass_sparse") in b]
+        oa = [a[(g, nm, "compass_sparse")] for nm in names]
+        pa = [a.get((g, nm, "PATH")) or b.get((g, nm, "PATH")) for nm in names]
+        both = [(x, p) for x, p in zip(oa, pa) if p and p["success"] and x["success"]]
+        out.append([g, len(names), sum(bool(x["success"]) for x in ob),
+                    sum(bool(x["success"]) for x in oa),
+                    fmt_time(statistics.median([_ours(x) for x in ob])) if ob else "–",
+                    fmt_time(statistics.median([_ours(x) for x in oa])),
+                    fmt_time(statistics.median([p["time"] for p in pa if p and p["success"]]))
+                    if any(p and p["success"] for p in pa) else "–",
+                    f"{max(_ours(x) / p['time'] for x, p in both):.1f}" if both else "–"])
+    return md_table(["group", "problems", "solved before", "solved after",
+                     "median CPU before", "median CPU after", "median PATH (its solves)",
+                     "worst ratio after / PATH"], out)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--groups", nargs="+", default=["known", "thesis", "cge"],
@@ -390,7 +416,14 @@ def main(argv=None):
     ap.add_argument("--import-time", action="store_true", help="only measure import time")
     ap.add_argument("--suffix", default="")
     ap.add_argument("--summarize", metavar="CSV", help="print the tables of an existing CSV")
+    ap.add_argument("--compare", nargs=2, metavar=("BEFORE", "AFTER"),
+                    help="per-group table of two CSVs")
     a = ap.parse_args(argv)
+    if a.compare:
+        from _common import read_csv
+
+        print(compare(read_csv(Path(a.compare[0])), read_csv(Path(a.compare[1]))))
+        return
     if a.summarize:
         from _common import read_csv
 

@@ -4,19 +4,26 @@ The basis B (n x n) of the pivotal path has one column per slot: ``M[:, i]`` for
 z_i, ``-e_i`` for w_i and for the free slack of a fixed variable, ``+e_i`` for v_i,
 ``art_sign[i] * e_i`` for an artificial on row i, and the covering vector ``r`` for t.
 
-Factorization (rank-revealing, left-looking LU with partial pivoting)
---------------------------------------------------------------------
+Factorization (left-looking LU with partial pivoting; repair only when singular)
+---------------------------------------------------------------------------------
 Columns are eliminated one at a time, unit columns first (they are independent: one slot
 per index, each unit column on its own row), then the others in slot order.  Step m takes
 column ``c = B[:, j]``, applies the earlier eliminations (``c -= L[:, k] c[p_k]`` for
 k < m) and chooses as pivot row ``p_m`` the not yet pivoted row with the largest ``|c|``
-(partial pivoting).  When that entry is at most ``rank_tol * max(1, ||B[:, j]||_inf)`` the
-column is dependent on the earlier ones: the slot gets an artificial unit column on that
-row instead (thesis §3.3.1; a covering vector or slack column that is dependent makes the
-basis singular).  Then ``U[k, m] = c[p_k]`` (k < m), ``U[m, m] = c[p_m]`` and
+(partial pivoting).  Then ``U[k, m] = c[p_k]`` (k < m), ``U[m, m] = c[p_m]`` and
 ``L[:, m] = c / c[p_m]`` on the rows not yet pivoted.  So ``B Q = P^T L U`` with Q the
 elimination order; a solve ``B x = b`` is a forward pass over the steps, a backward pass
-with U, and the scatter of step m's value to slot ``q_m``.  Cost n^3/3 per factorization.
+with U, and the scatter of step m's value to slot ``q_m``.  Cost n^3/3 per factorization
+(less when unit columns are many: their eliminations are skipped).
+
+When a pivot is at most ``rank_tol * max(1, ||B[:, j]||_inf)`` the basis is singular and
+is repaired as the thesis does (§3.3.1; the dense reference basis does the same): start
+from unit columns on every row, give each non-unit slot the next row not covered by a
+unit column (its *home* row), and bring the columns in, in slot order, each pivoting on
+its home row; a column whose remainder there is tiny is dependent, and an artificial unit
+column on that row takes its slot (a dependent covering vector or slack makes the basis
+singular: nothing to repair).  The repaired basis is then factorized with partial pivoting
+for the solves.
 
 Updates (product form on top of the LU)
 ---------------------------------------
