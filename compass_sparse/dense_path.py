@@ -85,8 +85,9 @@ class DensePathEngine:
 
     # ------------------------------------------------------------------ the path
     def _factor(self, path, istate, fstate):
-        msg = K.refactor(self.M, path.q, self.r, path.sk, path.si, path.xb, path.zval,
-                         path.art_sign, self.displaced, istate, fstate, self.L, self.U,
+        st = path.st
+        msg = K.refactor(self.M, path.q, self.r, st.sk, st.si, st.xb, st.zval,
+                         st.art_sign, self.displaced, istate, fstate, self.L, self.U,
                          self.prow, self.qslot, self.rank_tolerance, path.lb, path.ub,
                          self.work)
         return msg
@@ -104,9 +105,9 @@ class DensePathEngine:
         fstate = np.zeros(5)
         istate[K.I_TSLOT] = -1
         self.displaced[:] = -1
-        path.t, path.t_slot, path.best, path.breakpoints, path.pivots = 0.0, -1, (0.0, None), [], 0
+        st = path.st  # the run's PathState: slot table set by PivotalPath.run
         msg = self._factor(path, istate, fstate)
-        if slack_basis is not None and (msg != 0 or np.any(path.sk == K.VAR_A)):
+        if slack_basis is not None and (msg != 0 or np.any(st.sk == K.VAR_A)):
             path._reset_slots(slack_basis, z, w, v)
             self.displaced[:] = -1
             msg = self._factor(path, istate, fstate)
@@ -120,8 +121,8 @@ class DensePathEngine:
         opt = path.opt
         while True:
             code, msg = K.path_loop(
-                self.M, q, self.r, lb, ub, path.sk, path.si, path.xb, path.zval,
-                path.art_sign, self.displaced, self.enter_count, istate, fstate, self.L,
+                self.M, q, self.r, lb, ub, st.sk, st.si, st.xb, st.zval,
+                st.art_sign, self.displaced, self.enter_count, istate, fstate, self.L,
                 self.U, self.prow, self.qslot, self.eta_s, self.eta_d, self.best_x, self.bp_t,
                 self.bp_x, self.work, opt.pivot_tolerance, opt.ratio_tolerance,
                 self.rank_tolerance, self.pivot_tolerance, int(path.minor_limit),
@@ -132,18 +133,28 @@ class DensePathEngine:
                 code, msg = K.MINOR_LIMIT, -1
                 break
         if code == K.SOLVED:
-            code, msg = K.verify(self.M, q, self.r, path.sk, path.si, path.xb, path.zval,
-                                 path.art_sign, self.displaced, istate, fstate, self.L, self.U,
+            code, msg = K.verify(self.M, q, self.r, st.sk, st.si, st.xb, st.zval,
+                                 st.art_sign, self.displaced, istate, fstate, self.L, self.U,
                                  self.prow, self.qslot, self.rank_tolerance, lb, ub,
                                  self.work)
-        path.unbounded = msg == K.MSG_RAY_UNBOUNDED
-        path.t = float(fstate[K.F_T])
-        path.t_slot = int(istate[K.I_TSLOT])
-        path.pivots = int(istate[K.I_PIV])
+        st.unbounded = msg == K.MSG_RAY_UNBOUNDED
+        if st.unbounded:
+            # z moves along dz: basic z's at their rates, an entering z at its direction
+            # (the rates of the last pivot are still in the work area).
+            ek, ei = int(istate[K.I_EK]), int(istate[K.I_EI])
+            dz = np.zeros(self.n)
+            m = st.sk == K.VAR_Z
+            dz[st.si[m]] = self.work[7][m]
+            if ek == K.VAR_Z:
+                dz[ei] += fstate[K.F_ES]
+            st.ray = (path._current_point()[0], dz)
+        st.t = float(fstate[K.F_T])
+        st.t_slot = int(istate[K.I_TSLOT])
+        st.pivots = int(istate[K.I_PIV])
         nbp = int(istate[K.I_NBP])
-        path.breakpoints = [(float(self.bp_t[k]), self.bp_x[k].copy()) for k in range(nbp)]
+        st.breakpoints = [(float(self.bp_t[k]), self.bp_x[k].copy()) for k in range(nbp)]
         if fstate[K.F_BEST_T] > 0.0:
-            path.best = (float(fstate[K.F_BEST_T]), self.best_x.copy())
+            st.best = (float(fstate[K.F_BEST_T]), self.best_x.copy())
         self._account(istate)
         codes = {K.SOLVED: LinearCode.SOLVED, K.RAY: LinearCode.RAY, K.CYCLE: LinearCode.CYCLE,
                  K.MINOR_LIMIT: LinearCode.MINOR_LIMIT, K.SINGULAR: LinearCode.SINGULAR,

@@ -11,17 +11,17 @@ exception of :mod:`compass_sparse.exceptions` before any work is done.
 from __future__ import annotations
 
 import logging
-import sys
 import time
 
 import numpy as np
 import scipy.sparse as sp
 
-from .crash import crash, normal_map_at
-from .merit import fb_phi, fb_psi, residual_report
+from .crash import crash
+from .merit import fb_phi, fb_psi, normal_map_at, residual_report
 from .nms import NMSSolver, Point
 from .options import Options
-from .path import LinearCode, PivotalPath, WarmBasis
+from .exceptions import ShapeError
+from .path import LinearCode, WarmBasis, default_basis, solve_linear_mcp
 from .problem import MCP
 from .result import PassStats, PointStatus, Result, Status
 
@@ -76,15 +76,15 @@ def _blas_threads(n: int):
     return _BLAS_CONTROLLER[0].limit(limits=1, user_api="blas")
 
 
-def _setup_logging(opt: Options):
-    if opt.verbosity > 0 and not logger.handlers and not logging.getLogger().handlers:
-        h = logging.StreamHandler(sys.stdout)
-        h.setFormatter(logging.Formatter("%(message)s"))
-        logger.addHandler(h)
-        logger.propagate = False
-    if opt.verbosity > 0:
-        logger.setLevel(logging.INFO if opt.verbosity >= 2 else logging.WARNING)
-    return (lambda s: logger.info(s)) if opt.verbosity >= 2 else None
+def _loggers(opt: Options):
+    """(major-iteration log, minor log) callables for verbosity >= 2 and >= 3, or None.
+
+    The library only emits records (at INFO) on the ``compass_sparse`` logger; showing
+    them is the application's choice (``logging.basicConfig(level=logging.INFO)``; the
+    command-line tool does so)."""
+    major = logger.info if opt.verbosity >= 2 else None
+    minor = logger.info if opt.verbosity >= 3 else None
+    return major, minor
 
 
 def _as_problem(F, jac, lb, ub, x0, kwargs) -> MCP:
@@ -192,9 +192,32 @@ def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> 
         problem.evaluator.forget()
 
 
+def _check_basis(basis, n: int) -> WarmBasis | None:
+    """A warm-start basis of the user's problem, or an error naming the mismatch."""
+    if basis is None:
+        return None
+    b = np.asarray(basis.basic if isinstance(basis, WarmBasis) else basis)
+    if b.shape != (n,):
+        raise ShapeError(f"the warm-start basis has shape {b.shape} but the problem has {n} "
+                         "variables: pass the Result.basis of a solve of this problem")
+    return WarmBasis(b.astype(np.int8))
+
+
+def _postsolve_basis(pre, basis: WarmBasis | None, z, lb, ub) -> WarmBasis | None:
+    """The basis of the reduced problem in the original index space: reduced variable k
+    is original variable ``cols[k]``; a removed variable gets the status of its
+    postsolved value (at a bound: its slack; fixed: the free slack)."""
+    if basis is None or pre is None:
+        return basis
+    full = default_basis(z, lb, ub)
+    full[pre.stack.cols] = basis.basic
+    return WarmBasis(full)
+
+
 def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -> Result:
+    basis = _check_basis(basis, problem.n)
     t0 = time.perf_counter()
-    log_major = _setup_logging(opt)
+    log_major, log_minor = _loggers(opt)
     deadline = t0 + opt.time_limit if np.isfinite(opt.time_limit) else None
     passes = {}
     # F and J at the start point: one evaluation each (kept from the problem's start check
@@ -223,6 +246,8 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
             pre = None  # nothing removed: no postsolve needed
         else:
             work = pre.reduced
+            if basis is not None:  # the warm basis, restricted through the index map
+                basis = WarmBasis(basis.basic[pre.stack.cols])
     z0 = work.x0
     if work is not problem:
         f0, J0 = work.evaluator.fj(z0)
@@ -242,15 +267,17 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
         return _finish(problem, pre, status, msg, z0, opt, t0, passes,
                        f_reduced=f0, start_z=problem.x0, basis=basis)
     solver = NMSSolver(work, opt, manager_factory=_manager_factory(opt),
-                       callback=callback, deadline=deadline, log_major=log_major)
+                       callback=callback, deadline=deadline, log_major=log_major,
+                       log_minor=log_minor)
     solver.basis = basis
     if log_major is not None:
         log_major(f"{'major':>5} {'minor':>7} {'func':>6} {'grad':>5} {'residual':>12} "
                   f"type {'prox':>9} {'inorm':>10} (label)")
+    tn = time.perf_counter()
     with _blas_threads(work.n):
         out = solver.solve(Point(z0, f0, phi0, fb_psi(phi0), J0))
     passes.update(out.passes)
-    passes["nms"] = PassStats(ran=True, iterations=out.nit)
+    passes["nms"] = PassStats(ran=True, iterations=out.nit, time=time.perf_counter() - tn)
     res = _finish(problem, pre, out.status, out.message, out.best.z, opt, t0, passes,
                   f_reduced=out.best.f, nit=out.nit, minor_iterations=out.minor,
                   crash_iterations=out.crash_iterations, restarts=out.restarts,
@@ -258,7 +285,7 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
                   factorizations=out.factorizations, basis_updates=out.updates,
                   basis=out.basis)
     if opt.verbosity >= 1:
-        logger.warning(res.summary())
+        logger.info(res.summary())
     return res
 
 
@@ -275,6 +302,8 @@ def _finish(problem, pre, status, message, z_red, opt, t0, passes, *, f_reduced=
         f = problem.evaluator.f(z)
         if f is None:  # the point is returned with the failure; F is unknown there
             f = np.full(problem.n, np.nan)
+    if "basis" in counts:
+        counts["basis"] = _postsolve_basis(pre, counts["basis"], z, problem.lb, problem.ub)
     return _result(problem, status, message, z, f, opt, t0, start_z=start_z,
                    passes=passes, **counts)
 
@@ -296,8 +325,6 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     q = np.asarray(q, dtype=float)
     n = q.size
     if M.shape != (n, n):
-        from .exceptions import ShapeError
-
         raise ShapeError(f"M has shape {M.shape} but q has {n} entries; M must be {n} x {n}")
     M.sort_indices()
 
@@ -305,7 +332,7 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
         return M @ z + q
 
     problem = MCP(F, lambda z: M, lb, ub, x0, n=n, var_names=var_names, constant_jac=M)
-    log_major = _setup_logging(opt)
+    log_major, log_minor = _loggers(opt)
     passes = {"presolve": PassStats(reason="linear problems go straight to the path")}
     lb, ub = problem.lb, problem.ub
     z = problem.x0
@@ -340,17 +367,12 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     # One path solves a linear problem: give it room (a Lemke path may need ~n pivots).
     limit = opt.minor_iteration_limit or max(10 * n, 1000)
     deadline = t0 + opt.time_limit if np.isfinite(opt.time_limit) else None
-    path = PivotalPath(M, q, lb, ub, bm, opt, minor_limit=limit, deadline=deadline)
-    start_ray = opt.lemke_start in ("always", "first")
     with _blas_threads(n):
-        res = path.run(x, ray_start=start_ray)
-        pivots = res.pivots
-        if res.code is not LinearCode.SOLVED and not start_ray:
-            res2 = PivotalPath(M, q, lb, ub, bm, opt, minor_limit=limit,
-                               deadline=deadline).run(x, ray_start=True)
-            pivots += res2.pivots
-            if res2.code is LinearCode.SOLVED or res2.code is LinearCode.RAY:
-                res = res2
+        res = solve_linear_mcp(M, q, lb, ub, bm, opt, x,
+                               ray_start=opt.lemke_start in ("always", "first"),
+                               keep_ray=True, minor_limit=limit, deadline=deadline,
+                               log=log_minor)
+    pivots = res.pivots
     passes["path"] = PassStats(ran=True, time=time.perf_counter() - tp, iterations=1,
                                pivots=pivots, factorizations=bm.stats.factorizations)
     counts = dict(nit=1, minor_iterations=pivots, crash_iterations=crash_its,
@@ -368,13 +390,14 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     bounded = bool(np.all(np.isfinite(lb)) and np.all(np.isfinite(ub)))
     if (res.code is LinearCode.RAY and res.ray_start and res.unbounded and not bounded
             and _is_monotone(M)):
-        zs = res.z
-        fs = problem.F(zs)
-        if np.linalg.norm(fb_phi(z, f, lb, ub)) < np.linalg.norm(fb_phi(zs, fs, lb, ub)):
-            zs, fs = z, f
-        return _result(problem, Status.INFEASIBLE,
-                       "ray termination from a Lemke start on a positive semidefinite M: "
-                       "the problem has no solution", zs, fs, opt, t0, **counts)
+        # The certificate: x is the ray's base and x + theta * ray (theta >= 0) the ray.
+        zs = res.ray_base
+        out = _result(problem, Status.INFEASIBLE,
+                      "ray termination from a Lemke start on a positive semidefinite M: "
+                      "the problem has no solution", zs, problem.F(zs), opt, t0,
+                      ray=res.ray.copy(), **counts)
+        out.point_status = PointStatus.CERTIFICATE
+        return out
     # The path cycled, hit a limit or lost accuracy: the stabilized Newton method takes over.
     general = _solve_problem(problem.with_start(z), opt.replace(presolve=False))
     general.passes = {**passes, **{k: v for k, v in general.passes.items() if k != "presolve"}}

@@ -118,6 +118,10 @@ def _assert_same_path(py, cc, M, q):
     scale = 1.0 + np.abs(py.z).max(initial=0.0)
     assert np.max(np.abs(cc.z - py.z), initial=0.0) <= 1e-8 * scale
     assert np.array_equal(cc.basis.basic, py.basis.basic)
+    assert cc.unbounded == py.unbounded
+    if py.unbounded:  # the same ray: base point and direction of z
+        assert np.allclose(cc.ray_base, py.ray_base, rtol=1e-8, atol=1e-8)
+        assert np.allclose(cc.ray, py.ray, rtol=1e-8, atol=1e-8)
 
 
 @pytest.mark.parametrize("structure", ["grid", "banded"])
