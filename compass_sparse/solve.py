@@ -38,7 +38,8 @@ def _manager_factory(opt: Options):
         n = M.shape[0]
         from . import dense_path
 
-        if n <= dense_path.DENSE_ENGINE_MAX_N:
+        # The compiled engine writes no per-pivot log: verbosity >= 3 keeps the Python loop.
+        if n <= dense_path.DENSE_ENGINE_MAX_N and opt.verbosity < 3:
             return dense_path.DensePathEngine(M, opt)
         if n <= DENSE_BASIS_MAX_N:
             from .basis.dense import DenseBasis
