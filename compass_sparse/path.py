@@ -273,11 +273,11 @@ class PivotalPath:
             # solution check in compiled code, on this slot table.
             code, msg = self.bm.run_path(self, z, w, v, slack_basis)
             return self._finish(code, self.st.t, t0, st0, ray_start, msg)
-        code, msg = self._factor(initial=True)
+        code, msg = self._factor()
         if slack_basis is not None and (
                 code is not None or np.any(self.st.sk == VAR_A)):
             self._reset_slots(slack_basis, z, w, v)
-            code, msg = self._factor(initial=True)
+            code, msg = self._factor()
         if code is not None:
             return self._finish(code, 0.0, t0, st0, ray_start, msg)
         self.st.t = 0.0
@@ -345,7 +345,7 @@ class PivotalPath:
         return z, w, v, r, basic
 
     # ------------------------------------------------------------------ factorization
-    def _factor(self, initial=False):
+    def _factor(self):
         """Factor the current slot table; the basis repairs singularity with artificials
         (one factorization repairs every dependent column)."""
         ck, ci, cs = self._columns_for(self.st.sk, self.st.si)
