@@ -49,9 +49,19 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE.parent / "tests"))
-from _common import (  # noqa: E402
-    RESULTS, SUCCESS_TOL, CsvLog, fmt_time, machine_info, md_table, natural_residual,
-    path_available, path_session, print_machine, warm_up)
+from _common import (
+    RESULTS,
+    SUCCESS_TOL,
+    CsvLog,
+    fmt_time,
+    machine_info,
+    md_table,
+    natural_residual,
+    path_available,
+    path_session,
+    print_machine,
+    warm_up,
+)
 
 FIELDS = ["group", "name", "n", "solver", "success", "status", "natural", "time", "user",
           "wall", "cpu", "user_cpu", "major", "minor", "repeats", "error"]
@@ -307,7 +317,7 @@ def import_time(repeats=7):
     env["PYTHONPATH"] = str(HERE.parent)
     tot, own = [], []
     for k in range(repeats + 1):
-        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                            env=env, cwd=HERE.parent)
         if k:
             a, b = r.stdout.strip().splitlines()[-1].split()

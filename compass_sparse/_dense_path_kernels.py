@@ -118,8 +118,7 @@ def factor(M, r, sk, si, art_sign, L, U, prow, qslot, rank_tol, rep_slot, rep_ro
         cmax = 0.0
         for i in range(n):
             a = abs(c[i])
-            if a > cmax:
-                cmax = a
+            cmax = max(cmax, a)
         for k in range(m):
             ck = c[prow[k]]
             U[k, m] = ck

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import sys
 
-__all__ = ["njit", "LazyKernel", "materialize"]
+__all__ = ["LazyKernel", "materialize", "njit"]
 
 
 class LazyKernel:

@@ -25,13 +25,14 @@ refactorized (the sparse manager's tests, same defaults).
 from __future__ import annotations
 
 import time
+
 import numpy as np
 import scipy.sparse as sp
 
 from . import _dense_path_kernels as K
 from .basis.types import BasisStats
 
-__all__ = ["DensePathEngine", "DENSE_ENGINE_MAX_N"]
+__all__ = ["DENSE_ENGINE_MAX_N", "DensePathEngine"]
 
 DENSE_ENGINE_MAX_N = 500
 """Largest n solved by the compiled dense engine (above: the sparse basis manager)."""

@@ -8,12 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import scipy.sparse as sp
 
 import compass_sparse.generators as gen
-from compass_sparse import MCP, Options, solve_lcp, solve_mcp
+from compass_sparse import MCP, Options, dense_path, solve_lcp, solve_mcp
 from compass_sparse import _dense_path_kernels as K
-from compass_sparse import dense_path
 from compass_sparse.basis.dense import DenseBasis
 from compass_sparse.dense_path import DensePathEngine
 from compass_sparse.path import LinearCode, PivotalPath
@@ -180,23 +178,25 @@ def test_solves_agree_with_and_without_the_engine(monkeypatch):
     and with the Python loop on the dense reference basis."""
     cases = [gen.p_matrix_lcp(40, "banded", 3, "mixed"), gen.obstacle_problem(7, 2),
              gen.duplicated_columns_lcp(30, 1, bounds="box")]
+    points = {}
     for thr in (dense_path.DENSE_ENGINE_MAX_N, 0):
         monkeypatch.setattr(dense_path, "DENSE_ENGINE_MAX_N", thr)
-        out = []
+        points[thr] = []
         for g in cases:
             M, q, lb, ub = g.lcp
             r = solve_lcp(M, q, lb, ub)
             assert r.success, r.message
-            out.append(r.x)
-            n = q.size
+            points[thr].append(r.x)
             Md = M.toarray()
-            prob = MCP(lambda z: Md @ z + q + 0.1 * z**3 * (z > 0),
-                       lambda z: Md + np.diag(0.3 * z**2 * (z > 0)),
-                       lb, ub, np.clip(np.zeros(n), lb, ub))
-            rm = solve_mcp(prob)
+
+            def F(z, Md=Md, q=q):
+                return Md @ z + q + 0.1 * z**3 * (z > 0)
+
+            def J(z, Md=Md):
+                return Md + np.diag(0.3 * z**2 * (z > 0))
+
+            rm = solve_mcp(MCP(F, J, lb, ub, np.clip(np.zeros(q.size), lb, ub)))
             assert rm.success, rm.message
-            out.append(rm.x)
-        if thr == 0:
-            for a, b in zip(out, first):
-                assert np.max(np.abs(a - b)) <= 1e-6 * (1 + np.abs(b).max())
-        first = out
+            points[thr].append(rm.x)
+    for a, b in zip(points[0], points[dense_path.DENSE_ENGINE_MAX_N]):
+        assert np.max(np.abs(a - b)) <= 1e-6 * (1 + np.abs(b).max())
