@@ -317,8 +317,8 @@ def import_time(repeats=7):
     env["PYTHONPATH"] = str(HERE.parent)
     tot, own = [], []
     for k in range(repeats + 1):
-        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                           env=env, cwd=HERE.parent)
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                           check=True, env=env, cwd=HERE.parent)
         if k:
             a, b = r.stdout.strip().splitlines()[-1].split()
             tot.append(float(a))
