@@ -29,7 +29,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from .merit import fb_phi, normal_map_at, project
 
@@ -55,6 +54,8 @@ class CrashResult:
 def _solve_reduced(Jii, rhs, perturb, eps0):
     """Solve (J_II + eps I) d = rhs with eps = 0 first, then growing when singular."""
     eps = 0.0
+    import scipy.sparse.linalg as spla  # here, not at import: it costs ~0.3 s
+
     nf = 0
     for attempt in range(6):
         A = Jii if eps == 0.0 else (Jii + eps * sp.identity(Jii.shape[0], format="csc"))

@@ -32,6 +32,8 @@ user call is counted exactly once, whichever problem asked for it.
 """
 from __future__ import annotations
 
+import functools
+
 from dataclasses import dataclass
 from typing import Callable
 
@@ -55,6 +57,13 @@ class EvalCounters:
     domain_errors: int = 0  #: guarded evaluations rejected (an exception or NaN/Inf)
 
 
+@functools.lru_cache(maxsize=16)
+def _full_pattern(n: int):
+    """(indptr, indices) of the full n x n CSC pattern (never handed out: copied)."""
+    return (np.arange(0, n * n + 1, n, dtype=np.int32),
+            np.tile(np.arange(n, dtype=np.int32), n))
+
+
 def canonical_csc(J, n: int) -> sp.csc_matrix:
     """J as a canonical (sorted, duplicate-free) float CSC copy; a dense array keeps its
     full pattern (its zeros stay stored)."""
@@ -66,9 +75,12 @@ def canonical_csc(J, n: int) -> sp.csc_matrix:
         A = np.asarray(J, dtype=float)
         if A.shape != (n, n):
             raise ShapeError(f"the Jacobian has shape {A.shape}, expected ({n}, {n})")
-        C = sp.csc_matrix(np.ones((n, n)))
-        C.data = A.T.ravel().copy()
-        return C
+        # The full pattern, built once per n (a small problem with a dense Jacobian
+        # evaluates it every major iteration); copies of the index arrays, since scipy
+        # may sort or prune them in place.
+        indptr, indices = _full_pattern(n)
+        return sp.csc_matrix((A.T.ravel().copy(), indices.copy(), indptr.copy()),
+                             shape=(n, n))
     if not C.has_canonical_format:
         C.sum_duplicates()  # sorts indices too
     C.sort_indices()

@@ -192,7 +192,8 @@ class PivotalPath:
 
     def __init__(self, M, q, lb, ub, manager, options, *, minor_limit=None, deadline=None,
                  log=None):
-        self.M = sp.csc_matrix(M)
+        # No copy when M is already CSC (every major iteration builds a new path).
+        self.M = M if (sp.issparse(M) and M.format == "csc") else sp.csc_matrix(M)
         self.n = self.M.shape[0]
         self.q = np.asarray(q, dtype=float)
         self.lb = lb
@@ -267,6 +268,11 @@ class PivotalPath:
             return res
         self._reset_slots(basic, z, w, v)
         self.bm.set_dense_column(r)
+        if getattr(self.bm, "runs_paths", False):
+            # The small-problem engine (dense_path.py): factorization, pivots and the
+            # solution check in compiled code, on this slot table.
+            code, msg = self.bm.run_path(self, z, w, v, slack_basis)
+            return self._finish(code, self.st.t, t0, st0, ray_start, msg)
         code, msg = self._factor()
         if slack_basis is not None and (
                 code is not None or np.any(self.st.sk == VAR_A)):

@@ -36,6 +36,11 @@ DENSE_BASIS_MAX_N = 300
 def _manager_factory(opt: Options):
     def make(M):
         n = M.shape[0]
+        from . import dense_path
+
+        # The compiled engine writes no per-pivot log: verbosity >= 3 keeps the Python loop.
+        if n <= dense_path.DENSE_ENGINE_MAX_N and opt.verbosity < 3:
+            return dense_path.DensePathEngine(M, opt)
         if n <= DENSE_BASIS_MAX_N:
             from .basis.dense import DenseBasis
 
@@ -47,19 +52,29 @@ def _manager_factory(opt: Options):
     return make
 
 
+_BLAS_CONTROLLER = []
+"""The one threadpoolctl controller of the process (empty until the first small solve)."""
+
+
 def _blas_threads(n: int):
     """Single-threaded BLAS for small problems: their dense kernels (the dense basis below
     DENSE_BASIS_MAX_N) are tiny, and a multithreaded BLAS on a loaded machine made a
-    200 x 200 inverse 100 times slower (0.2 s against 2 ms, measured)."""
+    200 x 200 inverse 100 times slower (0.2 s against 2 ms, measured).
+
+    The BLAS libraries are found once per process: ``threadpool_limits`` scans the loaded
+    libraries (/proc/self/maps) on every call, 1.7 ms, more than a whole small solve should
+    take; the kept controller sets the limit in ~10 us."""
     import contextlib
 
     if n > DENSE_BASIS_MAX_N:
         return contextlib.nullcontext()
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - a declared dependency
-        return contextlib.nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
+    if not _BLAS_CONTROLLER:
+        try:
+            from threadpoolctl import ThreadpoolController
+        except ImportError:  # pragma: no cover - a declared dependency
+            return contextlib.nullcontext()
+        _BLAS_CONTROLLER.append(ThreadpoolController())
+    return _BLAS_CONTROLLER[0].limit(limits=1, user_api="blas")
 
 
 def _loggers(opt: Options):
