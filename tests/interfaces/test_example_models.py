@@ -33,25 +33,22 @@ def test_pyomo_model_gives_the_callables_solution(module, args):
     d, x = reference(module, args)
     m = module.pyomo_model(d)
     opts = {"convergence_tolerance": TOL}
-    if module is cge:
-        opts["crash_method"] = "none"  # see the xfail test below
     res = pe.SolverFactory("compass_sparse").solve(m, options=opts)
     pe.assert_optimal_termination(res)
     np.testing.assert_allclose(module.pyomo_solution(m), x, atol=1e-8, rtol=0)
 
 
-@pytest.mark.xfail(strict=True, reason="solver defect, not the link: from the calibrated "
-                   "benchmark point (a singular-looking factor block) the projected-Newton "
-                   "crash with the exact Jacobian wanders (50 restarts, NO_PROGRESS); with "
-                   "crash_method='none' or a finite-difference Jacobian it takes 15 iterations")
-def test_cge_pyomo_model_solves_with_the_default_crash():
+def test_cge_model_from_its_calibrated_point_solves_with_the_default_crash():
+    # Pinned failure: on the explicitly updated dense inverse the crash and the path
+    # wandered from the calibrated point (50 restarts, NO_PROGRESS); the compiled dense
+    # LU engine solves it in a few major iterations.
     pytest.importorskip("pyomo.environ", reason="pyomo is not installed (extra [pyomo])")
     pytest.importorskip("casadi", reason="casadi is not installed (extra [pyomo])")
     import compass_sparse.interfaces.pyomo as cpy
 
     m = cge.pyomo_model(cge.data(4))
     res = solve_mcp(cpy.PyomoMCP(m).mcp(), options={"convergence_tolerance": TOL})
-    assert res.success
+    assert res.success and res.restarts == 0 and res.residual.natural <= TOL
 
 
 @pytest.mark.parametrize("module,args", CASES, ids=IDS)
