@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from .acceptance import judge
 from .crash import crash, normal_map_at
 from .fallback import gradient_steps, lm_step
 from .merit import fb_gradient, fb_phi, fb_psi, project
@@ -57,6 +58,10 @@ __all__ = ["NMSSolver", "Outcome", "Linearizer"]
 LOCAL_FACTOR = 1e-3
 """Below this fraction of a run's starting residual the NMS accepts only steps that do not
 raise the merit (d-steps included); larger steps go to the watchdog's backtracking."""
+
+FLAT_REJECTION_LIMIT = 10
+"""Points with a residual below the tolerance that the scale test (see
+:mod:`compass_sparse.acceptance`) rejected before the solve stops with FLAT_RESIDUAL."""
 
 PROGRESS_AFTER = 1.0
 """Seconds after which ``progress=True`` starts its one-line display."""
@@ -113,6 +118,7 @@ class Linearizer:
         self.pos_J = self._positions(P, J.indices, col)
         self.pos_D = self._positions(P, np.arange(n), np.arange(n))
         self.n = n
+        self.nnz_J = J.nnz
 
     @staticmethod
     def _positions(P, rows, cols):
@@ -169,6 +175,7 @@ class NMSSolver:
         self.bm = None
         self.basis: WarmBasis | None = None
         self.rng = np.random.default_rng(options.seed)
+        self.flat_rejections = 0
 
     # ------------------------------------------------------------------ bookkeeping
     def _consider(self, z, f, phi, psi):
@@ -176,7 +183,16 @@ class NMSSolver:
         if self.best is None or psi < self.best.psi:
             self.best = Point(z.copy(), f.copy(), phi.copy(), psi)
         if np.sqrt(2.0 * psi) <= self.tol:
-            raise _Stop(Status.SOLVED, "solution found")
+            v = judge(z, f, self.lb, self.ub, self.tol, jac=lambda y: self.ev.jac(y, f))
+            if v.solved:
+                self.best = Point(z.copy(), f.copy(), phi.copy(), psi)
+                raise _Stop(Status.SOLVED, "solution found")
+            if v.small_residual and v.flat_row >= 0:
+                # A flat tail: keep going (a genuine solution may still be reached), but
+                # not for ever along a tail that leads nowhere.
+                self.flat_rejections += 1
+                if self.flat_rejections >= FLAT_REJECTION_LIMIT:
+                    raise _Stop(Status.FLAT_RESIDUAL, v.flat_message(self.p.row_label))
 
     def _point(self, z, f=None):
         if f is None:
@@ -232,8 +248,8 @@ class NMSSolver:
         self._last_J = J
         if J is None:
             return None, None, LinearCode.ERROR
-        if self.linearizer is None:
-            self.linearizer = Linearizer(J)
+        if self.linearizer is None or self.linearizer.nnz_J != J.nnz:
+            self.linearizer = Linearizer(J)  # first J, or an undeclared pattern grew
         M = self.linearizer(J, eps)
         q = cur.f - M @ cur.z
         if self.bm is None:

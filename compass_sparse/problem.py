@@ -10,9 +10,13 @@ Row i of F is paired with (complementary to) variable z_i, so the system is squa
 Bounds may be infinite; an entry with |bound| >= ``INFINITY`` (1e20, PATH's convention) is
 treated as infinite.
 
-The Jacobian J(z) = dF/dz is sparse with a *fixed structural pattern*: every call must
-return the same set of stored entries (explicit zeros count as stored).  Three ways to
-give it:
+The Jacobian J(z) = dF/dz is sparse with a *structural pattern*, the set of entries J
+can ever hold.  ``jac_sparsity=`` declares it (with any form of ``jac``): every returned J
+must fit inside it, entries it lacks are zeros, and a row without entries is constant
+(the preprocessor relies on that).  Without a declaration the pattern is the union of the
+entries seen so far: a J built from arrays that drop zeros at one point may add entries
+later, and the pattern grows (so nothing is concluded from an entry's absence).  Three
+ways to give J:
 
 * ``jac=callable``: ``jac(x)`` returns any scipy.sparse matrix (or a dense array, which is
   only sensible for small problems since its pattern is the full matrix);
@@ -27,6 +31,7 @@ callbacks, count evaluations, check shapes and return J in canonical CSC form wh
 """
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
@@ -42,6 +47,8 @@ from .exceptions import (
     ShapeError,
     StartPointError,
 )
+
+logger = logging.getLogger("compass_sparse")
 
 INFINITY = 1e20
 """Bounds at or beyond this magnitude are infinite (PATH uses the same value)."""
@@ -107,6 +114,12 @@ def _var_label(names, i: int) -> str:
     if names is not None:
         return f"variable {names[i]!r} (index {i})"
     return f"variable {i}"
+
+
+def _keys(A: sp.csc_matrix) -> np.ndarray:
+    """Sorted keys col * n + row of the stored entries of a canonical CSC matrix."""
+    n = A.shape[0]
+    return np.repeat(np.arange(A.shape[1], dtype=np.int64), np.diff(A.indptr)) * n + A.indices
 
 
 def _canonical_csc(J, n: int) -> sp.csc_matrix:
@@ -204,17 +217,22 @@ class MCP:
         self.counters = EvalCounters()
         self._pattern: sp.csc_matrix | None = None
         self._colors: np.ndarray | None = None
+        # A declared pattern is a contract: every J fits inside it (entries it lacks are
+        # zeros) and a row without entries is constant.  A pattern recorded from the first
+        # J is only an observation (a J built from arrays drops the zeros of that point),
+        # so it grows when a later J has more entries.
+        self.pattern_declared = jac_sparsity is not None
+        self.pattern_growths = 0
         if jac_sparsity is not None:
             if sp.issparse(jac_sparsity):
                 S = _canonical_csc(jac_sparsity, n)  # stored entries define the structure
             else:
                 S = _canonical_csc(sp.csc_matrix(np.asarray(jac_sparsity) != 0), n)
             S.data[:] = 1.0
-            if jac is None:
-                self._pattern = S
+            self._pattern = S
         self._constant_spec = constant_jac
         self.constant_mask: np.ndarray | None = None
-        if self._pattern is not None:  # finite differences: the pattern is known now
+        if self._pattern is not None:  # declared: the pattern is known now
             self._set_constant_mask()
         if check:
             self.check_start()
@@ -349,6 +367,8 @@ class MCP:
         return P
 
     def _fix_pattern(self, C: sp.csc_matrix) -> sp.csc_matrix:
+        """C on the problem's pattern: entries of the pattern that C lacks are zeros; an
+        entry outside a declared pattern is an error; an undeclared pattern grows."""
         if self._pattern is None:
             self._pattern = C.copy()
             self._set_constant_mask()
@@ -357,26 +377,40 @@ class MCP:
         if (C.indptr.shape == P.indptr.shape and C.indices.shape == P.indices.shape
                 and np.array_equal(C.indptr, P.indptr) and np.array_equal(C.indices, P.indices)):
             return C
-        raise JacobianPatternError(self._pattern_change_message(P, C))
+        kp, kc = _keys(P), _keys(C)
+        pos = np.searchsorted(kp, kc)
+        inside = pos < kp.size
+        inside[inside] = kp[pos[inside]] == kc[inside]
+        if not inside.all():
+            if self.pattern_declared:
+                raise JacobianPatternError(self._outside_message(kc[~inside]))
+            keys = np.union1d(kp, kc)
+            rows, cols = keys % self.n, keys // self.n
+            U = sp.csc_matrix((np.ones(keys.size), (rows, cols)), shape=P.shape)
+            U.sort_indices()
+            logger.info("the Jacobian has %d entries outside the pattern seen so far "
+                        "(first at row %s, column %s): the pattern grows", int((~inside).sum()),
+                        self.row_label(int(kc[~inside][0] % self.n)),
+                        self.var_label(int(kc[~inside][0] // self.n)))
+            self._pattern = P = U
+            self.pattern_growths += 1
+            self._set_constant_mask()
+            kp = _keys(P)
+            pos = np.searchsorted(kp, kc)
+        data = np.zeros(P.nnz)
+        data[pos] = C.data
+        return sp.csc_matrix((data, P.indices.copy(), P.indptr.copy()), shape=P.shape)
 
-    def _pattern_change_message(self, P, C) -> str:
-        Pc, Cc = P.tocoo(), C.tocoo()
-        n = self.n
-        kp = set((Pc.col.astype(np.int64) * n + Pc.row).tolist())
-        kc = set((Cc.col.astype(np.int64) * n + Cc.row).tolist())
-        added = sorted(kc - kp)
-        removed = sorted(kp - kc)
-        first = min(added[:1] + removed[:1])
-        j, i = divmod(first, n)
-        what = "appeared" if added and first == added[0] else "disappeared"
+    def on_pattern(self, J) -> sp.csc_matrix:
+        """A J returned earlier, on the current pattern (which may have grown since)."""
+        return self._fix_pattern(_canonical_csc(J, self.n))
+
+    def _outside_message(self, keys) -> str:
+        j, i = divmod(int(keys[0]), self.n)
         return (
-            f"the Jacobian's structural pattern changed: entry (row {self.row_label(i)}, "
-            f"column {self.var_label(j)}) {what} ({len(added)} entries added, {len(removed)} "
-            "removed since the first call). Return J with a fixed index structure: store "
-            "explicit zeros (e.g. build it from fixed (row, col) index arrays with "
-            "scipy.sparse.csc_matrix((data, (rows, cols)), shape) rather than from a dense "
-            "array, which drops zeros)"
-        )
+            f"the Jacobian has an entry at (row {self.row_label(i)}, column "
+            f"{self.var_label(j)}) outside the declared pattern jac_sparsity ({keys.size} such "
+            "entries): jac_sparsity must contain every entry J can ever hold")
 
     def _set_constant_mask(self):
         spec = self._constant_spec
@@ -389,8 +423,7 @@ class MCP:
         S.sort_indices()
         P = self._pattern  # canonical CSC, so its keys are sorted and unique too
         n = self.n
-        keys_p = np.repeat(np.arange(n, dtype=np.int64), np.diff(P.indptr)) * n + P.indices
-        keys_s = np.repeat(np.arange(n, dtype=np.int64), np.diff(S.indptr)) * n + S.indices
+        keys_p, keys_s = _keys(P), _keys(S)
         pos = np.searchsorted(keys_p, keys_s)
         inside = pos < keys_p.size
         inside[inside] = keys_p[pos[inside]] == keys_s[inside]

@@ -17,8 +17,9 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
+from .acceptance import judge
 from .crash import crash, normal_map_at
-from .merit import fb_phi, fb_psi, residual_report
+from .merit import fb_phi, residual_report
 from .nms import NMSSolver
 from .options import Options
 from .path import LinearCode, PivotalPath, WarmBasis
@@ -82,13 +83,31 @@ def _as_problem(F, jac, lb, ub, x0, kwargs) -> MCP:
     return MCP(F, jac, lb, ub, x0, **kwargs)
 
 
+def _judge_on(problem: MCP, z, f, opt: Options):
+    """The acceptance verdict of z on ``problem`` (J evaluated only when the residuals are
+    small; a J that cannot be evaluated there leaves the residual test alone)."""
+    def jac(y):
+        try:
+            return problem.J_uncounted(y)
+        except Exception:
+            return None
+    return judge(z, f, problem.lb, problem.ub, opt.convergence_tolerance, jac=jac)
+
+
+_FLAT_OVERRIDES = (Status.SOLVED, Status.NO_PROGRESS, Status.MAJOR_ITERATION_LIMIT,
+                   Status.MINOR_ITERATION_LIMIT, Status.TIME_LIMIT, Status.STATIONARY_POINT)
+
+
 def _result(problem: MCP, status: Status, message: str, z, f, opt: Options, t0, *,
             start_z=None, **counts) -> Result:
     rep = residual_report(z, f, problem.lb, problem.ub, names=problem.row_label)
-    solved = rep.fb_norm <= opt.convergence_tolerance
+    verdict = _judge_on(problem, z, f, opt)
+    solved = verdict.solved
     if solved and status not in (Status.SOLVED,):
         # A limit fired after the solution was reached: report the solution.
         status, message = Status.SOLVED, "solution found"
+    if not solved and verdict.small_residual and status in _FLAT_OVERRIDES:
+        status, message = Status.FLAT_RESIDUAL, verdict.flat_message(problem.row_label)
     if status is Status.SOLVED and not solved:
         status, message = Status.ERROR, "internal error: a non-solution was marked solved"
     if solved:
@@ -199,10 +218,9 @@ def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> 
     if f0 is None:
         return _finish(problem, pre, Status.DOMAIN_ERROR, f"F failed at the start point: "
                        f"{evalr.last_error}", work.x0, opt, t0, passes, evalr)
-    phi0 = fb_phi(z0, f0, work.lb, work.ub)
-    if np.sqrt(2 * fb_psi(phi0)) <= opt.convergence_tolerance or opt.major_iteration_limit == 0:
-        status = (Status.SOLVED if np.sqrt(2 * fb_psi(phi0)) <= opt.convergence_tolerance
-                  else Status.MAJOR_ITERATION_LIMIT)
+    at_solution = _judge_on(work, z0, f0, opt).solved
+    if at_solution or opt.major_iteration_limit == 0:
+        status = Status.SOLVED if at_solution else Status.MAJOR_ITERATION_LIMIT
         msg = ("the start point is a solution" if status is Status.SOLVED
                else "major_iteration_limit = 0: start point evaluated")
         for k in ("crash", "path", "fallback"):
@@ -281,10 +299,9 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     lb, ub = problem.lb, problem.ub
     z = problem.x0
     f = problem.F(z)
-    if np.linalg.norm(fb_phi(z, f, lb, ub)) <= opt.convergence_tolerance \
-            or opt.major_iteration_limit == 0:
-        status = (Status.SOLVED if np.linalg.norm(fb_phi(z, f, lb, ub))
-                  <= opt.convergence_tolerance else Status.MAJOR_ITERATION_LIMIT)
+    at_solution = _judge_on(problem, z, f, opt).solved
+    if at_solution or opt.major_iteration_limit == 0:
+        status = Status.SOLVED if at_solution else Status.MAJOR_ITERATION_LIMIT
         return _result(problem, status, "start point evaluated", z, f, opt, t0,
                        start_z=problem.x0, passes=passes)
     crash_its = 0
@@ -301,7 +318,7 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     else:
         st.reason = f"n < crash_minimum_dimension ({opt.crash_minimum_dimension})"
     passes["crash"] = st
-    if np.linalg.norm(fb_phi(z, f, lb, ub)) <= opt.convergence_tolerance:
+    if _judge_on(problem, z, f, opt).solved:
         passes["path"] = PassStats(reason="crash solved the problem")
         return _result(problem, Status.SOLVED, "solved by the crash", z, f, opt, t0,
                        passes=passes, crash_iterations=crash_its,

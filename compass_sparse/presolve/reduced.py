@@ -53,7 +53,11 @@ def build_reduced(ws):
     fill = stack.fill
     mode = P._jac
 
+    nnz0 = ws.er.size
+
     def red_J_from(J):
+        if J.nnz != nnz0:  # an undeclared pattern grew since presolve: select by index
+            return J[rows][:, cols].tocsc()
         return sp.csc_matrix((J.data[take], indices.copy(), indptr.copy()), shape=shape)
 
     if mode is True:
@@ -69,7 +73,7 @@ def build_reduced(ws):
         else:
             def jac(y):
                 return red_J_from(P.J_uncounted(fill(y)))
-    return MCP(
+    red = MCP(
         F_red, jac, lb=P.lb[cols], ub=P.ub[cols], x0=P.x0[cols],
         jac_sparsity=pattern,
         var_names=[P.var_label(int(j)) for j in cols],
@@ -78,3 +82,5 @@ def build_reduced(ws):
         fd_step=P.fd_step,
         check=False,
     )
+    red.pattern_declared = P.pattern_declared  # the reduced pattern is as certain as P's
+    return red
