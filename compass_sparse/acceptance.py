@@ -29,10 +29,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import scipy.sparse as sp
 
 from .merit import fb_jacobian_diagonals, fb_phi, min_map
 
-__all__ = ["FLAT_STEP_RTOL", "Verdict", "judge"]
+__all__ = ["FLAT_STEP_RTOL", "Verdict", "judge", "residuals_small", "Acceptance"]
 
 FLAT_STEP_RTOL = 1e-3
 """Largest Newton displacement d_i, relative to 1 + |z_i|, of an accepted point."""
@@ -90,3 +91,37 @@ def judge(z, f, lb, ub, tol, jac=None) -> Verdict:
     if ratio[k] <= FLAT_STEP_RTOL:
         return Verdict(True, True)
     return Verdict(False, True, flat_row=int(rows[k]), step=float(d[k]))
+
+
+class Acceptance:
+    """Both tests for the points of a solve that may work on a scaled problem
+    (z_user = col * z, F_user = f / row; see :mod:`compass_sparse.scaling`): the verdict is
+    always on the user's problem, at the user's tolerance."""
+
+    def __init__(self, lb, ub, tol, row=None, col=None):
+        self.lb, self.ub, self.tol = lb, ub, tol
+        self.row, self.col = row, col
+
+    def _user(self, z, f):
+        if self.row is None:
+            return z, f
+        return self.col * z, f / self.row
+
+    def small(self, z, f) -> bool:
+        """Test (1) only (cheap: no Jacobian)."""
+        zu, fu = self._user(z, f)
+        return residuals_small(zu, fu, self.lb, self.ub, self.tol)
+
+    def judge(self, z, f, jac=None) -> Verdict:
+        """Both tests; ``jac(z)`` evaluates the Jacobian of the problem being solved at z."""
+        zu, fu = self._user(z, f)
+        if jac is None:
+            return judge(zu, fu, self.lb, self.ub, self.tol)
+
+        def user_jac(_):
+            J = jac(z)
+            if J is None or self.row is None:
+                return J
+            return sp.diags(1.0 / self.row) @ J @ sp.diags(1.0 / self.col)
+
+        return judge(zu, fu, self.lb, self.ub, self.tol, jac=user_jac)

@@ -44,12 +44,13 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from .acceptance import judge
+from .acceptance import Acceptance
 from .crash import crash, normal_map_at
 from .fallback import gradient_steps, lm_step
 from .merit import fb_gradient, fb_phi, fb_psi, project
 from .path import LinearCode, PivotalPath, WarmBasis
 from .result import PassStats, Status
+from .stationary import stationarity
 
 logger = logging.getLogger("compass_sparse")
 
@@ -62,6 +63,9 @@ raise the merit (d-steps included); larger steps go to the watchdog's backtracki
 FLAT_REJECTION_LIMIT = 10
 """Points with a residual below the tolerance that the scale test (see
 :mod:`compass_sparse.acceptance`) rejected before the solve stops with FLAT_RESIDUAL."""
+
+_DIAGNOSED = (Status.NO_PROGRESS, Status.MAJOR_ITERATION_LIMIT, Status.MINOR_ITERATION_LIMIT,
+              Status.TIME_LIMIT)
 
 PROGRESS_AFTER = 1.0
 """Seconds after which ``progress=True`` starts its one-line display."""
@@ -152,8 +156,10 @@ class NMSSolver:
     """The stabilized Newton method on one MCP (after presolve)."""
 
     def __init__(self, problem, evalr, options, *, manager_factory, callback=None,
-                 deadline=None, log_major=None):
+                 deadline=None, log_major=None, acceptance=None):
         self.p = problem
+        self.acceptance = acceptance or Acceptance(problem.lb, problem.ub,
+                                                   options.convergence_tolerance)
         self.ev = evalr
         self.opt0 = options
         self.lb, self.ub = problem.lb, problem.ub
@@ -182,8 +188,8 @@ class NMSSolver:
         """Every evaluated trial point may be the best (and a solution)."""
         if self.best is None or psi < self.best.psi:
             self.best = Point(z.copy(), f.copy(), phi.copy(), psi)
-        if np.sqrt(2.0 * psi) <= self.tol:
-            v = judge(z, f, self.lb, self.ub, self.tol, jac=lambda y: self.ev.jac(y, f))
+        if self.acceptance.small(z, f):
+            v = self.acceptance.judge(z, f, jac=lambda y: self.ev.jac(y, f))
             if v.solved:
                 self.best = Point(z.copy(), f.copy(), phi.copy(), psi)
                 raise _Stop(Status.SOLVED, "solution found")
@@ -542,6 +548,7 @@ class NMSSolver:
             status, message = stop.status, stop.message
         except KeyboardInterrupt:
             status, message = Status.USER_INTERRUPT, "interrupted by the user (Ctrl-C)"
+        status, message = self._diagnose(status, message)
         if self.best is not None and time.perf_counter() - self._t_start >= PROGRESS_AFTER:
             self._progress(self.best, self.opt0, final=True)
         bm = self.bm
@@ -554,6 +561,22 @@ class NMSSolver:
             updates=bm.stats.updates if bm is not None else 0,
             basis=self.basis, passes=self.passes,
         )
+
+    def _diagnose(self, status, message):
+        """A failed solve names the rows that keep the merit up; one that converged to a
+        stationary point of the merit function says so (see
+        :mod:`compass_sparse.stationary`)."""
+        if status not in _DIAGNOSED or self.best is None:
+            return status, message
+        try:
+            J = self.ev.jac(self.best.z, self.best.f)
+        except KeyboardInterrupt:
+            return status, message
+        st = stationarity(self.best.z, self.best.f, J, self.lb, self.ub)
+        text = st.message(self.p.row_label)
+        if status is Status.NO_PROGRESS and st.stationary:
+            return Status.STATIONARY_POINT, text
+        return status, f"{message}; {text}"
 
     def _near_best(self):
         z = self.best.z

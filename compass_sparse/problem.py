@@ -100,8 +100,20 @@ def as_bounds(lb, ub, n: int, names: Sequence[str] | None = None):
     return lo, hi
 
 
+def as_real(value, what: str) -> np.ndarray:
+    """``value`` as a float array; complex input is an error, never truncated silently."""
+    arr = np.asarray(value)
+    if np.iscomplexobj(arr):
+        raise ProblemError(f"{what} is complex; compass_sparse solves real problems "
+                           "(pass the real part explicitly if that is what you mean)")
+    try:
+        return np.asarray(arr, dtype=float)
+    except (TypeError, ValueError):
+        raise ProblemError(f"{what} must be numeric, got {type(value).__name__}") from None
+
+
 def _broadcast_bound(b, n, what):
-    arr = np.asarray(b, dtype=float)
+    arr = as_real(b, what)
     if arr.ndim > 1 and arr.size == n:
         arr = arr.reshape(n)
     try:
@@ -126,8 +138,12 @@ def _canonical_csc(J, n: int) -> sp.csc_matrix:
     if sp.issparse(J):
         if J.shape != (n, n):
             raise ShapeError(f"the Jacobian has shape {J.shape}, expected ({n}, {n})")
+        if np.iscomplexobj(J.data):
+            raise EvaluationError("the Jacobian has complex entries; J must be real")
         C = sp.csc_matrix(J, dtype=float, copy=True)
     else:
+        if np.iscomplexobj(J):
+            raise EvaluationError("the Jacobian has complex entries; J must be real")
         A = np.asarray(J, dtype=float)
         if A.shape != (n, n):
             raise ShapeError(f"the Jacobian has shape {A.shape}, expected ({n}, {n})")
@@ -203,7 +219,9 @@ class MCP:
         self.lb, self.ub = as_bounds(lb, ub, n, self.var_names)
         if x0 is None:
             x0 = np.zeros(n)
-        x0 = np.asarray(x0, dtype=float)
+        x0 = as_real(x0, "x0")
+        if x0.ndim > 1 and x0.size == n:  # a column (n, 1) is accepted, as for the bounds
+            x0 = x0.reshape(n)
         if x0.shape != (n,):
             raise ShapeError(f"x0 has shape {x0.shape}, expected ({n},)")
         bad = np.flatnonzero(~np.isfinite(x0))
@@ -238,8 +256,7 @@ class MCP:
             self.check_start()
 
     # -- construction helpers -------------------------------------------------------
-    @staticmethod
-    def _infer_n(n, x0, lb, ub, pattern) -> int:
+    def _infer_n(self, n, x0, lb, ub, pattern) -> int:
         cands = []
         if n is not None:
             cands.append(("n", int(n)))
@@ -259,6 +276,7 @@ class MCP:
         if not cands:
             raise ShapeError("cannot infer the dimension: give x0, array bounds or n")
         first = cands[0]
+        self._n_source = first[0]
         for c in cands[1:]:
             if c[1] != first[1]:
                 raise ShapeError(
@@ -298,6 +316,8 @@ class MCP:
             f, J = out
         else:
             f, J = out, None
+        if np.iscomplexobj(f):
+            raise EvaluationError("F(x) returned complex values; F must be real")
         f = np.asarray(f, dtype=float)
         if f.shape != (self.n,):
             if f.size == self.n:
@@ -476,7 +496,11 @@ class MCP:
         except CompassError:  # our own diagnostics (shapes, pattern, ...) pass through
             raise
         except Exception as exc:  # the user's code failed at the start point
-            raise EvaluationError(f"F or J raised at the start point: {exc!r}") from exc
+            hint = ""
+            if self._n_source != "n":
+                hint = (f" (the dimension n = {self.n} was taken from {self._n_source}; "
+                        f"check that x0 and the bounds have one entry per variable)")
+            raise EvaluationError(f"F or J raised at the start point: {exc!r}{hint}") from exc
         bad = np.flatnonzero(~np.isfinite(f))
         if bad.size:
             i = bad[0]
@@ -500,7 +524,9 @@ class MCP:
         import copy
 
         other = copy.copy(self)
-        x0 = np.asarray(x0, dtype=float)
+        x0 = as_real(x0, "x0")
+        if x0.ndim > 1 and x0.size == self.n:
+            x0 = x0.reshape(self.n)
         if x0.shape != (self.n,):
             raise ShapeError(f"x0 has shape {x0.shape}, expected ({self.n},)")
         if not np.all(np.isfinite(x0)):

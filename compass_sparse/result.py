@@ -154,7 +154,15 @@ class Result:
             ub = F.ub if ub is None else ub
             names = names or F.row_label
         else:
-            f = np.asarray(F(np.array(self.x, copy=True)), dtype=float)
+            from .problem import as_real
+
+            f = as_real(F(np.array(self.x, copy=True)), "F(x)")
+            if f.size != self.x.size:
+                from .exceptions import ShapeError
+
+                raise ShapeError(f"F(x) returned {f.size} values at the result's point, "
+                                 f"which has {self.x.size} variables")
+            f = f.reshape(self.x.shape)
         lb = self.lb if lb is None else np.broadcast_to(np.asarray(lb, float), self.x.shape)
         ub = self.ub if ub is None else np.broadcast_to(np.asarray(ub, float), self.x.shape)
         return residual_report(self.x, f, lb, ub, names=names)

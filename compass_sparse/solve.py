@@ -17,7 +17,7 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from .acceptance import judge
+from .acceptance import Acceptance, judge
 from .crash import crash, normal_map_at
 from .merit import fb_phi, residual_report
 from .nms import NMSSolver
@@ -25,6 +25,7 @@ from .options import Options
 from .path import LinearCode, PivotalPath, WarmBasis
 from .problem import MCP
 from .result import PassStats, PointStatus, Result, Status
+from .scaling import SPREAD_TRIGGER, equilibrate, scale_problem, spread
 from ._evaluate import GuardedEvaluator
 
 logger = logging.getLogger("compass_sparse")
@@ -75,7 +76,34 @@ def _setup_logging(opt: Options):
     return (lambda s: logger.info(s)) if opt.verbosity >= 2 else None
 
 
+_PROBLEM_KEYWORDS = ("n", "jac_sparsity", "var_names", "eqn_names", "constant_jac", "fd_step",
+                     "check")
+
+
+def _check_keywords(kwargs):
+    """Unknown keywords of solve_mcp: a ProblemError with a hint (an option given as a
+    keyword belongs in ``options=``)."""
+    import dataclasses
+    import difflib
+
+    from .exceptions import ProblemError
+
+    unknown = sorted(set(kwargs) - set(_PROBLEM_KEYWORDS))
+    if not unknown:
+        return
+    option_names = {f.name for f in dataclasses.fields(Options)}
+    hints = []
+    for u in unknown:
+        if u in option_names:
+            hints.append(f"{u!r} (an option: pass options={{{u!r}: ...}})")
+            continue
+        close = difflib.get_close_matches(u, list(_PROBLEM_KEYWORDS) + sorted(option_names), 1)
+        hints.append(f"{u!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+    raise ProblemError("solve_mcp got unknown keyword(s): " + ", ".join(hints))
+
+
 def _as_problem(F, jac, lb, ub, x0, kwargs) -> MCP:
+    _check_keywords(kwargs)
     if isinstance(F, MCP):
         if x0 is not None:
             return F.with_start(x0)
@@ -228,8 +256,16 @@ def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> 
                                   if status is Status.SOLVED else "major_iteration_limit = 0")
         return _finish(problem, pre, status, msg, z0, opt, t0, passes, evalr,
                        start_z=problem.x0, basis=basis)
-    solver = NMSSolver(work, evalr, opt, manager_factory=_manager_factory(opt),
-                       callback=callback, deadline=deadline, log_major=log_major)
+    sc, passes["scaling"] = _scaling_pass(work, evalr, z0, f0, opt)
+    acceptance = Acceptance(work.lb, work.ub, opt.convergence_tolerance,
+                            *((sc.row, sc.col) if sc is not None else ()))
+    inner = evalr
+    if sc is not None:
+        inner = GuardedEvaluator(scale_problem(work, sc))
+        z0 = z0 / sc.col
+    solver = NMSSolver(inner.problem, inner, opt, manager_factory=_manager_factory(opt),
+                       callback=callback, deadline=deadline, log_major=log_major,
+                       acceptance=acceptance)
     solver.basis = basis
     if log_major is not None:
         log_major(f"{'major':>5} {'minor':>7} {'func':>6} {'grad':>5} {'residual':>12} "
@@ -238,8 +274,14 @@ def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> 
         out = solver.solve(z0)
     passes.update(out.passes)
     passes["nms"] = PassStats(ran=True, iterations=out.nit)
-    res = _finish(problem, pre, out.status, out.message, out.best.z, opt, t0, passes, evalr,
-                  f_reduced=out.best.f, nit=out.nit, minor_iterations=out.minor,
+    zb, fb = out.best.z, out.best.f
+    if sc is not None:  # back to the user's units
+        zb, fb = sc.col * zb, fb / sc.row
+        evalr.domain_errors += inner.domain_errors
+        work.counters.nfev += inner.problem.counters.nfev
+        work.counters.njev += inner.problem.counters.njev
+    res = _finish(problem, pre, out.status, out.message, zb, opt, t0, passes, evalr,
+                  f_reduced=fb, nit=out.nit, minor_iterations=out.minor,
                   crash_iterations=out.crash_iterations, restarts=out.restarts,
                   gradient_steps=out.gradient_steps, lm_steps=out.lm_steps,
                   factorizations=out.factorizations, basis_updates=out.updates,
@@ -247,6 +289,27 @@ def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> 
     if opt.verbosity >= 1:
         logger.warning(res.summary())
     return res
+
+
+def _scaling_pass(work, evalr, z0, f0, opt):
+    """(Scaling or None, PassStats): equilibrate J(z0) when it is badly scaled."""
+    st = PassStats()
+    if not opt.scaling:
+        st.reason = "scaling off"
+        return None, st
+    t = time.perf_counter()
+    J0 = evalr.jac(z0, f0)
+    if J0 is None:
+        st.reason = "J could not be evaluated at the start point"
+        return None, st
+    s = spread(J0)
+    if s <= SPREAD_TRIGGER:
+        st.reason = f"row/column max-norm spread {s:.1e} <= {SPREAD_TRIGGER:.0e}"
+        st.time = time.perf_counter() - t
+        return None, st
+    sc = equilibrate(J0)
+    st.ran, st.reason, st.time = True, sc.summary(), time.perf_counter() - t
+    return sc, st
 
 
 def _finish(problem, pre, status, message, z_red, opt, t0, passes, evalr, *, f_reduced=None,
@@ -280,14 +343,8 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     """
     t0 = time.perf_counter()
     opt = Options.coerce(options)
-    M = sp.csc_matrix(M, dtype=float)
-    q = np.asarray(q, dtype=float)
+    M, q = _lcp_data(M, q)
     n = q.size
-    if M.shape != (n, n):
-        from .exceptions import ShapeError
-
-        raise ShapeError(f"M has shape {M.shape} but q has {n} entries; M must be {n} x {n}")
-    M.sort_indices()
 
     def F(z):
         return M @ z + q
@@ -297,6 +354,16 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     evalr = GuardedEvaluator(problem)
     passes = {"presolve": PassStats(reason="linear problems go straight to the path")}
     lb, ub = problem.lb, problem.ub
+    if np.all(np.isneginf(lb)) and np.all(np.isposinf(ub)):
+        # Every variable free: the LCP is the linear system M z + q = 0.
+        from .linear_system import solve_free_lcp
+
+        out = solve_free_lcp(M, q, opt.convergence_tolerance)
+        if out is not None:
+            passes["path"] = PassStats(reason="all variables free: a linear system")
+            zs = out.z if out.z is not None else problem.x0
+            return _result(problem, out.status, out.message, zs, problem.F(zs), opt, t0,
+                           passes=passes)
     z = problem.x0
     f = problem.F(z)
     at_solution = _judge_on(problem, z, f, opt).solved
@@ -307,17 +374,29 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     crash_its = 0
     x = normal_map_at(z, f, lb, ub)[0]
     st = PassStats()
-    if opt.crash_method == "pnewton" and n >= opt.crash_minimum_dimension:
-        tc = time.perf_counter()
-        cr = crash(evalr, z, lb, ub, opt, f0=f, J0=M, log=log_major)
-        st = PassStats(ran=True, time=time.perf_counter() - tc, iterations=cr.iterations,
-                       factorizations=cr.factorizations, reason=cr.stop_reason)
-        crash_its = cr.iterations
-        if np.all(np.isfinite(cr.f)):
-            z, f, x = cr.z, cr.f, cr.x
-    else:
-        st.reason = f"n < crash_minimum_dimension ({opt.crash_minimum_dimension})"
-    passes["crash"] = st
+    deadline = t0 + opt.time_limit if np.isfinite(opt.time_limit) else None
+    try:
+        if opt.crash_method == "pnewton" and n >= opt.crash_minimum_dimension:
+            tc = time.perf_counter()
+            cr = crash(evalr, z, lb, ub, opt, f0=f, J0=M, log=log_major, deadline=deadline)
+            st = PassStats(ran=True, time=time.perf_counter() - tc, iterations=cr.iterations,
+                           factorizations=cr.factorizations, reason=cr.stop_reason)
+            crash_its = cr.iterations
+            if np.all(np.isfinite(cr.f)):
+                z, f, x = cr.z, cr.f, cr.x
+        else:
+            st.reason = f"n < crash_minimum_dimension ({opt.crash_minimum_dimension})"
+        passes["crash"] = st
+        return _lcp_path(problem, M, q, z, f, x, opt, t0, deadline, passes, st, crash_its)
+    except KeyboardInterrupt:
+        return _result(problem, Status.USER_INTERRUPT, "interrupted by the user (Ctrl-C)", z, f,
+                       opt, t0, start_z=problem.x0, passes=passes, crash_iterations=crash_its)
+
+
+def _lcp_path(problem, M, q, z, f, x, opt, t0, deadline, passes, st, crash_its):
+    """The pivotal path(s) of :func:`solve_lcp` from the (crashed) point z, x = pi^-1(z)."""
+    n = q.size
+    lb, ub = problem.lb, problem.ub
     if _judge_on(problem, z, f, opt).solved:
         passes["path"] = PassStats(reason="crash solved the problem")
         return _result(problem, Status.SOLVED, "solved by the crash", z, f, opt, t0,
@@ -327,7 +406,6 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     tp = time.perf_counter()
     # One path solves a linear problem: give it room (a Lemke path may need ~n pivots).
     limit = opt.minor_iteration_limit or max(10 * n, 1000)
-    deadline = t0 + opt.time_limit if np.isfinite(opt.time_limit) else None
     path = PivotalPath(M, q, lb, ub, bm, opt, minor_limit=limit, deadline=deadline)
     start_ray = opt.lemke_start in ("always", "first")
     with _blas_threads(n):
@@ -363,13 +441,50 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
         return _result(problem, Status.INFEASIBLE,
                        "ray termination from a Lemke start on a positive semidefinite M: "
                        "the problem has no solution", zs, fs, opt, t0, **counts)
-    # The path cycled, hit a limit or lost accuracy: the stabilized Newton method takes over.
-    general = _solve_problem(problem.with_start(z), opt.replace(presolve=False))
+    # The path cycled, hit a limit or lost accuracy: the stabilized Newton method takes over,
+    # within what is left of the time limit (the clock does not restart).
+    left = opt.time_limit - (time.perf_counter() - t0)
+    if left <= 0:
+        return _result(problem, Status.TIME_LIMIT, "time limit reached in the pivotal path",
+                       z, f, opt, t0, start_z=problem.x0, **counts)
+    general = _solve_problem(problem.with_start(z), opt.replace(presolve=False, time_limit=left))
     general.passes = {**passes, **{k: v for k, v in general.passes.items() if k != "presolve"}}
     general.minor_iterations += pivots
     general.crash_iterations += crash_its
     general.time = time.perf_counter() - t0
     return general
+
+
+def _lcp_data(M, q):
+    """Validated copies of the LCP data (the user's M is never modified): q real of shape
+    (n,) (a column (n, 1) is accepted), M real n x n, both finite, named in errors."""
+    from .exceptions import ProblemError, ShapeError
+    from .problem import as_real
+
+    q = as_real(q, "q")
+    if q.ndim > 1 and q.size == max(q.shape):
+        q = q.reshape(-1)
+    if q.ndim != 1:
+        raise ShapeError(f"q has shape {q.shape}, expected (n,) or (n, 1)")
+    n = q.size
+    if sp.issparse(M):
+        if np.iscomplexobj(M.data):
+            raise ProblemError("M is complex; compass_sparse solves real problems")
+        M = sp.csc_matrix(M, dtype=float, copy=True)
+    else:
+        M = sp.csc_matrix(as_real(M, "M"))
+    if M.shape != (n, n):
+        raise ShapeError(f"M has shape {M.shape} but q has {n} entries; M must be {n} x {n}")
+    M.sum_duplicates()
+    M.sort_indices()
+    if not np.all(np.isfinite(M.data)):
+        k = int(np.flatnonzero(~np.isfinite(M.data))[0])
+        j = int(np.searchsorted(M.indptr, k, side="right") - 1)
+        raise ProblemError(f"M[{int(M.indices[k])}, {j}] is {M.data[k]}: M must be finite")
+    bad = np.flatnonzero(~np.isfinite(q))
+    if bad.size:
+        raise ProblemError(f"q[{bad[0]}] is {q[bad[0]]}: q must be finite")
+    return M, q
 
 
 def _is_monotone(M, tol=1e-10) -> bool:
@@ -403,7 +518,11 @@ class MCPSolver:
 
     def __init__(self, problem: MCP, options=None, callback=None):
         if not isinstance(problem, MCP):
-            raise TypeError("MCPSolver takes an MCP; build one with compass_sparse.MCP(...)")
+            from .exceptions import ProblemError
+
+            raise ProblemError("MCPSolver takes an MCP, not "
+                               f"{type(problem).__name__}; build one with "
+                               "compass_sparse.MCP(F, jac, lb, ub, x0)")
         self.problem = problem
         self.options = Options.coerce(options)
         self.callback = callback
