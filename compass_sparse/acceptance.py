@@ -102,19 +102,20 @@ class Acceptance:
         self.lb, self.ub, self.tol = lb, ub, tol
         self.row, self.col = row, col
 
-    def _user(self, z, f):
+    def user_point(self, z, f):
+        """(z, F) in the user's units."""
         if self.row is None:
             return z, f
         return self.col * z, f / self.row
 
     def small(self, z, f) -> bool:
         """Test (1) only (cheap: no Jacobian)."""
-        zu, fu = self._user(z, f)
+        zu, fu = self.user_point(z, f)
         return residuals_small(zu, fu, self.lb, self.ub, self.tol)
 
     def judge(self, z, f, jac=None) -> Verdict:
         """Both tests; ``jac(z)`` evaluates the Jacobian of the problem being solved at z."""
-        zu, fu = self._user(z, f)
+        zu, fu = self.user_point(z, f)
         if jac is None:
             return judge(zu, fu, self.lb, self.ub, self.tol)
 

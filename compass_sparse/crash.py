@@ -7,7 +7,9 @@ them there,
 
 and the direction solves the reduced Newton system J_II d_I = F_I (d_A = 0), perturbed to
 J_II + eps I when J_II is singular (Billups).  The search is along the projected path
-z(alpha) = pi(z_k - alpha d), alpha = 1, 1/2, 1/4, ..., accepting the first alpha with
+z(alpha) = pi(z_k - alpha d) (``crash_searchtype = "arc"``; "line" searches the segment
+z_k + alpha (pi(z_k - d) - z_k) instead), alpha = 1, 1/2, 1/4, ..., accepting the first
+alpha with
 
     ||F_B(x(alpha))|| <= (1 - sigma alpha) ||F_B(x(0))||,
 
@@ -84,12 +86,15 @@ def _solve_reduced(Jii, rhs, perturb, eps0):
 
 
 def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=None,
-          log=None) -> CrashResult:
-    """Projected-Newton crash from z0 (in the box).  ``evalr`` is a GuardedEvaluator."""
+          log=None, on_point=None) -> CrashResult:
+    """Projected-Newton crash from z0, a point of the box.  ``evalr`` is the problem's
+    :class:`~compass_sparse.evaluation.Evaluator`; ``f0``, ``J0``: F and J at z0 when known.
+    ``on_point(z, f)`` sees every trial point where F was evaluated (the caller's best point
+    may be among them, and it may stop the crash by raising)."""
     t0 = time.perf_counter()
     opt = options
     tol = opt.convergence_tolerance if tol is None else tol
-    z = project(np.asarray(z0, dtype=float), lb, ub)
+    z = np.asarray(z0, dtype=float)
     f = evalr.f(z) if f0 is None else f0
     if f is None:
         return CrashResult(z, np.full(z.size, np.nan), z, 0, np.inf, "domain error at start",
@@ -164,13 +169,18 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
                 it -= 1
                 break
             d[inact] = di
-        # Projected search on ||F_B||.
+        # Search on ||F_B||: along the projected path (arc) or the segment to its end (line).
         alpha = 1.0
         accepted = False
+        seg = project(z - d, lb, ub) - z if opt.crash_searchtype == "line" else None
         while alpha >= opt.crash_stepsize_minimum:
-            zt = project(z - alpha * d, lb, ub)
+            if deadline is not None and time.perf_counter() > deadline:
+                break
+            zt = project(z - alpha * d if seg is None else z + alpha * seg, lb, ub)
             ft = evalr.f(zt)
             if ft is not None:
+                if on_point is not None:
+                    on_point(zt, ft)
                 xt, nmt = normal_map_at(zt, ft, lb, ub)
                 nmt_norm = float(np.linalg.norm(nmt))
                 if nmt_norm <= (1.0 - opt.crash_sigma * alpha) * max(recent):

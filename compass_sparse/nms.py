@@ -21,6 +21,9 @@ point x_N.  Acceptance (merit Psi = 0.5 ||Phi_FB||^2):
   watchdog limit is reached, take a Levenberg–Marquardt step and/or projected-gradient
   steps on Psi from the best point found.
 
+With ``nms = False`` the same loop is a monotone line search: no d-steps, a memory of one
+checkpoint and the reference value Psi(z_k), so every accepted step decreases the merit.
+
 Restarts when progress stops use PATH's three configurations (proximal perturbation
 0.01 * residual without crash; no perturbation with a short memory and m-steps every
 step; crash with more basis changes and arc searches), then — as the thesis proposes —
@@ -79,10 +82,13 @@ class _Stop(Exception):
 
 @dataclass
 class Point:
+    """An evaluated point: z, F(z), Phi_FB(z), Psi(z) and, when known, J(z)."""
+
     z: np.ndarray
     f: np.ndarray
     phi: np.ndarray
     psi: float
+    J: sp.csc_matrix | None = None
 
     @property
     def fbn(self) -> float:
@@ -155,12 +161,12 @@ def _restart_configs(opt, residual):
 class NMSSolver:
     """The stabilized Newton method on one MCP (after presolve)."""
 
-    def __init__(self, problem, evalr, options, *, manager_factory, callback=None,
+    def __init__(self, problem, options, *, manager_factory, callback=None,
                  deadline=None, log_major=None, acceptance=None):
         self.p = problem
         self.acceptance = acceptance or Acceptance(problem.lb, problem.ub,
                                                    options.convergence_tolerance)
-        self.ev = evalr
+        self.ev = problem.evaluator
         self.opt0 = options
         self.lb, self.ub = problem.lb, problem.ub
         self.n = problem.n
@@ -184,8 +190,13 @@ class NMSSolver:
         self.flat_rejections = 0
 
     # ------------------------------------------------------------------ bookkeeping
+    def _past_deadline(self) -> bool:
+        return self.deadline is not None and time.perf_counter() > self.deadline
+
     def _consider(self, z, f, phi, psi):
-        """Every evaluated trial point may be the best (and a solution)."""
+        """Every evaluated trial point may be the best (and a solution).  Every loop that
+        evaluates points passes through here, so the time limit is checked here too: it
+        holds to within one evaluation."""
         if self.best is None or psi < self.best.psi:
             self.best = Point(z.copy(), f.copy(), phi.copy(), psi)
         if self.acceptance.small(z, f):
@@ -199,14 +210,21 @@ class NMSSolver:
                 self.flat_rejections += 1
                 if self.flat_rejections >= FLAT_REJECTION_LIMIT:
                     raise _Stop(Status.FLAT_RESIDUAL, v.flat_message(self.p.row_label))
+        if self._past_deadline():
+            raise _Stop(Status.TIME_LIMIT, "time limit reached")
 
-    def _point(self, z, f=None):
+    def _consider_trial(self, z, f):
+        """A crash trial point (F evaluated there) may be the best point too."""
+        phi = fb_phi(z, f, self.lb, self.ub)
+        self._consider(z, f, phi, fb_psi(phi))
+
+    def _point(self, z, f=None, J=None):
         if f is None:
             f = self.ev.f(z)
             if f is None:
                 return None
         phi = fb_phi(z, f, self.lb, self.ub)
-        return Point(z, f, phi, fb_psi(phi))
+        return Point(z, f, phi, fb_psi(phi), J)
 
     def _check_limits(self, opt):
         if self.deadline is not None and time.perf_counter() > self.deadline:
@@ -239,18 +257,23 @@ class NMSSolver:
             return
         from .result import IntermediateResult
 
-        info = IntermediateResult(x=cur.z.copy(), fun=cur.f.copy(), residual=cur.fbn,
+        z, f = self.acceptance.user_point(cur.z, cur.f)  # the user's units
+        a = self.acceptance
+        info = IntermediateResult(x=np.array(z, copy=True), fun=np.array(f, copy=True),
+                                  residual=float(np.linalg.norm(fb_phi(z, f, a.lb, a.ub))),
                                   nit=self.nit, minor_iterations=self.minor)
         try:
             stop = self.callback(info)
         except StopIteration:
             stop = True
+        except Exception as exc:  # the user's callback failed: stop, keep the best point
+            raise _Stop(Status.CALLBACK_STOP, f"the callback raised {exc!r}") from exc
         if stop:
             raise _Stop(Status.CALLBACK_STOP, "stopped by the callback")
 
     # ------------------------------------------------------------------ Newton point
     def _newton_point(self, cur: Point, x, eps, opt):
-        J = self.ev.jac(cur.z, cur.f)
+        J = cur.J if cur.J is not None else self.ev.jac(cur.z, cur.f)
         self._last_J = J
         if J is None:
             return None, None, LinearCode.ERROR
@@ -297,7 +320,7 @@ class NMSSolver:
         b = self.best
         out = None
         if opt.lm_fallback:
-            lm = lm_step(self.ev, b.z, b.f, None, self.lb, self.ub, opt,
+            lm = lm_step(self.ev, b.z, b.f, None, self.lb, self.ub, opt, deadline=self.deadline,
                          on_point=self._consider)
             if lm is not None:
                 self.lm_steps += 1
@@ -305,6 +328,7 @@ class NMSSolver:
                 self._last_fallback = "L"
         if out is None:
             g = gradient_steps(self.ev, b.z, b.f, None, self.lb, self.ub, opt,
+                               deadline=self.deadline,
                                on_point=self._consider)
             if g is not None:
                 self.grad_steps += g[4]
@@ -317,11 +341,11 @@ class NMSSolver:
         return out
 
     # ------------------------------------------------------------------ one run
-    def _run(self, z0, opt):
-        """Crash + NMS from z0 with options opt.  Returns when stuck (for a restart)."""
+    def _run(self, start, opt):
+        """Crash + NMS from ``start`` (a point of the box, or an evaluated Point) with
+        options opt.  Returns when stuck (for a restart)."""
         lb, ub = self.lb, self.ub
-        z = project(z0, lb, ub)
-        cur = self._point(z)
+        cur = start if isinstance(start, Point) else self._point(start)
         if cur is None:
             return "domain error at the start point"
         self._consider(cur.z, cur.f, cur.phi, cur.psi)
@@ -331,8 +355,9 @@ class NMSSolver:
                 and opt.crash_iteration_limit > 0):
             t0 = time.perf_counter()
             nf0, nj0 = self.p.counters.nfev, self.p.counters.njev
-            cr = crash(self.ev, cur.z, lb, ub, opt, f0=cur.f, tol=self.tol,
-                       deadline=self.deadline, log=self._crash_log)
+            cr = crash(self.ev, cur.z, lb, ub, opt, f0=cur.f, J0=cur.J, tol=self.tol,
+                       deadline=self.deadline, log=self._crash_log,
+                       on_point=self._consider_trial)
             st = self.passes["crash"]
             st.ran = True
             st.time += time.perf_counter() - t0
@@ -351,7 +376,11 @@ class NMSSolver:
                 "crash_method none" if opt.crash_method == "none"
                 else f"n < crash_minimum_dimension ({opt.crash_minimum_dimension})")
         # --- NMS
-        memory = [opt.nms_initial_reference_factor * cur.psi]
+        # nms = False: a monotone line search -- no d-steps, and the reference value is
+        # the merit of the current point (a memory of one checkpoint, no initial slack).
+        monotone = not opt.nms
+        memory_size = 1 if monotone else opt.nms_memory_size
+        memory = [cur.psi if monotone else opt.nms_initial_reference_factor * cur.psi]
         ckpt = (cur, x)
         ckpt_newton = None
         delta = 10.0 * max(1.0, float(np.max(np.abs(cur.z))) if cur.z.size else 1.0)
@@ -397,7 +426,7 @@ class NMSSolver:
                         R = min(R, cur.psi)
                         large = 1.0
                     dist = float(np.max(np.abs(zN - cur.z))) if zN.size else 0.0
-                    if n_d < opt.nms_mstep_frequency and dist <= delta and \
+                    if not monotone and n_d < opt.nms_mstep_frequency and dist <= delta and \
                             cand.psi <= large * max(R, 1e-300):
                         step, new = "D", cand
                         n_d += 1
@@ -411,7 +440,7 @@ class NMSSolver:
                 xN = res.x if new.z is res.z else normal_map_at(new.z, new.f, lb, ub)[0]
                 cur, x = new, xN
                 if step in ("M", "O") or cur.psi < min(memory):
-                    memory = (memory + [cur.psi])[-opt.nms_memory_size:]
+                    memory = (memory + [cur.psi])[-memory_size:]
                     ckpt, ckpt_newton = (cur, x), None
                     watchdogs = 0
                 eps *= opt.proximal_shrink_factor
@@ -432,7 +461,7 @@ class NMSSolver:
                     found = self._watchdog_search(ckpt, ckpt_newton, R, opt)
                 if found is not None:
                     cur, x = found
-                    memory = (memory + [cur.psi])[-opt.nms_memory_size:]
+                    memory = (memory + [cur.psi])[-memory_size:]
                     ckpt, ckpt_newton = (cur, x), None
                     n_d = 0
                     self._log(res.code, "W", cur, eps, res)
@@ -477,6 +506,8 @@ class NMSSolver:
         xN = newton.x
         alpha = 1.0
         while alpha >= opt.nms_stepsize_minimum:
+            if self._past_deadline():
+                raise _Stop(Status.TIME_LIMIT, "time limit reached")
             if opt.nms_searchtype == "line":
                 zt = (1.0 - alpha) * c.z + alpha * zN
             else:
@@ -511,15 +542,15 @@ class NMSSolver:
             f" ({self.p.row_label(idx)})")
 
     # ------------------------------------------------------------------ driver
-    def solve(self, x0) -> Outcome:
+    def solve(self, start: Point) -> Outcome:
+        """Run from ``start``, the evaluated start point (in the box, with F and J)."""
         opt = self.opt0
         self._t_start = time.perf_counter()
-        z0 = project(np.asarray(x0, dtype=float), self.lb, self.ub)
+        start0, z0 = start, start.z
         status, message = Status.NO_PROGRESS, ""
         configs = None
         self._last_J = None
         try:
-            start = z0
             while True:
                 why = self._run(start, opt)
                 if self.restarts >= self.opt0.restart_limit:
@@ -534,7 +565,7 @@ class NMSSolver:
                 if k < len(configs):
                     # PATH's configurations, from the user's start point.
                     opt = self.opt0.replace(**configs[k])
-                    start = z0
+                    start = start0
                 elif k % 2 == 0:
                     # Multi-start: crash + NMS from a new point in the box.
                     opt = self.opt0.replace(crash_method="pnewton", crash_minimum_dimension=1)

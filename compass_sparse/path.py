@@ -52,12 +52,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ._path_kernels import project_slots, ratio_test
-from .basis import KIND_DENSE, KIND_M, KIND_UNIT
+from ._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
+from .basis import KIND_DENSE, KIND_M, KIND_UNIT, UpdateStatus
 from .exceptions import SingularBasisError
 
-# Basic-variable kinds of a slot.
-VAR_Z, VAR_W, VAR_V, VAR_A, VAR_T, VAR_S = 0, 1, 2, 3, 4, 5
 _VAR_NAMES = "zwvatS"
 
 
@@ -185,7 +183,14 @@ class PivotalPath:
             r=None) -> PathResult:
         t0 = time.perf_counter()
         n, lb, ub = self.n, self.lb, self.ub
+        # Per-run state, all of it set here: a path object may run more than once.
         self.art_sign = np.ones(n, dtype=np.int64)
+        self.unbounded = False  # RAY because the entering variable grows without bound
+        self.sk = self.si = self.xb = None  # slot table and basic values (set on factoring)
+        self.t, self.t_slot = 0.0, -1  # path parameter and the slot holding t (-1: nonbasic)
+        self.best = (0.0, None)  # (largest t, its x) for a path that does not reach t = 1
+        self.breakpoints = []
+        self.pivots = 0
         slack_basis = None
         if ray_start:
             z, w, v, r, basic = self._lemke_start()
@@ -290,38 +295,42 @@ class PivotalPath:
 
     # ------------------------------------------------------------------ factorization
     def _factor(self, initial=False):
-        """Factor the current slot table; repair singularity with artificials."""
+        """Factor the current slot table; the basis repairs singularity with artificials
+        (one factorization repairs every dependent column)."""
         ck, ci, cs = self._columns_for(self.sk, self.si)
-        for _attempt in range(max(1, self.opt.lemke_rank_deficiency_iterations)):
-            try:
-                rep = self.bm.factor(ck, ci, cs)
-            except SingularBasisError:
-                return LinearCode.SINGULAR, "the basis could not be factorized or repaired"
-            if rep.ok and not rep.replaced:
-                break
-            if not rep.ok:
-                return LinearCode.SINGULAR, "the basis could not be factorized"
-            for (slot, okind, oidx, osign, new_row) in rep.replaced:
-                vk = self.sk[slot]
-                if vk == VAR_T:
-                    return LinearCode.SINGULAR, "the covering vector is dependent on the basis"
-                if vk != VAR_Z and vk != VAR_A:
-                    return LinearCode.SINGULAR, "slack columns are dependent"
-                if vk == VAR_Z:
-                    j = int(self.si[slot])
-                    self.zval[j] = self.xb[slot]  # stranded on the right-hand side
-                    self.displaced[int(new_row)] = j
-                else:
-                    j = self.displaced.pop(int(self.si[slot]), None)
-                    if j is not None:
-                        self.displaced[int(new_row)] = j
-                self.sk[slot] = VAR_A
-                self.si[slot] = new_row
-                self.art_sign[new_row] = 1
-            ck, ci, cs = self._columns_for(self.sk, self.si)
-            # The manager already holds the repaired basis; recompute basic values.
-            break
+        try:
+            rep = self.bm.factor(ck, ci, cs)
+        except SingularBasisError:
+            return LinearCode.SINGULAR, "the basis could not be factorized or repaired"
+        if not rep.ok:
+            return LinearCode.SINGULAR, "the basis could not be factorized"
+        code, msg = self._apply_repairs(rep.replaced)
+        if code is not None:
+            return code, msg
         self._recompute_values()
+        return None, ""
+
+    def _apply_repairs(self, replaced):
+        """Follow the basis' repair in the slot table: a z column that could not stay is
+        moved to the right-hand side at its current value and an artificial takes its
+        slot (thesis §3.3.1)."""
+        for (slot, _okind, _oidx, _osign, new_row) in replaced:
+            vk = self.sk[slot]
+            if vk == VAR_T:
+                return LinearCode.SINGULAR, "the covering vector is dependent on the basis"
+            if vk != VAR_Z and vk != VAR_A:
+                return LinearCode.SINGULAR, "slack columns are dependent"
+            if vk == VAR_Z:
+                j = int(self.si[slot])
+                self.zval[j] = self.xb[slot]  # stranded on the right-hand side
+                self.displaced[int(new_row)] = j
+            else:
+                j = self.displaced.pop(int(self.si[slot]), None)
+                if j is not None:
+                    self.displaced[int(new_row)] = j
+            self.sk[slot] = VAR_A
+            self.si[slot] = new_row
+            self.art_sign[new_row] = 1
         return None, ""
 
     def _recompute_values(self):
@@ -329,7 +338,7 @@ class PivotalPath:
         zn = self.zval.copy()
         zb = self.sk == VAR_Z
         zn[self.si[zb]] = 0.0
-        t_nb = 0.0 if getattr(self, "t_slot", -1) >= 0 else getattr(self, "t", 0.0)
+        t_nb = 0.0 if self.t_slot >= 0 else self.t
         rhs = self.r * (1.0 - t_nb) - self.q - self.M @ zn
         xb = self.bm.ftran(rhs)
         # Artificials whose value is ~0 are exactly 0: they were placed there.
@@ -374,6 +383,7 @@ class PivotalPath:
             leave, theta, leave_up = self._ratio_test(rate, d)
             if leave < 0 and not np.isfinite(theta_self):
                 # Ray termination: the entering variable grows without bound.
+                self.unbounded = True
                 return LinearCode.RAY, f"ray: {_VAR_NAMES[ek]}[{ei}] unbounded"
             if leave < 0 or theta_self <= theta:
                 # The entering variable reaches its own bound first.
@@ -404,18 +414,18 @@ class PivotalPath:
             status = self.bm.replace(leave, *col)
             pivots += 1
             self.pivots = pivots
-            if getattr(status, "name", str(status)) == "REFUSED":
-                # Tiny pivot: fall back to a fresh factorization with repair.
-                self._set_slot(leave, ek, ei, new_val, lk, li, leave_val)
+            self._set_slot(leave, ek, ei, new_val, lk, li, leave_val)
+            if status is UpdateStatus.REFUSED or status is UpdateStatus.REPAIRED:
+                # Tiny pivot, or the basis lost its regularity: factorize the path's
+                # table afresh, repairing it with artificials.
                 code, msg = self._factor()
-                if code is not None:
-                    return code, msg
+            elif status is UpdateStatus.REFACTORED:
+                self._recompute_values()  # fresh factors: basic values without drift
+                code = None
             else:
-                self._set_slot(leave, ek, ei, new_val, lk, li, leave_val)
-                if getattr(status, "name", "") == "REFACTORED":
-                    code, msg = self._resync_after_refactor()
-                    if code is not None:
-                        return code, msg
+                code = None
+            if code is not None:
+                return code, msg
             self._project()
             self._update_t()
             if lk == VAR_T:
@@ -437,17 +447,6 @@ class PivotalPath:
                 entering = (VAR_Z, j, 0.0, self.zval[j])
             else:
                 return LinearCode.ERROR, f"unexpected leaving kind {lk}"
-
-    def _resync_after_refactor(self):
-        """A fresh factorization inside the manager may have repaired the basis; keep the
-        slot table in step with the manager's and recompute the basic values."""
-        ck, ci, cs = self._columns_for(self.sk, self.si)
-        if (np.array_equal(np.asarray(self.bm.kinds), ck)
-                and np.array_equal(np.asarray(self.bm.indices)[ck != KIND_DENSE],
-                                   ci[ck != KIND_DENSE])):
-            self._recompute_values()
-            return None, ""
-        return self._factor()
 
     def _bound_of(self, kind, index, upper):
         """The bound a leaving basic variable stops at."""
@@ -522,8 +521,8 @@ class PivotalPath:
 
     def _finish(self, code, t, t0, st0, ray_start, msg):
         s = self.bm.stats
-        if code in (LinearCode.SOLVED,) or not hasattr(self, "best") or self.best[1] is None:
-            z, w, v = self._current_point() if hasattr(self, "xb") else (self.zval, 0, 0)
+        if code is LinearCode.SOLVED or self.best[1] is None:
+            z, w, v = self._current_point() if self.xb is not None else (self.zval, 0, 0)
         else:
             # Not solved: return the point with the largest t (PATH's return-best-point).
             cur = self._current_point()
@@ -537,19 +536,19 @@ class PivotalPath:
             w = np.zeros(self.n)
             v = np.zeros(self.n)
         basic = np.full(self.n, VAR_Z, dtype=np.int8)
-        if hasattr(self, "sk"):
+        if self.sk is not None:
             basic = default_basis(z, self.lb, self.ub)
             for kind in (VAR_Z, VAR_W, VAR_V, VAR_S):
                 m = self.sk == kind
                 basic[self.si[m]] = kind
         res = PathResult(
             code, z, w, v, float(t if code is not LinearCode.SOLVED else 1.0),
-            pivots=getattr(self, "pivots", 0),
+            pivots=self.pivots,
             factorizations=s.factorizations - st0[0], updates=s.updates - st0[1],
-            artificials=int(np.sum(self.sk == VAR_A)) if hasattr(self, "sk") else 0,
-            breakpoints=getattr(self, "breakpoints", []),
+            artificials=int(np.sum(self.sk == VAR_A)) if self.sk is not None else 0,
+            breakpoints=self.breakpoints,
             basis=WarmBasis(basic), ray_start=ray_start, message=msg,
         )
-        res.unbounded = code is LinearCode.RAY and msg.startswith("ray:")
+        res.unbounded = code is LinearCode.RAY and self.unbounded
         res.time = time.perf_counter() - t0
         return res

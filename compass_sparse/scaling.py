@@ -33,9 +33,11 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from .evaluation import Evaluator
 from .problem import MCP
 
-__all__ = ["SPREAD_TRIGGER", "SWEEPS", "FACTOR_LIMIT", "Scaling", "equilibrate", "scale_problem"]
+__all__ = ["SPREAD_TRIGGER", "SWEEPS", "FACTOR_LIMIT", "Scaling", "equilibrate", "scale_problem",
+           "ScaledEvaluator"]
 
 SPREAD_TRIGGER = 1e2
 """Apply the pass when the row or column max-norms of J(z0) spread over more than this."""
@@ -55,6 +57,13 @@ class Scaling:
     col: np.ndarray
     spread_before: float
     spread_after: float
+
+    def scale_jacobian(self, J) -> sp.csc_matrix:
+        """R J C entry by entry (the stored entries, explicit zeros included, are kept)."""
+        J = sp.csc_matrix(J)
+        cols = np.repeat(np.arange(J.shape[1]), np.diff(J.indptr))
+        return sp.csc_matrix((J.data * self.row[J.indices] * self.col[cols], J.indices.copy(),
+                              J.indptr.copy()), shape=J.shape)
 
     def summary(self) -> str:
         return (f"row/column max-norm spread {self.spread_before:.1e} -> "
@@ -100,39 +109,42 @@ def equilibrate(J) -> Scaling:
 
 
 def scale_problem(problem: MCP, s: Scaling) -> MCP:
-    """The scaled MCP G(y) = R F(C y) on l / C <= y <= u / C (names and pattern kept)."""
-    R, C = s.row, s.col
-    DR, DC = sp.diags(R), sp.diags(C)
-    mode = problem._jac
-
-    def on_pattern(J):
-        J = sp.csc_matrix(J)
-        J = (DR @ J @ DC).tocsc()  # row/column products keep the stored entries
-        return J
-
-    if mode is True:
-        def G(y):
-            f, J = problem.FJ_uncounted(C * y)
-            return R * f, on_pattern(J)
-        jac = True
-    else:
-        def G(y):
-            return R * problem.F_uncounted(C * y)
-        if mode is None:
-            jac = None
-        else:
-            def jac(y):
-                return on_pattern(problem.J_uncounted(C * y))
-    P = problem.pattern
-    constant_jac = None
-    if problem.constant_mask is not None and problem.constant_mask.any():
-        mask = problem.constant_mask
-        cols = np.repeat(np.arange(problem.n), np.diff(P.indptr))
-        constant_jac = sp.csc_matrix((np.ones(int(mask.sum())), (P.indices[mask], cols[mask])),
-                                     shape=P.shape)
-    out = MCP(G, jac, lb=problem.lb / C, ub=problem.ub / C, x0=problem.x0 / C,
-              jac_sparsity=P, var_names=[problem.var_label(j) for j in range(problem.n)],
-              eqn_names=[problem.row_label(i) for i in range(problem.n)],
-              constant_jac=constant_jac, fd_step=problem.fd_step, check=False)
-    out.pattern_declared = problem.pattern_declared
+    """The scaled MCP G(y) = R F(C y) on l / C <= y <= u / C (names and pattern kept); its
+    evaluations go through the problem's evaluator (shared memo and counters)."""
+    ev = ScaledEvaluator(problem.evaluator, s)
+    out = MCP.from_evaluator(ev, problem.lb / s.col, problem.ub / s.col, problem.x0 / s.col,
+                             var_names=problem.var_names, eqn_names=problem.eqn_names)
     return out
+
+
+class ScaledEvaluator(Evaluator):
+    """G(y) = R F(C y) and R J(C y) C through the parent evaluator's counted calls."""
+
+    def __init__(self, parent: Evaluator, s: Scaling):
+        super().__init__(None, parent.jac_mode, parent.n, pattern=parent.pattern,
+                         fd_step=parent.fd_step, ub=parent.ub / s.col,
+                         row_label=parent.row_label, var_label=parent.var_label,
+                         counters=parent.counters)
+        self.parent = parent
+        self.scaling = s
+        self.pattern_declared = parent.pattern_declared
+
+    def _call_F(self, y):  # finite differences on G go through the parent's primitive
+        return self.scaling.row * self.parent._call_F(self.scaling.col * y)[0], None
+
+    def F(self, y) -> np.ndarray:
+        return self.scaling.row * self.parent.F(self.scaling.col * y)
+
+    def J(self, y, f=None) -> sp.csc_matrix:
+        if self.jac_mode is None:
+            return super().J(y, f)
+        J = self.parent.J(self.scaling.col * y)
+        return self._fix_pattern(self.scaling.scale_jacobian(J))
+
+    def pin(self, y):
+        self.parent.pin(self.scaling.col * y)
+        super().pin(y)
+
+    def forget(self):
+        self.parent.forget()
+        super().forget()

@@ -19,28 +19,28 @@ import scipy.sparse as sp
 
 from .acceptance import Acceptance, judge
 from .crash import crash, normal_map_at
-from .merit import fb_phi, residual_report
-from .nms import NMSSolver
+from .exceptions import CompassError
+from .merit import fb_phi, fb_psi, residual_report
+from .nms import NMSSolver, Point
 from .options import Options
 from .path import LinearCode, PivotalPath, WarmBasis
 from .problem import MCP
 from .result import PassStats, PointStatus, Result, Status
 from .scaling import SPREAD_TRIGGER, equilibrate, scale_problem, spread
-from ._evaluate import GuardedEvaluator
 
 logger = logging.getLogger("compass_sparse")
 
 __all__ = ["solve_mcp", "solve_lcp", "MCPSolver"]
 
 DENSE_BASIS_MAX_N = 300
-"""Below this dimension the dense reference basis is used (0: always the sparse manager)."""
+"""Up to this dimension the dense basis is used (0: always the sparse manager)."""
 
 
 def _manager_factory(opt: Options):
     def make(M):
         n = M.shape[0]
         if n <= DENSE_BASIS_MAX_N:
-            from ._dense_basis import DenseBasis
+            from .basis.dense import DenseBasis
 
             return DenseBasis(M)
         from .basis import BasisManager, BasisOptions
@@ -116,8 +116,8 @@ def _judge_on(problem: MCP, z, f, opt: Options):
     small; a J that cannot be evaluated there leaves the residual test alone)."""
     def jac(y):
         try:
-            return problem.J_uncounted(y)
-        except Exception:
+            return problem.evaluator.jac(y)
+        except CompassError:
             return None
     return judge(z, f, problem.lb, problem.ub, opt.convergence_tolerance, jac=jac)
 
@@ -149,7 +149,8 @@ def _result(problem: MCP, status: Status, message: str, z, f, opt: Options, t0, 
         x=np.asarray(z, dtype=float).copy(), fun=np.asarray(f, dtype=float).copy(),
         success=status is Status.SOLVED, status=status, point_status=pstat, message=message,
         nfev=c.nfev, njev=c.njev, residual=rep, time=time.perf_counter() - t0,
-        lb=problem.lb, ub=problem.ub, tolerance=opt.convergence_tolerance, **counts,
+        domain_errors=c.domain_errors, lb=problem.lb, ub=problem.ub,
+        tolerance=opt.convergence_tolerance, **counts,
     )
 
 
@@ -189,7 +190,7 @@ def solve_mcp(F, jac=None, lb=0.0, ub=np.inf, x0=None, *, options=None, callback
     return _solve_problem(problem, opt, callback=callback, basis=basis)
 
 
-def _presolve_pass(problem, opt):
+def _presolve_pass(problem, opt, f0, J0):
     """Run the preprocessor when the problem declares linear structure."""
     st = PassStats()
     if not opt.presolve:
@@ -211,7 +212,7 @@ def _presolve_pass(problem, opt):
         st.reason = "preprocessor unavailable"
         return None, st
     t0 = time.perf_counter()
-    pre = run_presolve(problem)
+    pre = run_presolve(problem, f0=f0, J0=J0)
     st.ran = True
     st.time = time.perf_counter() - t0
     return pre, st
@@ -219,18 +220,40 @@ def _presolve_pass(problem, opt):
 
 def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> Result:
     t0 = time.perf_counter()
+    try:
+        return _solve_evaluated(problem, opt, callback=callback, basis=basis)
+    except KeyboardInterrupt:
+        # Ctrl-C outside the major iterations (the start point, the preprocessor): the
+        # start point is the best point known.
+        return _result(problem, Status.USER_INTERRUPT, "interrupted by the user (Ctrl-C)",
+                       problem.x0, np.full(problem.n, np.nan), opt, t0, start_z=problem.x0)
+    finally:
+        # The user's functions may read data that changes before the next solve.
+        problem.evaluator.forget()
+
+
+def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -> Result:
+    t0 = time.perf_counter()
     log_major = _setup_logging(opt)
     deadline = t0 + opt.time_limit if np.isfinite(opt.time_limit) else None
     passes = {}
-    pre, st = _presolve_pass(problem, opt)
+    # F and J at the start point: one evaluation each (kept from the problem's start check
+    # when it ran), handed down to the preprocessor, the crash and the first iteration.
+    f0, J0 = problem.evaluator.fj(problem.x0)
+    problem.evaluator.pin(problem.x0)
+    if f0 is None:
+        return _result(problem, Status.DOMAIN_ERROR, "F or J failed at the start point: "
+                       f"{problem.evaluator.last_error}", problem.x0,
+                       np.full(problem.n, np.nan), opt, t0, start_z=problem.x0,
+                       passes=passes)
+    pre, st = _presolve_pass(problem, opt, f0, J0)
     passes["presolve"] = st
     work = problem
     if pre is not None:
         st.reason = pre.summary_line()
         if getattr(pre, "infeasible", None):
-            f = problem.F(problem.x0)
             return _result(problem, Status.INFEASIBLE, f"preprocessor: {pre.infeasible}",
-                           problem.x0, f, opt, t0, passes=passes)
+                           problem.x0, f0, opt, t0, passes=passes)
         if pre.reduced is None:
             z = pre.postsolve(np.zeros(0))
             f = problem.F(z)
@@ -240,12 +263,13 @@ def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> 
             pre = None  # nothing removed: no postsolve needed
         else:
             work = pre.reduced
-    evalr = GuardedEvaluator(work)
     z0 = work.x0
-    f0 = evalr.f(z0)
-    if f0 is None:
-        return _finish(problem, pre, Status.DOMAIN_ERROR, f"F failed at the start point: "
-                       f"{evalr.last_error}", work.x0, opt, t0, passes, evalr)
+    if work is not problem:
+        f0, J0 = work.evaluator.fj(z0)
+        work.evaluator.pin(z0)
+        if f0 is None:
+            return _finish(problem, pre, Status.DOMAIN_ERROR, "F or J failed at the start "
+                           f"point: {work.evaluator.last_error}", z0, opt, t0, passes)
     at_solution = _judge_on(work, z0, f0, opt).solved
     if at_solution or opt.major_iteration_limit == 0:
         status = Status.SOLVED if at_solution else Status.MAJOR_ITERATION_LIMIT
@@ -254,16 +278,17 @@ def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> 
         for k in ("crash", "path", "fallback"):
             passes[k] = PassStats(reason="start point already solved"
                                   if status is Status.SOLVED else "major_iteration_limit = 0")
-        return _finish(problem, pre, status, msg, z0, opt, t0, passes, evalr,
-                       start_z=problem.x0, basis=basis)
-    sc, passes["scaling"] = _scaling_pass(work, evalr, z0, f0, opt)
+        return _finish(problem, pre, status, msg, z0, opt, t0, passes,
+                       f_reduced=f0, start_z=problem.x0, basis=basis)
+    sc, passes["scaling"] = _scaling_pass(J0, opt)
     acceptance = Acceptance(work.lb, work.ub, opt.convergence_tolerance,
                             *((sc.row, sc.col) if sc is not None else ()))
-    inner = evalr
-    if sc is not None:
-        inner = GuardedEvaluator(scale_problem(work, sc))
-        z0 = z0 / sc.col
-    solver = NMSSolver(inner.problem, inner, opt, manager_factory=_manager_factory(opt),
+    inner = work
+    if sc is not None:  # the solver works in the scaled units
+        inner = scale_problem(work, sc)
+        z0, f0, J0 = z0 / sc.col, sc.row * f0, sc.scale_jacobian(J0)
+    phi0 = fb_phi(z0, f0, inner.lb, inner.ub)
+    solver = NMSSolver(inner, opt, manager_factory=_manager_factory(opt),
                        callback=callback, deadline=deadline, log_major=log_major,
                        acceptance=acceptance)
     solver.basis = basis
@@ -271,16 +296,14 @@ def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> 
         log_major(f"{'major':>5} {'minor':>7} {'func':>6} {'grad':>5} {'residual':>12} "
                   f"type {'prox':>9} {'inorm':>10} (label)")
     with _blas_threads(work.n):
-        out = solver.solve(z0)
+        out = solver.solve(Point(z0, f0, phi0, fb_psi(phi0), J0))
     passes.update(out.passes)
     passes["nms"] = PassStats(ran=True, iterations=out.nit)
     zb, fb = out.best.z, out.best.f
     if sc is not None:  # back to the user's units
         zb, fb = sc.col * zb, fb / sc.row
-        evalr.domain_errors += inner.domain_errors
-        work.counters.nfev += inner.problem.counters.nfev
-        work.counters.njev += inner.problem.counters.njev
-    res = _finish(problem, pre, out.status, out.message, zb, opt, t0, passes, evalr,
+    res = _finish(problem, pre, out.status, out.message, zb, opt, t0, passes,
+                  start_z=problem.x0,
                   f_reduced=fb, nit=out.nit, minor_iterations=out.minor,
                   crash_iterations=out.crash_iterations, restarts=out.restarts,
                   gradient_steps=out.gradient_steps, lm_steps=out.lm_steps,
@@ -291,17 +314,13 @@ def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> 
     return res
 
 
-def _scaling_pass(work, evalr, z0, f0, opt):
+def _scaling_pass(J0, opt):
     """(Scaling or None, PassStats): equilibrate J(z0) when it is badly scaled."""
     st = PassStats()
     if not opt.scaling:
         st.reason = "scaling off"
         return None, st
     t = time.perf_counter()
-    J0 = evalr.jac(z0, f0)
-    if J0 is None:
-        st.reason = "J could not be evaluated at the start point"
-        return None, st
     s = spread(J0)
     if s <= SPREAD_TRIGGER:
         st.reason = f"row/column max-norm spread {s:.1e} <= {SPREAD_TRIGGER:.0e}"
@@ -312,22 +331,21 @@ def _scaling_pass(work, evalr, z0, f0, opt):
     return sc, st
 
 
-def _finish(problem, pre, status, message, z_red, opt, t0, passes, evalr, *, f_reduced=None,
+def _finish(problem, pre, status, message, z_red, opt, t0, passes, *, f_reduced=None,
             start_z=None, **counts):
     """Postsolve and build the Result on the ORIGINAL problem."""
     if pre is not None:
         z = pre.postsolve(np.asarray(z_red, dtype=float))
-        f = problem.F(z)
+        f = None
     else:
         z = z_red
-        f = f_reduced if f_reduced is not None else problem.F(z)
-    res = _result(problem, status, message, z, f, opt, t0, start_z=start_z,
-                  passes=passes, domain_errors=evalr.domain_errors, **counts)
-    work = evalr.problem
-    if work is not problem:  # the reduced problem counts its own evaluations
-        res.nfev += work.counters.nfev
-        res.njev += work.counters.njev
-    return res
+        f = f_reduced if f_reduced is not None else None
+    if f is None:
+        f = problem.evaluator.f(z)
+        if f is None:  # the point is returned with the failure; F is unknown there
+            f = np.full(problem.n, np.nan)
+    return _result(problem, status, message, z, f, opt, t0, start_z=start_z,
+                   passes=passes, **counts)
 
 
 # ---------------------------------------------------------------------------- LCP
@@ -351,7 +369,6 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
 
     problem = MCP(F, lambda z: M, lb, ub, x0, n=n, var_names=var_names, constant_jac=M)
     log_major = _setup_logging(opt)
-    evalr = GuardedEvaluator(problem)
     passes = {"presolve": PassStats(reason="linear problems go straight to the path")}
     lb, ub = problem.lb, problem.ub
     if np.all(np.isneginf(lb)) and np.all(np.isposinf(ub)):
@@ -365,7 +382,7 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
             return _result(problem, out.status, out.message, zs, problem.F(zs), opt, t0,
                            passes=passes)
     z = problem.x0
-    f = problem.F(z)
+    f = problem.F(z)  # kept from the start check
     at_solution = _judge_on(problem, z, f, opt).solved
     if at_solution or opt.major_iteration_limit == 0:
         status = Status.SOLVED if at_solution else Status.MAJOR_ITERATION_LIMIT
@@ -378,7 +395,7 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     try:
         if opt.crash_method == "pnewton" and n >= opt.crash_minimum_dimension:
             tc = time.perf_counter()
-            cr = crash(evalr, z, lb, ub, opt, f0=f, J0=M, log=log_major, deadline=deadline)
+            cr = crash(problem.evaluator, z, lb, ub, opt, f0=f, J0=M, log=log_major, deadline=deadline)
             st = PassStats(ran=True, time=time.perf_counter() - tc, iterations=cr.iterations,
                            factorizations=cr.factorizations, reason=cr.stop_reason)
             crash_its = cr.iterations

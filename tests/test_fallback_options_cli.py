@@ -4,7 +4,6 @@ import pytest
 import scipy.sparse as sp
 
 import compass_sparse as cs
-from compass_sparse._evaluate import GuardedEvaluator
 from compass_sparse.fallback import cholmod_available, gradient_steps, lm_step, spd_solve
 from compass_sparse.merit import fb_phi, fb_psi
 from compass_sparse.generators import structured_quadratic
@@ -52,7 +51,7 @@ def test_lm_and_gradient_steps_decrease_psi(seed):
     p = g.problem
     rng = np.random.default_rng(seed)
     z = np.clip(g.solution + rng.normal(scale=0.5, size=p.n), p.lb, p.ub)
-    ev = GuardedEvaluator(p)
+    ev = p.evaluator
     f = ev.f(z)
     psi0 = fb_psi(fb_phi(z, f, p.lb, p.ub))
     opt = cs.Options()

@@ -174,7 +174,7 @@ def test_undeclared_pattern_grows_when_a_later_jacobian_adds_entries():
             -np.inf, np.inf, np.zeros(N), var_names=NAMES)
     nnz = q.pattern.nnz
     J2 = q.J(np.full(N, 2.0))
-    assert J2.nnz == nnz + 1 and J2[0, 4] == 1.0 and q.pattern_growths == 1
+    assert J2.nnz == nnz + 1 and J2[0, 4] == 1.0 and q.evaluator.pattern_growths == 1
     assert q.J(np.zeros(N)).nnz == nnz + 1  # the grown pattern stays
 
 
@@ -279,10 +279,14 @@ def test_evaluation_counters():
     assert (c.nfev, c.njev) == (0, 0)
     x = np.ones(6)
     p.F(x)
-    p.F(x)
+    p.F(x)  # the last point is memoized: F and J are asked once per point
     p.J(x)
     p.FJ(x)
-    assert (c.nfev, c.njev, c.nfev_fd) == (3, 2, 0)
+    assert (c.nfev, c.njev, c.nfev_fd) == (1, 1, 0)
+    y = np.full(6, 2.0)
+    p.F(y)
+    p.FJ(x)  # the memo holds one point per function: x was displaced for F, not for J
+    assert (c.nfev, c.njev, c.nfev_fd) == (3, 1, 0)
     p.F_uncounted(x)
     assert c.nfev == 3
     q = MCP(F, J, -np.inf, np.inf, np.zeros(6))  # the start check costs one of each

@@ -100,7 +100,7 @@ class Workspace:
         self.partner_row = np.arange(n, dtype=np.intp)
         self.base = P.x0.copy()
         self.f_evals = 0
-        self.stack = PostsolveStack(n=n, evaluate_F=P.F_uncounted, base=self.base)
+        self.stack = PostsolveStack(n=n, evaluate_F=P.F, base=self.base)
         self.nnz_total = self.er.size
         self.current_pass = ""
         self.changed = 0
@@ -109,7 +109,7 @@ class Workspace:
     # -- snapshot ----------------------------------------------------------------------
     def evaluate(self, x):
         self.f_evals += 1
-        return np.asarray(self.problem.F_uncounted(x), dtype=float)
+        return self.problem.F(x)
 
     def live_mask(self):
         return self.row_active[self.er] & self.col_active[self.ec]

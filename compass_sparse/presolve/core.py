@@ -137,18 +137,21 @@ def _has_structure(problem, J0) -> bool:
     return bool(np.any(counts_r == 0) or np.any(np.diff(J0.indptr) == 0))
 
 
-def presolve(problem, options: PresolveOptions | dict | None = None) -> PresolveResult:
-    """Reduce ``problem`` (an :class:`~compass_sparse.problem.MCP`); see the module docs."""
+def presolve(problem, options: PresolveOptions | dict | None = None, *, f0=None,
+             J0=None) -> PresolveResult:
+    """Reduce ``problem`` (an :class:`~compass_sparse.problem.MCP`); see the module docs.
+    ``f0``, ``J0``: F and J at ``problem.x0`` when the caller has them."""
     opts = PresolveOptions.coerce(options)
     t0 = time.perf_counter()
     warnings: list = []
-    J0 = problem.J(problem.x0)
+    if J0 is None:
+        J0 = problem.J(problem.x0)
     nnz = int(J0.indptr[-1])
     stats = PresolveStats(n_original=problem.n, nnz_original=nnz)
     for mod in PHASE_ONE + PHASE_TWO:
         stats.passes[mod.NAME] = PassStats(mod.NAME, enabled=getattr(opts, mod.NAME))
     if not _has_structure(problem, J0):
-        stack = PostsolveStack(n=problem.n, evaluate_F=problem.F_uncounted,
+        stack = PostsolveStack(n=problem.n, evaluate_F=problem.F,
                                base=problem.x0.copy(), cols=np.arange(problem.n),
                                rows=np.arange(problem.n))
         stats.n_reduced, stats.nnz_reduced = problem.n, nnz
@@ -161,9 +164,10 @@ def presolve(problem, options: PresolveOptions | dict | None = None) -> Presolve
     declared = problem.constant_mask is not None and problem.constant_mask.any()
     samples = sample_evaluations(problem, opts) if declared else []
     if J0.nnz != problem.pattern.nnz:  # an undeclared pattern grew at the sample points
-        J0 = problem.J(problem.x0)
+        J0 = problem.evaluator.on_pattern(J0)
         stats.nnz_original = nnz = int(J0.indptr[-1])
-    f0 = np.asarray(problem.F_uncounted(problem.x0), dtype=float)
+    if f0 is None:
+        f0 = problem.F(problem.x0)
     const = declared_constant_mask(problem, J0, f0, opts, warnings, samples)
     certain, nonlinear = empty_row_status(problem, J0)
     ws = Workspace(problem, opts, J0, const, warnings, certain_rows=certain,
@@ -261,7 +265,7 @@ def solve_with_presolve(problem, solve: Callable, options=None) -> PostsolvedSol
         inner = solve(pre.reduced)
         xr = np.asarray(inner.x, dtype=float)
     x = pre.postsolve(xr)
-    f = np.asarray(problem.F_uncounted(x), dtype=float)
+    f = problem.F(x)
     return PostsolvedSolution(x=x, F=f, natural_residual=natural_residual(x, f, problem.lb,
                                                                           problem.ub),
                               presolve=pre, inner=inner)

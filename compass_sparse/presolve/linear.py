@@ -45,7 +45,7 @@ def sample_evaluations(problem, options):
     out = []
     try:
         for x in _sample_points(problem, rng):
-            out.append((x, np.asarray(problem.F_uncounted(x), dtype=float), problem.J(x)))
+            out.append((x, problem.F(x), problem.J(x)))
     except Exception as exc:  # evaluation failed inside the box
         return exc
     return out
@@ -77,7 +77,7 @@ def declared_constant_mask(problem, J0, f0, options, warnings, samples=None):
     er = J0.indices
     ec = np.repeat(np.arange(n), np.diff(J0.indptr))
     for x, f, J in samples:
-        J = problem.on_pattern(J)
+        J = problem.evaluator.on_pattern(J)
         moved = mask & (J.data != J0.data)
         if moved.any():
             k = int(np.flatnonzero(moved)[0])
