@@ -31,9 +31,9 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .merit import fb_phi, project
+from .merit import fb_phi, normal_map_at, project
 
-__all__ = ["CrashResult", "crash", "normal_map_at"]
+__all__ = ["CrashResult", "crash"]
 
 CRASH_MEMORY = 4
 CRASH_START_FACTOR = 2.0
@@ -50,19 +50,6 @@ class CrashResult:
     time: float
     factorizations: int
     log: list
-
-
-def normal_map_at(z, f, lb, ub):
-    """(x, F_B(x)) for the x with pi(x) = z that minimizes ||F_B(x)|| (thesis (2.5.8))."""
-    at_l = z <= lb
-    at_u = (z >= ub) & ~at_l
-    w = np.where(at_l, np.maximum(f, 0.0), 0.0)  # absorbed at the lower bound
-    v = np.where(at_u, np.maximum(-f, 0.0), 0.0)
-    fixed = lb == ub
-    w = np.where(fixed, np.maximum(f, 0.0), w)
-    v = np.where(fixed, np.maximum(-f, 0.0), v)
-    x = z - w + v
-    return x, f - w + v
 
 
 def _solve_reduced(Jii, rhs, perturb, eps0):

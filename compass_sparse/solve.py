@@ -11,19 +11,19 @@ exception of :mod:`compass_sparse.exceptions` before any work is done.
 from __future__ import annotations
 
 import logging
-import sys
 import time
 
 import numpy as np
 import scipy.sparse as sp
 
 from .acceptance import Acceptance, judge
-from .crash import crash, normal_map_at
+from .crash import crash
 from .exceptions import CompassError
-from .merit import fb_phi, fb_psi, residual_report
+from .merit import fb_phi, fb_psi, normal_map_at, residual_report
 from .nms import NMSSolver, Point
 from .options import Options
-from .path import LinearCode, PivotalPath, WarmBasis
+from .exceptions import ShapeError
+from .path import LinearCode, WarmBasis, default_basis, solve_linear_mcp
 from .problem import MCP
 from .result import PassStats, PointStatus, Result, Status
 from .scaling import SPREAD_TRIGGER, equilibrate, scale_problem, spread
@@ -65,15 +65,15 @@ def _blas_threads(n: int):
     return threadpool_limits(limits=1, user_api="blas")
 
 
-def _setup_logging(opt: Options):
-    if opt.verbosity > 0 and not logger.handlers and not logging.getLogger().handlers:
-        h = logging.StreamHandler(sys.stdout)
-        h.setFormatter(logging.Formatter("%(message)s"))
-        logger.addHandler(h)
-        logger.propagate = False
-    if opt.verbosity > 0:
-        logger.setLevel(logging.INFO if opt.verbosity >= 2 else logging.WARNING)
-    return (lambda s: logger.info(s)) if opt.verbosity >= 2 else None
+def _loggers(opt: Options):
+    """(major-iteration log, minor log) callables for verbosity >= 2 and >= 3, or None.
+
+    The library only emits records (at INFO) on the ``compass_sparse`` logger; showing
+    them is the application's choice (``logging.basicConfig(level=logging.INFO)``; the
+    command-line tool does so)."""
+    major = logger.info if opt.verbosity >= 2 else None
+    minor = logger.info if opt.verbosity >= 3 else None
+    return major, minor
 
 
 _PROBLEM_KEYWORDS = ("n", "jac_sparsity", "var_names", "eqn_names", "constant_jac", "fd_step",
@@ -232,9 +232,32 @@ def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> 
         problem.evaluator.forget()
 
 
+def _check_basis(basis, n: int) -> WarmBasis | None:
+    """A warm-start basis of the user's problem, or an error naming the mismatch."""
+    if basis is None:
+        return None
+    b = np.asarray(basis.basic if isinstance(basis, WarmBasis) else basis)
+    if b.shape != (n,):
+        raise ShapeError(f"the warm-start basis has shape {b.shape} but the problem has {n} "
+                         "variables: pass the Result.basis of a solve of this problem")
+    return WarmBasis(b.astype(np.int8))
+
+
+def _postsolve_basis(pre, basis: WarmBasis | None, z, lb, ub) -> WarmBasis | None:
+    """The basis of the reduced problem in the original index space: reduced variable k
+    is original variable ``cols[k]``; a removed variable gets the status of its
+    postsolved value (at a bound: its slack; fixed: the free slack)."""
+    if basis is None or pre is None:
+        return basis
+    full = default_basis(z, lb, ub)
+    full[pre.stack.cols] = basis.basic
+    return WarmBasis(full)
+
+
 def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -> Result:
+    basis = _check_basis(basis, problem.n)
     t0 = time.perf_counter()
-    log_major = _setup_logging(opt)
+    log_major, log_minor = _loggers(opt)
     deadline = t0 + opt.time_limit if np.isfinite(opt.time_limit) else None
     passes = {}
     # F and J at the start point: one evaluation each (kept from the problem's start check
@@ -263,6 +286,8 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
             pre = None  # nothing removed: no postsolve needed
         else:
             work = pre.reduced
+            if basis is not None:  # the warm basis, restricted through the index map
+                basis = WarmBasis(basis.basic[pre.stack.cols])
     z0 = work.x0
     if work is not problem:
         f0, J0 = work.evaluator.fj(z0)
@@ -290,15 +315,16 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
     phi0 = fb_phi(z0, f0, inner.lb, inner.ub)
     solver = NMSSolver(inner, opt, manager_factory=_manager_factory(opt),
                        callback=callback, deadline=deadline, log_major=log_major,
-                       acceptance=acceptance)
+                       log_minor=log_minor, acceptance=acceptance)
     solver.basis = basis
     if log_major is not None:
         log_major(f"{'major':>5} {'minor':>7} {'func':>6} {'grad':>5} {'residual':>12} "
                   f"type {'prox':>9} {'inorm':>10} (label)")
+    tn = time.perf_counter()
     with _blas_threads(work.n):
         out = solver.solve(Point(z0, f0, phi0, fb_psi(phi0), J0))
     passes.update(out.passes)
-    passes["nms"] = PassStats(ran=True, iterations=out.nit)
+    passes["nms"] = PassStats(ran=True, iterations=out.nit, time=time.perf_counter() - tn)
     zb, fb = out.best.z, out.best.f
     if sc is not None:  # back to the user's units
         zb, fb = sc.col * zb, fb / sc.row
@@ -310,7 +336,7 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
                   factorizations=out.factorizations, basis_updates=out.updates,
                   basis=out.basis)
     if opt.verbosity >= 1:
-        logger.warning(res.summary())
+        logger.info(res.summary())
     return res
 
 
@@ -344,6 +370,8 @@ def _finish(problem, pre, status, message, z_red, opt, t0, passes, *, f_reduced=
         f = problem.evaluator.f(z)
         if f is None:  # the point is returned with the failure; F is unknown there
             f = np.full(problem.n, np.nan)
+    if "basis" in counts:
+        counts["basis"] = _postsolve_basis(pre, counts["basis"], z, problem.lb, problem.ub)
     return _result(problem, status, message, z, f, opt, t0, start_z=start_z,
                    passes=passes, **counts)
 
@@ -368,7 +396,7 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
         return M @ z + q
 
     problem = MCP(F, lambda z: M, lb, ub, x0, n=n, var_names=var_names, constant_jac=M)
-    log_major = _setup_logging(opt)
+    log_major, log_minor = _loggers(opt)
     passes = {"presolve": PassStats(reason="linear problems go straight to the path")}
     lb, ub = problem.lb, problem.ub
     if np.all(np.isneginf(lb)) and np.all(np.isposinf(ub)):
@@ -395,7 +423,8 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     try:
         if opt.crash_method == "pnewton" and n >= opt.crash_minimum_dimension:
             tc = time.perf_counter()
-            cr = crash(problem.evaluator, z, lb, ub, opt, f0=f, J0=M, log=log_major, deadline=deadline)
+            cr = crash(problem.evaluator, z, lb, ub, opt, f0=f, J0=M, log=log_major,
+                       deadline=deadline)
             st = PassStats(ran=True, time=time.perf_counter() - tc, iterations=cr.iterations,
                            factorizations=cr.factorizations, reason=cr.stop_reason)
             crash_its = cr.iterations
@@ -404,13 +433,14 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
         else:
             st.reason = f"n < crash_minimum_dimension ({opt.crash_minimum_dimension})"
         passes["crash"] = st
-        return _lcp_path(problem, M, q, z, f, x, opt, t0, deadline, passes, st, crash_its)
+        return _lcp_path(problem, M, q, z, f, x, opt, t0, deadline, passes, st, crash_its,
+                         log_minor)
     except KeyboardInterrupt:
         return _result(problem, Status.USER_INTERRUPT, "interrupted by the user (Ctrl-C)", z, f,
                        opt, t0, start_z=problem.x0, passes=passes, crash_iterations=crash_its)
 
 
-def _lcp_path(problem, M, q, z, f, x, opt, t0, deadline, passes, st, crash_its):
+def _lcp_path(problem, M, q, z, f, x, opt, t0, deadline, passes, st, crash_its, log_minor):
     """The pivotal path(s) of :func:`solve_lcp` from the (crashed) point z, x = pi^-1(z)."""
     n = q.size
     lb, ub = problem.lb, problem.ub
@@ -423,17 +453,12 @@ def _lcp_path(problem, M, q, z, f, x, opt, t0, deadline, passes, st, crash_its):
     tp = time.perf_counter()
     # One path solves a linear problem: give it room (a Lemke path may need ~n pivots).
     limit = opt.minor_iteration_limit or max(10 * n, 1000)
-    path = PivotalPath(M, q, lb, ub, bm, opt, minor_limit=limit, deadline=deadline)
-    start_ray = opt.lemke_start in ("always", "first")
     with _blas_threads(n):
-        res = path.run(x, ray_start=start_ray)
-        pivots = res.pivots
-        if res.code is not LinearCode.SOLVED and not start_ray:
-            res2 = PivotalPath(M, q, lb, ub, bm, opt, minor_limit=limit,
-                               deadline=deadline).run(x, ray_start=True)
-            pivots += res2.pivots
-            if res2.code is LinearCode.SOLVED or res2.code is LinearCode.RAY:
-                res = res2
+        res = solve_linear_mcp(M, q, lb, ub, bm, opt, x,
+                               ray_start=opt.lemke_start in ("always", "first"),
+                               keep_ray=True, minor_limit=limit, deadline=deadline,
+                               log=log_minor)
+    pivots = res.pivots
     passes["path"] = PassStats(ran=True, time=time.perf_counter() - tp, iterations=1,
                                pivots=pivots, factorizations=bm.stats.factorizations)
     counts = dict(nit=1, minor_iterations=pivots, crash_iterations=crash_its,
@@ -451,13 +476,14 @@ def _lcp_path(problem, M, q, z, f, x, opt, t0, deadline, passes, st, crash_its):
     bounded = bool(np.all(np.isfinite(lb)) and np.all(np.isfinite(ub)))
     if (res.code is LinearCode.RAY and res.ray_start and res.unbounded and not bounded
             and _is_monotone(M)):
-        zs = res.z
-        fs = problem.F(zs)
-        if np.linalg.norm(fb_phi(z, f, lb, ub)) < np.linalg.norm(fb_phi(zs, fs, lb, ub)):
-            zs, fs = z, f
-        return _result(problem, Status.INFEASIBLE,
-                       "ray termination from a Lemke start on a positive semidefinite M: "
-                       "the problem has no solution", zs, fs, opt, t0, **counts)
+        # The certificate: x is the ray's base and x + theta * ray (theta >= 0) the ray.
+        zs = res.ray_base
+        out = _result(problem, Status.INFEASIBLE,
+                      "ray termination from a Lemke start on a positive semidefinite M: "
+                      "the problem has no solution", zs, problem.F(zs), opt, t0,
+                      ray=res.ray.copy(), **counts)
+        out.point_status = PointStatus.CERTIFICATE
+        return out
     # The path cycled, hit a limit or lost accuracy: the stabilized Newton method takes over,
     # within what is left of the time limit (the clock does not restart).
     left = opt.time_limit - (time.perf_counter() - t0)

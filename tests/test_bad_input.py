@@ -132,11 +132,10 @@ def test_integral_floats_and_numpy_scalars_are_valid_options_and_solve(kw):
 
 
 def test_ctrl_c_during_solve_lcps_first_path_returns_a_result(monkeypatch):
-    class Interrupted(solve_module.PivotalPath):
-        def run(self, *a, **k):
-            raise KeyboardInterrupt
+    def interrupted(*a, **k):  # Ctrl-C while the first pivotal path runs
+        raise KeyboardInterrupt
 
-    monkeypatch.setattr(solve_module, "PivotalPath", Interrupted)
+    monkeypatch.setattr(solve_module, "solve_linear_mcp", interrupted)
     r = solve_lcp(M2, q2)
     assert r.status is Status.USER_INTERRUPT and r.x.shape == (2,)
 

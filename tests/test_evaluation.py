@@ -10,8 +10,9 @@ from compass_sparse.evaluation import Evaluator
 from compass_sparse.exceptions import JacobianPatternError, ShapeError
 
 
-def _counting_ncp(n, seed=0):
-    """A nonlinear NCP F(x) = A x + 0.1 x^3 + b with call logs of F and J."""
+def _counting_ncp(n, seed=0, cubic=0.1):
+    """F(x) = A x + cubic x^3 + b (A tridiagonal, diagonally dominant) with call logs of
+    F and J; also returns A."""
     rng = np.random.default_rng(seed)
     A = sp.diags([np.full(n - 1, -1.0), np.full(n, 4.0), np.full(n - 1, -1.0)], [-1, 0, 1],
                  format="csc")
@@ -20,13 +21,13 @@ def _counting_ncp(n, seed=0):
 
     def F(x):
         calls["F"].append(x.copy())
-        return A @ x + 0.1 * x ** 3 + b
+        return A @ x + cubic * x ** 3 + b
 
     def J(x):
         calls["J"].append(x.copy())
-        return (A + sp.diags(0.3 * x ** 2)).tocsc()
+        return (A + sp.diags(3 * cubic * x ** 2)).tocsc()
 
-    return F, J, calls
+    return F, J, calls, A
 
 
 def _at(points, x0):
@@ -36,7 +37,7 @@ def _at(points, x0):
 @pytest.mark.parametrize("crash", ["pnewton", "none"])
 def test_start_point_is_evaluated_once_before_the_first_iteration(crash):
     n = 50
-    F, J, calls = _counting_ncp(n)
+    F, J, calls, _ = _counting_ncp(n)
     x0 = np.full(n, 0.5)
     seen = {}
 
@@ -60,20 +61,7 @@ def test_start_point_is_evaluated_once_before_the_first_iteration(crash):
 
 def test_start_point_is_evaluated_once_with_presolve():
     n = 40
-    rng = np.random.default_rng(3)
-    A = sp.diags([np.full(n - 1, -1.0), np.full(n, 4.0), np.full(n - 1, -1.0)], [-1, 0, 1],
-                 format="csc")
-    b = rng.normal(size=n)
-    calls = {"F": [], "J": []}
-
-    def F(x):
-        calls["F"].append(x.copy())
-        return A @ x + b
-
-    def J(x):
-        calls["J"].append(x.copy())
-        return A
-
+    F, J, calls, A = _counting_ncp(n, seed=3, cubic=0.0)  # linear: presolve applies
     x0 = np.full(n, 0.25)
     lb = np.zeros(n)
     ub = np.full(n, np.inf)
@@ -133,3 +121,29 @@ def test_evaluator_shape_and_pattern_errors_propagate_from_guarded_calls():
     ev.jac(np.zeros(3))
     with pytest.raises(JacobianPatternError):
         ev.jac(np.ones(3))  # an entry outside the declared pattern
+
+
+def test_jac_true_one_call_serves_f_and_j_and_the_pinned_start_survives():
+    n = 4
+    calls = []
+
+    def FJ(x):
+        calls.append(x.copy())
+        return 2.0 * x + 1.0, sp.diags(np.full(n, 2.0), format="csc")
+
+    ev = Evaluator(FJ, True, n)
+    x0, y = np.zeros(n), np.ones(n)
+    ev.check_at(x0)  # pins the start point
+    assert (ev.counters.nfev, ev.counters.njev, len(calls)) == (1, 1, 1)
+    ev.F(y)  # an F-only call: its J is kept, counted only when used
+    assert (ev.counters.nfev, ev.counters.njev) == (2, 1)
+    ev.J(y)
+    assert (ev.counters.nfev, ev.counters.njev, len(calls)) == (2, 2, 2)
+    ev.J(2 * y)
+    ev.F(2 * y)
+    assert (ev.counters.nfev, ev.counters.njev, len(calls)) == (3, 3, 3)
+    ev.FJ(x0)  # still in the memo
+    assert len(calls) == 3 and ev.counters.nfev == len(calls)
+    ev.forget()
+    ev.F(x0)
+    assert len(calls) == 4

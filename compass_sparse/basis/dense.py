@@ -27,7 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..exceptions import SingularBasisError
-from .types import KIND_DENSE, KIND_M, KIND_UNIT, BasisStats, FactorReport, UpdateStatus
+from .types import KIND_M, KIND_UNIT, BasisStats, FactorReport, UpdateStatus
 
 __all__ = ["DenseBasis"]
 

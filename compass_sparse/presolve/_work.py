@@ -220,6 +220,19 @@ class Workspace:
         self.partner_var[new_row] = free_var
         self.partner_row[free_var] = new_row
 
+    def remove_and_re_pair(self, j, i, p):
+        """Remove z_j with row i, whose own variable z_p is free, and pair z_p with row r,
+        z_j's old row (which must be an equation: z_j was free or interior).  A free
+        variable with an equation is a valid MCP pair.  Returns r, or None (nothing done)
+        when row r was already used by a reduction of this round."""
+        r = int(self.partner_row[j])
+        if self.touched_row[r]:
+            return None
+        self.remove([j], [i])
+        self.repair(p, r)
+        self.touch(cols=[p], rows=[r])
+        return r
+
     def push(self, record: Record):
         record.pass_name = self.current_pass
         self.stack.push(record)

@@ -32,7 +32,7 @@ from .structural import StructuralReport, structural_rank_check
 
 logger = logging.getLogger("compass_sparse.presolve")
 
-__all__ = ["presolve", "PresolveResult", "PresolveStats", "PassStats", "solve_with_presolve",
+__all__ = ["presolve", "PresolveResult", "PresolveStats", "ReductionStats", "solve_with_presolve",
            "PostsolvedSolution"]
 
 PHASE_ONE = (fixed, empty_rows, empty_columns, singleton_rows, column_singletons, forcing,
@@ -41,8 +41,9 @@ PHASE_TWO = (range_fixing,)
 
 
 @dataclass
-class PassStats:
-    """Counters of one pass: how often it reduced something, what it removed, its time."""
+class ReductionStats:
+    """Counters of one reduction of the preprocessor: calls, calls that reduced something,
+    what it removed, its time (the solver's passes are :class:`compass_sparse.PassStats`)."""
 
     name: str
     enabled: bool = True
@@ -149,7 +150,7 @@ def presolve(problem, options: PresolveOptions | dict | None = None, *, f0=None,
     nnz = int(J0.indptr[-1])
     stats = PresolveStats(n_original=problem.n, nnz_original=nnz)
     for mod in PHASE_ONE + PHASE_TWO:
-        stats.passes[mod.NAME] = PassStats(mod.NAME, enabled=getattr(opts, mod.NAME))
+        stats.passes[mod.NAME] = ReductionStats(mod.NAME, enabled=getattr(opts, mod.NAME))
     if not _has_structure(problem, J0):
         stack = PostsolveStack(n=problem.n, evaluate_F=problem.F,
                                base=problem.x0.copy(), cols=np.arange(problem.n),
