@@ -225,3 +225,41 @@ def test_stationarity_threshold_on_x_squared_plus_one(x, stationary):
                       np.array([np.inf]))
     assert st.stationary is stationary
     assert (4 * abs(x) / (x * x + 1) <= STATIONARY_RTOL) is stationary
+
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 10 ** 6), tol=st.sampled_from([1e-4, 1e-6, 1e-8]),
+       row_scale=st.sampled_from([0, 2, 4]), drop=st.booleans())
+def test_property_success_meets_both_residuals_and_infeasible_never_on_solvable(
+        seed, tol, row_scale, drop):
+    """Random solvable problems F = S (A x + x^3 - b) on boxes, NCP and free rows (S: rows
+    in units spread over 10^+-row_scale; A monotone, so F is coercive and a solution
+    exists; J a sparse matrix built from arrays, dropping zeros, when ``drop``):
+    never INFEASIBLE, and every SOLVED point has both residuals <= tol, recomputed here."""
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 15))
+    B = sp.random(n, n, density=0.3, random_state=seed).toarray()
+    A = B - B.T + np.diag(rng.uniform(0.0, 1.0, n))
+    b = rng.normal(size=n)
+    S = 10.0 ** rng.uniform(-row_scale, row_scale, n)
+    lb = np.where(rng.random(n) < 0.5, 0.0, -np.inf)
+    ub = np.where(rng.random(n) < 0.3, 2.0, np.inf)  # boxes [0, 2] and (-inf, 2]
+
+    def F(x):
+        return S * (A @ x + x ** 3 - b)
+
+    def J(x):
+        Jd = S[:, None] * (A + np.diag(3 * x ** 2))
+        return sp.csc_matrix(Jd) if drop else Jd  # a dense array keeps its full pattern
+
+    r = solve_mcp(F, J, lb, ub, np.zeros(n),
+                  options={"convergence_tolerance": tol, "time_limit": 10})
+    assert r.status is not Status.INFEASIBLE
+    if r.success:
+        f = F(r.x.copy())
+        assert np.max(np.abs(r.x - np.clip(r.x - f, lb, ub))) <= tol
+        assert r.check(F, lb, ub).fb_norm <= tol
