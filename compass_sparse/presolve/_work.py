@@ -238,7 +238,15 @@ class Workspace:
         self.stack.push(record)
 
     def infeasible(self, message, rows=(), variables=()):
+        """Raise the verdict, saying what it rests on: the rows' entries declared constant
+        (``constant_jac``, checked at more points when ``verify_linear``) and, for entries
+        absent from the pattern, the declared pattern (``jac_sparsity``)."""
         P = self.problem
+        if "because" not in message:
+            basis = ["Jacobian entries declared constant (constant_jac)"]
+            basis.append("the declared pattern (jac_sparsity)" if P.pattern_declared else
+                         "the entries J returned at the start point")
+            message += f" [this rests on {' and '.join(basis)}]"
         diag = InfeasibilityDiagnostic(
             message=message,
             pass_name=self.current_pass,
