@@ -191,3 +191,15 @@ def test_time_limit_holds_when_solve_lcp_hands_over_to_the_general_method(clock)
     finally:
         solve_module.MCP = real
     _assert_within_limit(r, clock, start, 1.0)
+
+
+def test_time_limit_holds_through_the_crash_searches(clock):
+    # a crash that keeps halving its step (no solution: F_i = x_i^2 + 1 + small coupling)
+    C = 0.01 * _B
+    F = _costly(lambda x: x ** 2 + 1.0 + C @ x, clock)
+    J = lambda x: sp.csc_matrix(np.diag(2 * x) + C)  # noqa: E731
+    start = clock.now
+    r = solve_mcp(F, J, -np.inf, np.inf, np.full(N, 1e-3),
+                  options={"time_limit": 0.5, "restart_limit": 10 ** 6,
+                           "crash_minimum_dimension": 1, "crash_iteration_limit": 200})
+    _assert_within_limit(r, clock, start, 0.5)
