@@ -65,10 +65,10 @@ def _demo(args) -> int:
     elif kind == "cge":
         from .generators.cge import static_cge
 
-        model = static_cge(seed=args.seed)
-        g = model
+        # the shocked model is the one solved, so it is the one the result is checked on
+        g = static_cge(seed=args.seed).with_shock(output_tax=0.0)
         build = time.perf_counter() - t0
-        res = solve_mcp(model.with_shock(output_tax=0.0).problem, options=_opts(args))
+        res = solve_mcp(g.problem, options=_opts(args))
     else:  # kojshin
         def F(x):
             x1, x2, x3, x4 = x

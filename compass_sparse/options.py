@@ -12,7 +12,7 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-from ._options_base import OptionsMixin
+from ._options_base import OptionsMixin, keyword_checked, normalized
 from .exceptions import OptionError
 
 __all__ = ["Options", "PATH_NAMES"]
@@ -29,17 +29,20 @@ PATH_NAMES: dict[str, str | None] = {
     "lm_initial_mu": None,
     "seed": None,
     "progress": None,
+    "scaling": None,  # PATH's hidden model-scaling switches are defined otherwise
 }
 
 
-def _opt(default, doc: str, *, lo=None, hi=None, choices=None, lo_open=False, nullable=False):
+def _opt(default, doc: str, *, lo=None, hi=None, choices=None, lo_open=False, nullable=False,
+         inf_ok=False):
     return field(
         default=default,
         metadata={"doc": doc, "lo": lo, "hi": hi, "choices": choices, "lo_open": lo_open,
-                  "nullable": nullable},
+                  "nullable": nullable, "inf_ok": inf_ok},
     )
 
 
+@keyword_checked
 @dataclass(frozen=True)
 class Options(OptionsMixin):
     """Options of :func:`compass_sparse.solve_mcp` and :func:`compass_sparse.solve_lcp`.
@@ -58,7 +61,8 @@ class Options(OptionsMixin):
     cumulative_iteration_limit: int | None = _opt(
         None, "maximum pivots over the whole solve; None = max(100000, 100n)", lo=1,
         nullable=True)
-    time_limit: float = _opt(math.inf, "wall-clock seconds for the solve", lo=0.0, lo_open=True)
+    time_limit: float = _opt(math.inf, "wall-clock seconds for the solve (inf: none)", lo=0.0,
+                             lo_open=True, inf_ok=True)
 
     # --- crash (projected Newton, thesis §2.5) -----------------------------------------
     crash_method: str = _opt("pnewton", "crash pass: 'pnewton' or 'none'",
@@ -150,6 +154,9 @@ class Options(OptionsMixin):
 
     # --- passes -------------------------------------------------------------------------
     presolve: bool = _opt(True, "run the preprocessor when the problem has linear structure")
+    scaling: bool = _opt(
+        True, "row and column equilibration of J(x0) when its row or column norms spread "
+        "over more than 1e2 (the tolerance still applies to the user's F)")
 
     # --- output ---------------------------------------------------------------------
     verbosity: int = _opt(0, "0 silent, 1 summary, 2 major-iteration log, 3 minor log",
@@ -162,7 +169,8 @@ class Options(OptionsMixin):
 
     # ---------------------------------------------------------------------------------
     def validate(self):
-        """Check every field against its documented range; raise OptionError."""
+        """Check every field against its documented range and store it as a plain bool,
+        int or float (NumPy scalars, integral floats for integers); raise OptionError."""
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
             m = f.metadata
@@ -171,19 +179,15 @@ class Options(OptionsMixin):
                     continue
                 raise OptionError(f"option {f.name} may not be None")
             if m.get("choices") is not None:
-                if v not in m["choices"]:
+                if not isinstance(v, str) or v not in m["choices"]:
                     raise OptionError(f"option {f.name}={v!r}: expected one of {m['choices']}")
                 continue
-            if isinstance(f.default, bool) or f.type in ("bool",):
-                if not isinstance(v, (bool,)):
-                    raise OptionError(f"option {f.name}={v!r}: expected True or False")
+            kind = ("bool" if isinstance(f.default, bool) or f.type in ("bool",)
+                    else "int" if "int" in str(f.type) else "float")
+            v = normalized(f.name, v, kind, allow_inf=m.get("inf_ok", False))
+            object.__setattr__(self, f.name, v)
+            if kind == "bool":
                 continue
-            if not isinstance(v, (int, float)) or isinstance(v, bool):
-                raise OptionError(f"option {f.name}={v!r}: expected a number")
-            if "int" in str(f.type) and not float(v).is_integer():
-                raise OptionError(f"option {f.name}={v!r}: expected an integer")
-            if isinstance(v, float) and math.isnan(v):
-                raise OptionError(f"option {f.name} is NaN")
             lo, hi = m.get("lo"), m.get("hi")
             if lo is not None and (v < lo or (m.get("lo_open") and v == lo)):
                 op = ">" if m.get("lo_open") else ">="

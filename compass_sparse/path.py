@@ -146,8 +146,9 @@ def solve_linear_mcp(M, q, lb, ub, basis, options, x, *, warm: WarmBasis | None 
     res = PivotalPath(M, q, lb, ub, basis, options, **kw).run(x, warm=warm,
                                                               ray_start=ray_start, r=r)
     if (res.code is LinearCode.SOLVED or ray_start or options.lemke_start != "automatic"
-            or res.t >= retry_below):
-        return res
+            or res.t >= retry_below
+            or (deadline is not None and time.perf_counter() > deadline)):
+        return res  # (no retry after the time limit: its factorization alone may take long)
     res2 = PivotalPath(M, q, lb, ub, basis, options, **kw).run(x, ray_start=True)
     pivots = res.pivots + res2.pivots
     factorizations = res.factorizations + res2.factorizations

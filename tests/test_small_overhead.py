@@ -103,14 +103,15 @@ def test_lazy_kernels_calling_each_other_compile_on_first_use(tmp_path, monkeypa
 
 
 def test_blas_limit_reuses_one_controller():
+    from compass_sparse import _blas
     from compass_sparse import solve as S
 
     with S._blas_threads(10):
         pass
-    first = list(S._BLAS_CONTROLLER)
-    with S._blas_threads(10):
+    first = list(_blas._CONTROLLER)
+    with _blas.single_threaded_blas():
         pass
-    assert len(S._BLAS_CONTROLLER) == 1 and S._BLAS_CONTROLLER[0] is first[0]
+    assert len(_blas._CONTROLLER) == 1 and _blas._CONTROLLER[0] is first[0]
 
 
 def test_dense_jacobian_gets_canonical_full_pattern_each_call():

@@ -76,6 +76,15 @@ def _dense_select(K, rank_tol):
     m, c = A.shape
     if m == 0 or c == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    # Single-threaded BLAS (see compass_sparse._blas); this factorization is also atomic
+    # for the solve's time limit.
+    from .._blas import single_threaded_blas
+
+    with single_threaded_blas():
+        return _dense_select_qr(A, rank_tol)
+
+
+def _dense_select_qr(A, rank_tol):
     import scipy.linalg as sla  # lazy: import cost
 
     cn = np.abs(A).max(axis=0)
