@@ -45,6 +45,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .crash import crash, normal_map_at
+from .exceptions import FactorBudgetError
 from .fallback import gradient_steps, lm_step
 from .merit import fb_gradient, fb_phi, fb_psi, project
 from .path import LinearCode, PivotalPath, WarmBasis
@@ -524,6 +525,9 @@ class NMSSolver:
                 self.basis = None
         except _Stop as stop:
             status, message = stop.status, stop.message
+        except FactorBudgetError as exc:
+            status = Status.TIME_LIMIT if exc.kind == "time" else Status.MEMORY_LIMIT
+            message = f"factorization not started: {exc}"
         except KeyboardInterrupt:
             status, message = Status.USER_INTERRUPT, "interrupted by the user (Ctrl-C)"
         if self.best is not None and time.perf_counter() - self._t_start >= PROGRESS_AFTER:

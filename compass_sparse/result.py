@@ -39,10 +39,13 @@ class Status(enum.IntEnum):
     DOMAIN_ERROR = 8  #: F/J undefined (NaN/Inf or exception) and no progress was possible
     INFEASIBLE = 9  #: a linear problem proved to have no solution (ray termination)
     ERROR = 10  #: internal failure (singular basis that could not be repaired, ...)
+    MEMORY_LIMIT = 11  #: a factorization was not started: its L + U would exceed the memory
     CALLBACK_STOP = 100  #: the user's callback asked to stop (PATH code 6)
 
     def path_code(self) -> int:
         """The PATH ``MCP_Termination`` code with the same meaning."""
+        if self is Status.MEMORY_LIMIT:
+            return int(Status.ERROR)
         return 6 if self is Status.CALLBACK_STOP else int(self)
 
     @property
@@ -62,6 +65,7 @@ _STATUS_TEXT = {
     Status.INFEASIBLE: "the linear problem has no solution (ray termination)",
     Status.ERROR: "internal error",
     Status.CALLBACK_STOP: "stopped by the callback",
+    Status.MEMORY_LIMIT: "memory limit: the next factorization would not fit in memory",
 }
 
 
@@ -129,6 +133,9 @@ class Result:
     lb: np.ndarray | None = None
     ub: np.ndarray | None = None
     tolerance: float = 1e-6
+    #: sparse LU of the basis: backend, ordering, symbolic estimates (est_nnz_lu, est_flops,
+    #: est_bytes: the largest met), max_nnz_lu, times, and the process's peak RSS in bytes
+    lu: dict = field(default_factory=dict)
 
     @property
     def worst_rows(self):

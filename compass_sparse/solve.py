@@ -34,7 +34,9 @@ DENSE_BASIS_MAX_N = 300
 """Below this dimension the dense reference basis is used (0: always the sparse manager)."""
 
 
-def _manager_factory(opt: Options):
+def _manager_factory(opt: Options, deadline=None):
+    """Bases for the pivotal paths; the sparse manager gets the solve's deadline, so that a
+    factorization that cannot finish in time is not started (TIME_LIMIT)."""
     def make(M):
         n = M.shape[0]
         if n <= DENSE_BASIS_MAX_N:
@@ -43,7 +45,8 @@ def _manager_factory(opt: Options):
             return DenseBasis(M)
         from .basis import BasisManager, BasisOptions
 
-        return BasisManager(M, options=BasisOptions(update_limit=opt.factorization_update_limit))
+        return BasisManager(M, options=BasisOptions(update_limit=opt.factorization_update_limit,
+                                                    deadline=deadline))
 
     return make
 
@@ -210,7 +213,7 @@ def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> 
                                   if status is Status.SOLVED else "major_iteration_limit = 0")
         return _finish(problem, pre, status, msg, z0, opt, t0, passes, evalr,
                        start_z=problem.x0, basis=basis)
-    solver = NMSSolver(work, evalr, opt, manager_factory=_manager_factory(opt),
+    solver = NMSSolver(work, evalr, opt, manager_factory=_manager_factory(opt, deadline),
                        callback=callback, deadline=deadline, log_major=log_major)
     solver.basis = basis
     if log_major is not None:
@@ -226,9 +229,24 @@ def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> 
                   gradient_steps=out.gradient_steps, lm_steps=out.lm_steps,
                   factorizations=out.factorizations, basis_updates=out.updates,
                   basis=out.basis)
+    res.lu = _lu_report(solver.bm)
     if opt.verbosity >= 1:
         logger.warning(res.summary())
     return res
+
+
+def _lu_report(bm) -> dict:
+    """Sparse-LU figures of a solve for ``Result.lu`` (empty for the dense basis)."""
+    import resource
+
+    st = getattr(bm, "stats", None)
+    if st is None or not hasattr(st, "est_bytes"):
+        return {}
+    return dict(backend=st.backend, ordering=st.ordering,
+                orderings_computed=st.orderings_computed, time_ordering=st.time_ordering,
+                time_factor=st.time_factor, est_nnz_lu=st.est_nnz_lu, est_flops=st.est_flops,
+                est_bytes=st.est_bytes, max_nnz_lu=st.max_nnz_lu,
+                peak_rss_bytes=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
 
 
 def _finish(problem, pre, status, message, z_red, opt, t0, passes, evalr, *, f_reduced=None,
@@ -306,11 +324,11 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
         return _result(problem, Status.SOLVED, "solved by the crash", z, f, opt, t0,
                        passes=passes, crash_iterations=crash_its,
                        factorizations=st.factorizations)
-    bm = _manager_factory(opt)(M)
+    deadline = t0 + opt.time_limit if np.isfinite(opt.time_limit) else None
+    bm = _manager_factory(opt, deadline)(M)
     tp = time.perf_counter()
     # One path solves a linear problem: give it room (a Lemke path may need ~n pivots).
     limit = opt.minor_iteration_limit or max(10 * n, 1000)
-    deadline = t0 + opt.time_limit if np.isfinite(opt.time_limit) else None
     path = PivotalPath(M, q, lb, ub, bm, opt, minor_limit=limit, deadline=deadline)
     start_ray = opt.lemke_start in ("always", "first")
     with _blas_threads(n):

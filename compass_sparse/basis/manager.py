@@ -55,12 +55,44 @@ import scipy.sparse as sp
 
 from ..exceptions import CompassError, ProblemError, ShapeError, SingularBasisError
 from . import _kernels as kern
-from .backends import make_backend
+from .backends import FactorBudget, make_backend
 from .repair import select_regular_block
 from .types import (KIND_DENSE, KIND_M, KIND_UNIT, BasisOptions, BasisStats,
                     FactorReport, UpdateStatus)
 
 _I = np.int64
+
+
+def _csc_entries(A):
+    """(rows, cols, values) of a CSC matrix, grouped by column in storage order."""
+    A = sp.csc_matrix(A)
+    cols = np.repeat(np.arange(A.shape[1], dtype=_I), np.diff(A.indptr))
+    return A.indices.astype(_I), cols, A.data
+
+
+def _csc_from_grouped(parts, n):
+    """n x n CSC matrix from (rows, cols, values) parts, each grouped by column: entries of
+    a column keep their part order (no sorting: the solve kernels do not need it)."""
+    counts = [np.bincount(c, minlength=n) for _, c, _ in parts]
+    total = np.sum(counts, axis=0) if counts else np.zeros(n, _I)
+    indptr = np.zeros(n + 1, dtype=_I)
+    np.cumsum(total, out=indptr[1:])
+    nnz = int(indptr[-1])
+    ind = np.empty(nnz, dtype=_I)
+    val = np.empty(nnz)
+    fill = indptr[:-1].copy()
+    for (r, c, x), cnt in zip(parts, counts):
+        if not c.size:
+            continue
+        start = np.zeros(n + 1, dtype=_I)
+        np.cumsum(cnt, out=start[1:])
+        dest = fill[c] + (np.arange(c.size, dtype=_I) - start[c])
+        ind[dest] = r
+        val[dest] = x
+        fill += cnt
+    A = sp.csc_matrix((val, ind, indptr), shape=(n, n))
+    A.has_sorted_indices = False
+    return A
 
 
 def _readonly(a):
@@ -87,8 +119,13 @@ class BasisManager:
 
     def __init__(self, M, options: BasisOptions | None = None):
         self.options = options if options is not None else BasisOptions()
-        self._backend = make_backend(self.options.backend, self.options.permc_spec,
-                                     self.options.diag_pivot_thresh)
+        o = self.options
+        mem = o.memory_limit
+        if mem is None:
+            avail = FactorBudget.available_memory()
+            mem = 0.8 * avail if avail is not None else None
+        self.budget = FactorBudget(o.deadline, None if mem == np.inf else mem)
+        self._backend = make_backend(o.backend, o.ordering, o.diag_pivot_thresh, self.budget)
         self._load_matrix(M, first=True)
         n = self.n
         self._r = None
@@ -321,8 +358,9 @@ class BasisManager:
         Ud = np.ones(n)
         Ud[:m1] = self._signs[units]
         rscale = None
-        li, lj, lx = [np.zeros(0, _I)], [np.zeros(0, _I)], [np.zeros(0)]
-        ui, uj, ux = [np.zeros(0, _I)], [np.zeros(0, _I)], [np.zeros(0)]
+        # L and U of B as CSC arrays over positions, assembled column-grouped (no sort)
+        Lcols = [(np.zeros(0, _I), np.zeros(0, _I), np.zeros(0))]
+        Ucols = [(np.zeros(0, _I), np.zeros(0, _I), np.zeros(0))]
         if mk:
             krows = R2[rows_k][fac.row_order]          # global row at K position t
             kcols = cols_k[fac.col_order]              # BS column at K position t
@@ -331,28 +369,20 @@ class BasisManager:
             if fac.row_scale is not None:
                 rscale = np.ones(n)
                 rscale[R2[rows_k]] = fac.row_scale
-            Lk = sp.coo_matrix(fac.L)
-            msk = Lk.row > Lk.col
-            li.append(Lk.row[msk].astype(_I) + m1)
-            lj.append(Lk.col[msk].astype(_I) + m1)
-            lx.append(Lk.data[msk])
-            Uk = sp.coo_matrix(fac.U)
-            msk = Uk.row < Uk.col
-            ui.append(Uk.row[msk].astype(_I) + m1)
-            uj.append(Uk.col[msk].astype(_I) + m1)
-            ux.append(Uk.data[msk])
+            r, c, x = _csc_entries(fac.L)
+            msk = r > c
+            Lcols.append((r[msk] + m1, c[msk] + m1, x[msk]))
+            r, c, x = _csc_entries(fac.U)
+            msk = r < c
+            Ucols.append((r[msk] + m1, c[msk] + m1, x[msk]))
             Ud[m1:] = fac.U.diagonal()
             # C block: entries of kept non-unit columns in unit-covered rows
-            Bk = sp.coo_matrix(BS[:, kcols])
-            cov = rowpos[Bk.row] < m1
-            ui.append(rowpos[Bk.row[cov]])
-            uj.append(Bk.col[cov].astype(_I) + m1)
-            ux.append(Bk.data[cov])
-        L = sp.csc_matrix((np.concatenate(lx), (np.concatenate(li), np.concatenate(lj))),
-                          shape=(n, n))
+            r, c, x = _csc_entries(BS[:, kcols])
+            cov = rowpos[r] < m1
+            Ucols.append((rowpos[r[cov]], c[cov] + m1, x[cov]))
+        L = _csc_from_grouped(Lcols, n)
         Lr = L.tocsr()
-        U = sp.csc_matrix((np.concatenate(ux), (np.concatenate(ui), np.concatenate(uj))),
-                          shape=(n, n))
+        U = _csc_from_grouped(Ucols, n)
         cap_cols = n + o.update_limit + 2
         self._Lp, self._Li, self._Lx = L.indptr.astype(_I), L.indices.astype(_I), L.data
         self._Lrp, self._Lri, self._Lrx = (Lr.indptr.astype(_I), Lr.indices.astype(_I),
@@ -401,10 +431,23 @@ class BasisManager:
         st = self.stats
         st.factorizations += 1
         st.nnz_L, st.nnz_U, st.nnz_eta = self._nnzL, self._nnzU, 0
+        if mk:
+            self._record_lu(self._backend.last)
         st.time_factor += time.perf_counter() - t0
         report.ok = True
         self.last_report = report
         return report
+
+    def _record_lu(self, info):
+        st = self.stats
+        st.backend, st.ordering = info.backend, info.ordering
+        if not info.ordering_reused:
+            st.orderings_computed += 1
+            st.time_ordering += info.time_ordering
+        st.est_nnz_lu = max(st.est_nnz_lu, info.est_nnz_lu)
+        st.est_flops = max(st.est_flops, info.est_flops)
+        st.est_bytes = max(st.est_bytes, info.est_bytes)
+        st.max_nnz_lu = max(st.max_nnz_lu, info.nnz_lu)
 
     # ------------------------------------------------------------------ solves
     def _require(self):
