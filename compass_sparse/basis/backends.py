@@ -183,7 +183,9 @@ class SuperLUBackend:
         self.budget = budget
         self.last = FactorInfo(backend=self.name)
 
-    def factor(self, K) -> LUFactors:
+    def splu(self, K):
+        """(SuperLU object of the ordered K, ordering): ``lu`` factors
+        ``K[o.rows][:, o.cols]`` under a symmetric ordering, K itself under COLAMD."""
         from scipy.sparse.linalg import splu
 
         K = sp.csc_matrix(K)
@@ -207,6 +209,12 @@ class SuperLUBackend:
                       options=dict(SymmetricMode=symm))
         except RuntimeError as exc:  # "Factor is exactly singular"
             raise SingularFactorError(str(exc)) from exc
+        info.time_factor = time.perf_counter() - t0
+        return lu, o
+
+    def factor(self, K) -> LUFactors:
+        t0 = time.perf_counter()
+        lu, o = self.splu(K)
         # Pr A Pc = L U: row i of A sits at position perm_r[i], column j at perm_c[j].
         row_order = _inverse(lu.perm_r.astype(_I))
         col_order = _inverse(lu.perm_c.astype(_I))
@@ -214,9 +222,19 @@ class SuperLUBackend:
             row_order = o.rows[row_order]
             col_order = o.cols[col_order]
         L, U = lu.L, lu.U
-        info.nnz_lu = int(L.nnz + U.nnz)
-        info.time_factor = time.perf_counter() - t0
+        self.last.nnz_lu = int(L.nnz + U.nnz)
+        self.last.time_factor = time.perf_counter() - t0
         return LUFactors(L, U, row_order, col_order)
+
+    def solve(self, K, b):
+        """x with K x = b, from one factorization (no factors extracted)."""
+        lu, o = self.splu(K)
+        b = np.asarray(b, dtype=np.float64)
+        if o.method == "colamd":
+            return lu.solve(b)
+        x = np.empty_like(b)
+        x[o.cols] = lu.solve(b[o.rows])
+        return x
 
 
 def _kvx_matrix(K):
@@ -332,6 +350,27 @@ class AutoBackend:
             return b.factor(K)
         finally:
             self.last = b.last
+
+
+def solve_sparse(A, b):
+    """Solve A x = b (A square sparse) by one LU in the automatic ordering (or the
+    environment's choice, as for the basis); raises :class:`SingularFactorError` when A is
+    exactly singular.  For the crash, whose reduced Jacobians are large CGE blocks too."""
+    b_ = make_backend()
+    if isinstance(b_, AutoBackend):
+        b_ = b_.small if A.shape[0] < AUTO_SYMMETRIC_MIN_N else b_.large
+    if isinstance(b_, SuperLUBackend):
+        return b_.solve(A, b)
+    f = b_.factor(sp.csc_matrix(A))     # UMFPACK: solve with its factors
+    from scipy.sparse.linalg import spsolve_triangular
+
+    w = (f.row_scale * np.asarray(b, dtype=np.float64))[f.row_order]
+    L = sp.csr_matrix(f.L)
+    y = spsolve_triangular(L, w, lower=True, unit_diagonal=True)
+    y = spsolve_triangular(sp.csr_matrix(f.U), y, lower=False)
+    x = np.empty_like(y)
+    x[f.col_order] = y
+    return x
 
 
 def make_backend(name="auto", ordering="auto", diag_pivot_thresh=None, budget=None):

@@ -198,3 +198,19 @@ def test_rank_repair_under_every_backend():
         assert np.linalg.matrix_rank(B) == n
         x = bm.ftran(np.ones(n))
         assert np.abs(B @ x - 1.0).max() < 1e-9
+
+
+@pytest.mark.parametrize("n", [50, 600])
+def test_solve_sparse_for_the_crash_agrees_with_dense(n, lu_choice):
+    from compass_sparse.basis.backends import SingularFactorError, solve_sparse
+
+    rng = np.random.default_rng(n)
+    K = sp.csc_matrix(badly_scaled_sparse(n, rng, density=min(0.08, 8.0 / n))[rng.permutation(n)])
+    b = rng.standard_normal(n)
+    x = solve_sparse(K, b)
+    xd = np.linalg.solve(K.toarray(), b)
+    assert np.abs(x - xd).max() <= 1e-8 * np.abs(xd).max()
+    Z = sp.lil_matrix(K)
+    Z[:, 3] = 0.0
+    with pytest.raises(SingularFactorError):
+        solve_sparse(sp.csc_matrix(Z), b)
