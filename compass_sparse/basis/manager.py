@@ -67,38 +67,6 @@ _REFINE_ABOVE = 1e-14
 tolerance) refines the solution once (:meth:`BasisManager._refine`)."""
 
 
-def _csc_entries(A):
-    """(rows, cols, values) of a CSC matrix, grouped by column in storage order."""
-    A = sp.csc_matrix(A)
-    cols = np.repeat(np.arange(A.shape[1], dtype=_I), np.diff(A.indptr))
-    return A.indices.astype(_I), cols, A.data
-
-
-def _csc_from_grouped(parts, n):
-    """n x n CSC matrix from (rows, cols, values) parts, each grouped by column: entries of
-    a column keep their part order (no sorting: the solve kernels do not need it)."""
-    counts = [np.bincount(c, minlength=n) for _, c, _ in parts]
-    total = np.sum(counts, axis=0) if counts else np.zeros(n, _I)
-    indptr = np.zeros(n + 1, dtype=_I)
-    np.cumsum(total, out=indptr[1:])
-    nnz = int(indptr[-1])
-    ind = np.empty(nnz, dtype=_I)
-    val = np.empty(nnz)
-    fill = indptr[:-1].copy()
-    for (r, c, x), cnt in zip(parts, counts):
-        if not c.size:
-            continue
-        start = np.zeros(n + 1, dtype=_I)
-        np.cumsum(cnt, out=start[1:])
-        dest = fill[c] + (np.arange(c.size, dtype=_I) - start[c])
-        ind[dest] = r
-        val[dest] = x
-        fill += cnt
-    A = sp.csc_matrix((val, ind, indptr), shape=(n, n))
-    A.has_sorted_indices = False
-    return A
-
-
 def _readonly(a):
     v = a.view()
     v.flags.writeable = False
@@ -362,9 +330,7 @@ class BasisManager:
         Ud = np.ones(n)
         Ud[:m1] = self._signs[units]
         rscale = None
-        # L and U of B as CSC arrays over positions, assembled column-grouped (no sort)
-        Lcols = [(np.zeros(0, _I), np.zeros(0, _I), np.zeros(0))]
-        Ucols = [(np.zeros(0, _I), np.zeros(0, _I), np.zeros(0))]
+        # L and U of B as CSC arrays over positions (compiled assembly, no sort)
         if mk:
             krows = R2[rows_k][fac.row_order]          # global row at K position t
             kcols = cols_k[fac.col_order]              # BS column at K position t
@@ -373,20 +339,18 @@ class BasisManager:
             if fac.row_scale is not None:
                 rscale = np.ones(n)
                 rscale[R2[rows_k]] = fac.row_scale
-            r, c, x = _csc_entries(fac.L)
-            msk = r > c
-            Lcols.append((r[msk] + m1, c[msk] + m1, x[msk]))
-            r, c, x = _csc_entries(fac.U)
-            msk = r < c
-            Ucols.append((r[msk] + m1, c[msk] + m1, x[msk]))
-            Ud[m1:] = fac.U.diagonal()
-            # C block: entries of kept non-unit columns in unit-covered rows
-            r, c, x = _csc_entries(BS[:, kcols])
-            cov = rowpos[r] < m1
-            Ucols.append((rowpos[r[cov]], c[cov] + m1, x[cov]))
-        L = _csc_from_grouped(Lcols, n)
+            Lk, Uk = sp.csc_matrix(fac.L), sp.csc_matrix(fac.U)
+            C = BS[:, kcols]       # its entries in unit-covered rows form the C block
+            Ud[m1:] = Uk.diagonal()
+            parts = [(F.indptr.astype(_I), F.indices.astype(_I), F.data) for F in (Lk, Uk, C)]
+        else:
+            e = (np.zeros(1, _I), np.zeros(0, _I), np.zeros(0))
+            parts = [e, e, e]
+        L = sp.csc_matrix(kern.assemble_triangle(n, m1, *parts[0], True, *parts[2], rowpos),
+                          shape=(n, n))
         Lr = L.tocsr()
-        U = _csc_from_grouped(Ucols, n)
+        U = sp.csc_matrix(kern.assemble_triangle(n, m1, *parts[1], False, *parts[2], rowpos),
+                          shape=(n, n))
         cap_cols = n + o.update_limit + 2
         self._Lp, self._Li, self._Lx = L.indptr.astype(_I), L.indices.astype(_I), L.data
         self._Lrp, self._Lri, self._Lrx = (Lr.indptr.astype(_I), Lr.indices.astype(_I),
