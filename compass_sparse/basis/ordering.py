@@ -104,9 +104,14 @@ def zero_free_diagonal(K):
     n = K.shape[0]
     if n == 0:
         return np.zeros(0, _I)
-    P = sp.csr_matrix((np.ones(K.nnz), K.indices, K.indptr), shape=K.shape[::-1])
-    # P = K^T as CSR of pattern only; a column-perfect matching of K: match[j] = row of j
-    m = maximum_bipartite_matching(P.T.tocsr(), perm_type="row")
+    # the numerical pattern: an explicitly stored zero must not be matched to the
+    # diagonal (SuperLU would have to pivot away from it, and the fill the ordering
+    # counted on would be lost: measured 3.2e6 instead of 2.0e6 on a CGE basis block)
+    nz = K.data != 0.0
+    cols = np.repeat(np.arange(K.shape[1], dtype=_I), np.diff(K.indptr))
+    P = sp.csr_matrix((np.ones(int(nz.sum())), (K.indices[nz], cols[nz])), shape=K.shape)
+    # a column-perfect matching of K: match[j] = row matched to column j
+    m = maximum_bipartite_matching(P, perm_type="row")
     if np.any(m < 0):
         return None
     return m.astype(_I)
@@ -245,6 +250,7 @@ def compute_ordering(K, method="auto") -> Ordering:
             log.debug("ordering %s: no zero-free diagonal, using colamd", method)
         return Ordering("colamd", time=time.perf_counter() - t0)
     Km = sp.csc_matrix(K[match, :])
+    Km.eliminate_zeros()
     S, sym = symmetrized(Km)
     candidates = ("amd", "metis") if method == "auto" else (method,)
     if method == "auto" and (n < METIS_MIN_N or not _has_metis()):
