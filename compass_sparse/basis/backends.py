@@ -13,8 +13,8 @@ column. A backend raises :class:`SingularFactorError` when the matrix is exactly
   orders the columns itself and pivots rows partially (threshold ``diag_pivot_thresh``,
   default 1.0); with a symmetric ordering (``amd``, ``metis``: rows matched to a zero-free
   diagonal, then permuted symmetrically) it keeps the column order and pivots rows with
-  the threshold ``diag_pivot_thresh`` (default 0.1), preferring the diagonal the ordering
-  was computed for: a pivot is kept while ``|a_jj| >= 0.1 max_i |a_ij|``.
+  the threshold ``diag_pivot_thresh`` (default :data:`SYMMETRIC_PIVOT_THRESH` = 0.1),
+  preferring the diagonal the ordering was computed for.
 * :class:`UmfpackBackend` (SuiteSparse UMFPACK from the ``kvxopt`` wheels) chooses its own
   ordering and strategy.  UMFPACK computes ``P R K Q = L U`` with R a diagonal row scaling
   (kvxopt returns P, Q and R as sparse matrices; ``R`` multiplies), i.e.
@@ -59,16 +59,19 @@ BYTES_PER_ENTRY = 16.0
 
 SYMMETRIC_PIVOT_THRESH = 0.1
 """Row-pivoting threshold of SuperLU under a symmetric ordering: the diagonal is kept while
-``|a_jj| >= 0.5 max_i |a_ij|``.  0.1 gave 15-25% less fill on the CGE Jacobians but lost
-forward accuracy on ill-conditioned bases (cond 1e9: errors 30x above 1e3 cond eps, where
-partial pivoting stays within); 0.5 keeps most of the ordering's gain (fill +9% static,
-+17% dynamic against 0.1; 1.0 doubles the static fill)."""
+``|a_jj| >= 0.1 max_i |a_ij|``.  Measured on the CGE Jacobians against 0.5 and 1.0:
+fill 2.0e6 / 2.2e6 / 4.2e6 (static n = 1e4) and 1.6e6 / 1.9e6 / 2.0e6 (dynamic).  The
+accuracy threshold pivoting gives up on ill-conditioned bases (forward errors 30x above
+partial pivoting at cond 1e9) is won back by the refinement step of the periodic residual
+checks (:meth:`BasisManager._refine`, and the BTRAN check)."""
 
 AUTO_SYMMETRIC_MIN_N = 400
 """``backend="auto"``: blocks of at least this order are factored by SuperLU in a
 symmetric fill-reducing ordering (AMD / nested dissection); smaller ones by SuperLU with
-COLAMD, whose set-up costs least.  Crossovers measured on the CGE Jacobians and on random
-sparse blocks (``benchmarks/bench_basis_lu.py``)."""
+COLAMD, whose set-up costs least (every choice takes about a millisecond there).
+Crossovers measured on CGE Jacobian blocks: ``benchmarks/bench_basis_lu.py``,
+``benchmarks/basis.md``."""
+
 
 
 class SingularFactorError(Exception):

@@ -79,6 +79,7 @@ def test_ordering_computed_once_per_pattern_across_set_matrix():
     rng = np.random.default_rng(8)
     n = 500
     M = dominant_matrix(n, 0.01, rng)
+    ordmod._SHARED.clear()          # orderings are shared within the process
     bm = BasisManager(M, BasisOptions(ordering="metis"))
     allm = (np.full(n, KIND_M), np.arange(n), np.ones(n))
     bm.factor(*allm)
@@ -231,3 +232,16 @@ def test_matching_ignores_explicit_zeros_so_the_diagonal_is_numerically_nonzero(
     assert K.nnz > P.nnz + n // 2          # the zeros are stored
     m = ordmod.zero_free_diagonal(K)
     assert np.all(K.toarray()[m, np.arange(n)] != 0.0)
+
+
+def test_pattern_key_ignores_stored_zeros_and_tells_patterns_apart():
+    rng = np.random.default_rng(16)
+    A = sp.csc_matrix(sp.random(30, 30, density=0.1, random_state=rng) + sp.eye(30))
+    B = A.copy()
+    B.data[::3] = 0.0                     # stored zeros: pattern of the nonzeros changes
+    C = B.copy()
+    C.eliminate_zeros()
+    assert ordmod.pattern_key(B) == ordmod.pattern_key(C)
+    assert ordmod.pattern_key(A) != ordmod.pattern_key(C)
+    E = sp.csc_matrix(([1.0], ([0], [0])), shape=(30, 30))   # empty columns at the end
+    assert ordmod.pattern_key(E) != ordmod.pattern_key(sp.csc_matrix(sp.eye(30)))
