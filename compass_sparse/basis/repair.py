@@ -121,8 +121,9 @@ def select_regular_block(K, backend, rank_tol, dense_limit, max_rounds=30):
             return rows, cols, None
         Kk = sp.csc_matrix(K[rows, :][:, cols])
         try:
-            # partial pivoting from here on: threshold pivoting may put a small pivot on
-            # an independent column and so drop more columns than the rank deficiency
+            # COLAMD and partial pivoting from here on: with threshold pivoting in a
+            # symmetric ordering a small pivot may fall on an independent column and
+            # more columns be dropped than the rank deficiency
             fac = backend.factor(Kk, strict=True)
             bad = _tiny_pivots(fac, Kk, rank_tol)
         except SingularFactorError:
