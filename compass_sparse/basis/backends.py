@@ -43,7 +43,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..exceptions import FactorBudgetError
-from .ordering import Ordering, OrderingCache, pattern_key
+from .ordering import Ordering, OrderingCache
 
 log = logging.getLogger(__name__)
 
@@ -255,6 +255,19 @@ class SuperLUBackend:
         return x
 
 
+def _structure_key(K) -> bytes:
+    """Hash of the stored structure of a CSC matrix, stored zeros included: UMFPACK's
+    symbolic analysis belongs to the exact structure (the ordering key,
+    :func:`~compass_sparse.basis.ordering.pattern_key`, ignores stored zeros)."""
+    import hashlib
+
+    h = hashlib.blake2b(digest_size=16)
+    h.update(np.asarray(K.shape, dtype=_I).tobytes())
+    h.update(np.ascontiguousarray(K.indptr, dtype=_I).tobytes())
+    h.update(np.ascontiguousarray(K.indices, dtype=_I).tobytes())
+    return h.digest()
+
+
 def _kvx_matrix(K):
     from kvxopt import matrix, spmatrix
 
@@ -290,7 +303,7 @@ class UmfpackBackend:
         K = sp.csc_matrix(K)
         K.sort_indices()
         n = K.shape[0]
-        key = pattern_key(K)
+        key = _structure_key(K)
         A = _kvx_matrix(K)
         t0 = time.perf_counter()
         Fs = self._symbolic.pop(key, None)
