@@ -133,6 +133,10 @@ def warm_up():
     solve_mcp(m.with_shock(tariff=(0, 0.25)).problem, options={"time_limit": 60})
     r = ramsey_cge(periods=12, sectors=4)
     solve_mcp(r.with_shock(capital_tax=-0.1).problem, options={"time_limit": 60})
+    import scipy.sparse as sp
+
+    from compass_sparse.basis.ordering import compute_ordering
+    compute_ordering(sp.csc_matrix(sp.eye(50) + sp.eye(50, k=1)), "amd")  # ordering kernel
 
 
 def make_model(family: str, n: int, seed: int = 0):
@@ -282,6 +286,96 @@ def part_main(args, info):
                       f"FE={row.get('fact_equiv', float('nan')):.3g} "
                       f"LU={row.get('lu_nnz', '')} rss+={row.get('rss_delta_mb', float('nan')):.0f}MB "
                       f"{row.get('error', '')}", flush=True)
+    log.close()
+    return rows
+
+
+# =========================================================================== part lu
+LU_FIELDS = ["family", "n_target", "n", "case", "lu", "success", "status", "natural", "time",
+             "major", "crash", "factorizations", "splu_start", "fact_equiv", "ordering",
+             "orderings_computed", "time_ordering", "time_factor", "est_nnz_lu", "est_gb",
+             "max_nnz_lu", "jac_nnz", "rss_delta_mb", "load", "error"]
+
+LU_CONFIGS = {"old": "superlu:colamd", "new": ""}
+"""Linear algebra compared by part ``lu``: ``old`` = SuperLU with COLAMD and partial
+pivoting everywhere (what the solver did before the fill-reducing orderings), ``new`` = the
+automatic choice (``COMPASS_SPARSE_LU`` unset)."""
+
+
+def task_splu_start(family, n_target, case):
+    """One SuperLU (COLAMD, diag_pivot_thresh 0.1) of the free Jacobian block at the
+    shocked start: the unit of 'factorization equivalents' (median of up to 3)."""
+    m, _ = make_model(family, n_target)
+    ms = m.with_shock(**SHOCKS[case])
+    st = splu_stats(ms.J(m.benchmark), ms.lb, ms.ub, reps=3)
+    return dict(splu_start=st["splu_time"], jac_nnz=st["jac_nnz"], error=st["splu_error"])
+
+
+def task_lu(family, n_target, case, lu, time_limit):
+    if LU_CONFIGS[lu]:
+        os.environ["COMPASS_SPARSE_LU"] = LU_CONFIGS[lu]
+    else:
+        os.environ.pop("COMPASS_SPARSE_LU", None)
+    from compass_sparse import solve_mcp
+
+    m, _ = make_model(family, n_target)
+    ms = m.with_shock(**SHOCKS[case])
+    prob = ms.problem
+    base = rss_mb()
+    load = os.getloadavg()[0]
+    t = time.perf_counter()
+    res = solve_mcp(prob, options={"time_limit": float(time_limit)})
+    wall = time.perf_counter() - t
+    row = dict(n=m.n, time=wall, rss_delta_mb=rss_mb() - base, load=load)
+    row.update(result_fields(res, ms.F(res.x), prob.lb, prob.ub))
+    row["success"] = bool(row["natural"] <= SUCCESS_TOL)
+    lu_rep = getattr(res, "lu", {}) or {}
+    for k in ("ordering", "orderings_computed", "time_ordering", "time_factor", "est_nnz_lu",
+              "max_nnz_lu"):
+        row[k] = lu_rep.get(k, "")
+    eb = lu_rep.get("est_bytes", -1)
+    row["est_gb"] = eb / 2**30 if eb and eb > 0 else ""
+    return row
+
+
+def part_lu(args, info):
+    """Old and new linear algebra side by side, in one run, on the CGE counterfactuals."""
+    log = CsvLog(RESULTS / f"cge_lu{args.suffix}.csv", LU_FIELDS, append=args.append)
+    rows = []
+    for n in args.sizes:
+        for family, cases in (("static", ("tariff25", "notax")),
+                              ("dynamic", ("ksub10", "ktax25"))):
+            if family not in args.families:
+                continue
+            for case in cases:
+                if args.cases and case not in args.cases:
+                    continue
+                ref = {}
+                if n <= args.splu_max_n:
+                    ref = run_forked(task_splu_start, 700, family=family, n_target=int(n),
+                                     case=case)
+                for lu in args.lu:
+                    row = run_forked(task_lu, args.time_limit + 60 + n / 500, family=family,
+                                     n_target=int(n), case=case, lu=lu,
+                                     time_limit=args.time_limit)
+                    row.update(family=family, n_target=int(n), case=case, lu=lu)
+                    row.setdefault("success", False)
+                    if ref.get("splu_start"):
+                        row["splu_start"] = ref["splu_start"]
+                        row["jac_nnz"] = ref.get("jac_nnz", "")
+                        if "time" in row:
+                            row["fact_equiv"] = row["time"] / ref["splu_start"]
+                    log.write(row)
+                    rows.append(row)
+                    print(f"  {family:7s} n={row.get('n', n):>7} {case:8s} {lu:4s} "
+                          f"ok={row['success']!s:5s} {row.get('status', '')} "
+                          f"t={row.get('time', float('nan')):.3g}s maj={row.get('major', '')} "
+                          f"fact={row.get('factorizations', '')} "
+                          f"FE={row.get('fact_equiv', float('nan')):.3g} "
+                          f"ord={row.get('ordering', '')} LU={row.get('max_nnz_lu', '')} "
+                          f"rss+={row.get('rss_delta_mb', float('nan')):.0f}MB "
+                          f"load={row.get('load', float('nan')):.1f} {row.get('error', '')}",
+                          flush=True)
     log.close()
     return rows
 
@@ -810,7 +904,9 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="small sizes (< 2 minutes)")
     ap.add_argument("--sizes", type=float, nargs="+", default=None)
     ap.add_argument("--parts", nargs="+", default=["main", "tol", "stress", "path"],
-                    choices=["main", "tol", "stress", "path"])
+                    choices=["main", "tol", "stress", "path", "lu"])
+    ap.add_argument("--lu", nargs="+", default=list(LU_CONFIGS), choices=list(LU_CONFIGS),
+                    help="linear algebra compared by part lu")
     ap.add_argument("--time-limit", type=float, default=None, help="per-solve seconds")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--suffix", default=None, help="CSV name suffix (default '' / '_quick')")

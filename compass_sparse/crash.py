@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from .basis.backends import SingularFactorError, solve_sparse
 from .merit import fb_phi, normal_map_at, project
 
 __all__ = ["CrashResult", "crash"]
@@ -61,11 +62,10 @@ def _solve_reduced(Jii, rhs, perturb, eps0):
         A = Jii if eps == 0.0 else (Jii + eps * sp.identity(Jii.shape[0], format="csc"))
         try:
             nf += 1
-            lu = spla.splu(sp.csc_matrix(A), permc_spec="COLAMD")
-            d = lu.solve(rhs)
+            d = solve_sparse(A, rhs)
             if np.all(np.isfinite(d)):
                 return d, eps, nf
-        except RuntimeError:  # exactly singular
+        except SingularFactorError:  # exactly singular
             pass
         if not perturb:
             return None, eps, nf

@@ -49,3 +49,14 @@ class OptionError(CompassError, ValueError):
 class SingularBasisError(CompassError):
     """A basis could not be factorized even after rank repair (internal; the pivotal path
     turns it into a linear-solver code)."""
+
+
+
+class FactorBudgetError(CompassError):
+    """A factorization was not started: its symbolic estimate exceeds the time left
+    (``kind == "time"``) or the memory allowed (``kind == "memory"``).  Internal: a solve
+    turns it into ``Status.TIME_LIMIT`` or ``Status.MEMORY_LIMIT``."""
+
+    def __init__(self, kind, message):
+        super().__init__(message)
+        self.kind = kind

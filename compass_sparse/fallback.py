@@ -12,8 +12,10 @@
 
   and search along pi(z + alpha d).  For mu -> 0 this is a Gauss–Newton step on Phi, for
   large mu a short gradient step, so it bridges Newton and gradient behaviour where the
-  pivotal path fails (singular or indefinite J).  The system is solved by CHOLMOD when
-  scikit-sparse is installed (a sparse Cholesky of an SPD matrix), else by SuperLU.
+  pivotal path fails (singular or indefinite J).  The system is solved by CHOLMOD (a
+  sparse Cholesky of the SPD matrix, SuiteSparse from the ``kvxopt`` wheels, AMD-ordered
+  by CHOLMOD itself); SuperLU when CHOLMOD reports the matrix not positive definite
+  (round-off on a nearly singular H^T H with tiny mu) or kvxopt is missing.
 """
 from __future__ import annotations
 
@@ -29,7 +31,7 @@ __all__ = ["gradient_steps", "lm_step", "spd_solve", "cholmod_available"]
 
 def cholmod_available() -> bool:
     try:
-        import sksparse.cholmod  # noqa: F401
+        import kvxopt.cholmod  # noqa: F401
     except Exception:
         return False
     return True
@@ -38,15 +40,22 @@ def cholmod_available() -> bool:
 def spd_solve(A, b):
     """Solve A x = b for sparse SPD A: CHOLMOD when available, else SuperLU."""
     A = sp.csc_matrix(A)
+    b = np.asarray(b, dtype=np.float64).ravel()
     try:
-        from sksparse.cholmod import CholmodNotPositiveDefiniteError, cholesky
-
-        try:
-            return cholesky(A)(b)
-        except CholmodNotPositiveDefiniteError:
-            pass
+        from kvxopt import cholmod, matrix, spmatrix
     except ImportError:
-        pass
+        cholmod = None
+    if cholmod is not None and A.shape[0] > 0:
+        L = sp.tril(A, format="csc")      # CHOLMOD reads the lower triangle ('L')
+        cols = np.repeat(np.arange(L.shape[1], dtype=np.int64), np.diff(L.indptr))
+        Ak = spmatrix(matrix(L.data.astype(np.float64)), matrix(L.indices.astype(np.int64)),
+                      matrix(cols), L.shape)
+        B = matrix(b.copy())
+        try:
+            cholmod.linsolve(Ak, B, uplo="L")
+            return np.asarray(B).ravel()
+        except ArithmeticError:           # not positive definite in floating point
+            pass
     import scipy.sparse.linalg as spla  # here: its import costs ~0.3 s
 
     return spla.splu(A, permc_spec="MMD_AT_PLUS_A").solve(b)

@@ -48,6 +48,7 @@ import scipy.sparse as sp
 
 from .acceptance import Acceptance
 from .crash import crash
+from .exceptions import FactorBudgetError
 from .fallback import gradient_steps, lm_step
 from .merit import fb_gradient, fb_phi, fb_psi, normal_map_at, project
 from .path import LinearCode, WarmBasis, solve_linear_mcp
@@ -573,6 +574,9 @@ class NMSSolver:
                 self.basis = None
         except _Stop as stop:
             status, message = stop.status, stop.message
+        except FactorBudgetError as exc:
+            status = Status.TIME_LIMIT if exc.kind == "time" else Status.MEMORY_LIMIT
+            message = f"factorization not started: {exc}"
         except KeyboardInterrupt:
             status, message = Status.USER_INTERRUPT, "interrupted by the user (Ctrl-C)"
         status, message = self._diagnose(status, message)

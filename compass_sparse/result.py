@@ -39,6 +39,7 @@ class Status(enum.IntEnum):
     DOMAIN_ERROR = 8  #: F/J undefined (NaN/Inf or exception) and no progress was possible
     INFEASIBLE = 9  #: a linear problem proved to have no solution (ray termination)
     ERROR = 10  #: internal failure (singular basis that could not be repaired, ...)
+    MEMORY_LIMIT = 11  #: a factorization was not started: its L + U would exceed the memory
     CALLBACK_STOP = 100  #: the user's callback asked to stop (PATH code 6)
     #: the residual is below the tolerance only because F is flat there (PATH code 2)
     FLAT_RESIDUAL = 101
@@ -69,9 +70,11 @@ _STATUS_TEXT = {
     Status.CALLBACK_STOP: "stopped by the callback",
     Status.FLAT_RESIDUAL: "residual small only because F is flat (not a solution)",
     Status.STATIONARY_POINT: "stationary point of the merit function (not a solution)",
+    Status.MEMORY_LIMIT: "memory limit: the next factorization would not fit in memory",
 }
 
-_PATH_CODE = {Status.CALLBACK_STOP: 6, Status.FLAT_RESIDUAL: 2, Status.STATIONARY_POINT: 2}
+_PATH_CODE = {Status.CALLBACK_STOP: 6, Status.FLAT_RESIDUAL: 2, Status.STATIONARY_POINT: 2,
+              Status.MEMORY_LIMIT: 10}
 
 
 class PointStatus(enum.IntEnum):
@@ -163,6 +166,9 @@ class Result:
     #: every major iteration (:class:`Iteration`), when the stabilized Newton method ran;
     #: ``compass_sparse.plot.convergence`` draws it
     history: list | None = None
+    #: sparse LU of the basis: backend, ordering, symbolic estimates (est_nnz_lu, est_flops,
+    #: est_bytes: the largest met), max_nnz_lu, times, and the process's peak RSS in bytes
+    lu: dict = field(default_factory=dict)
 
     @property
     def worst_rows(self):

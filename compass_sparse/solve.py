@@ -37,7 +37,9 @@ DENSE_BASIS_MAX_N = 300
 """Up to this dimension the dense basis is used (0: always the sparse manager)."""
 
 
-def _manager_factory(opt: Options):
+def _manager_factory(opt: Options, deadline=None):
+    """Bases for the pivotal paths; the sparse manager gets the solve's deadline, so that a
+    factorization that cannot finish in time is not started (TIME_LIMIT)."""
     def make(M):
         n = M.shape[0]
         from . import dense_path
@@ -51,7 +53,8 @@ def _manager_factory(opt: Options):
             return DenseBasis(M)
         from .basis import BasisManager, BasisOptions
 
-        return BasisManager(M, options=BasisOptions(update_limit=opt.factorization_update_limit))
+        return BasisManager(M, options=BasisOptions(update_limit=opt.factorization_update_limit,
+                                                    deadline=deadline))
 
     return make
 
@@ -318,7 +321,7 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
         inner = scale_problem(work, sc)
         z0, f0, J0 = z0 / sc.col, sc.row * f0, sc.scale_jacobian(J0)
     phi0 = fb_phi(z0, f0, inner.lb, inner.ub)
-    solver = NMSSolver(inner, opt, manager_factory=_manager_factory(opt),
+    solver = NMSSolver(inner, opt, manager_factory=_manager_factory(opt, deadline),
                        callback=callback, deadline=deadline, log_major=log_major,
                        log_minor=log_minor, acceptance=acceptance)
     solver.basis = basis
@@ -340,6 +343,7 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
                   gradient_steps=out.gradient_steps, lm_steps=out.lm_steps,
                   factorizations=out.factorizations, basis_updates=out.updates,
                   basis=out.basis, history=_history(solver, out, phi0))
+    res.lu = _lu_report(solver.bm)
     if opt.verbosity >= 1:
         logger.info(res.summary())
     return res
@@ -370,6 +374,20 @@ def _scaling_pass(J0, opt):
     sc = equilibrate(J0)
     st.ran, st.reason, st.time = True, sc.summary(), time.perf_counter() - t
     return sc, st
+
+
+def _lu_report(bm) -> dict:
+    """Sparse-LU figures of a solve for ``Result.lu`` (empty for the dense basis)."""
+    import resource
+
+    st = getattr(bm, "stats", None)
+    if st is None or not hasattr(st, "est_bytes"):
+        return {}
+    return dict(backend=st.backend, ordering=st.ordering,
+                orderings_computed=st.orderings_computed, time_ordering=st.time_ordering,
+                time_factor=st.time_factor, est_nnz_lu=st.est_nnz_lu, est_flops=st.est_flops,
+                est_bytes=st.est_bytes, max_nnz_lu=st.max_nnz_lu,
+                peak_rss_bytes=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
 
 
 def _finish(problem, pre, status, message, z_red, opt, t0, passes, *, f_reduced=None,
@@ -464,7 +482,8 @@ def _lcp_path(problem, M, q, z, f, x, opt, t0, deadline, passes, st, crash_its, 
         return _result(problem, Status.SOLVED, "solved by the crash", z, f, opt, t0,
                        passes=passes, crash_iterations=crash_its,
                        factorizations=st.factorizations)
-    bm = _manager_factory(opt)(M)
+    deadline = t0 + opt.time_limit if np.isfinite(opt.time_limit) else None
+    bm = _manager_factory(opt, deadline)(M)
     tp = time.perf_counter()
     # One path solves a linear problem: give it room (a Lemke path may need ~n pivots).
     limit = opt.minor_iteration_limit or max(10 * n, 1000)

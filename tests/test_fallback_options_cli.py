@@ -15,17 +15,27 @@ def _spd(n, seed):
     return (B.T @ B + sp.identity(n) * rng.uniform(0.5, 1.0)).tocsc()
 
 
-@pytest.mark.suitesparse
-@pytest.mark.skipif(not cholmod_available(),
-                    reason="optional suitesparse extra (scikit-sparse/CHOLMOD) not installed")
-def test_spd_solve_uses_cholmod_and_agrees_with_dense():
-    import sksparse.cholmod  # noqa: F401  (the extra is really importable)
+def test_spd_solve_uses_cholmod_and_agrees_with_dense(monkeypatch):
+    assert cholmod_available()           # kvxopt is a required dependency
+    from kvxopt import cholmod
 
+    calls = []
+    real = cholmod.linsolve
+    monkeypatch.setattr(cholmod, "linsolve", lambda *a, **k: calls.append(1) or real(*a, **k))
     A = _spd(300, 1)
     b = np.random.default_rng(2).normal(size=300)
     x = spd_solve(A, b)
     assert np.linalg.norm(A @ x - b) <= 1e-10 * np.linalg.norm(b)
     assert np.allclose(x, np.linalg.solve(A.toarray(), b), rtol=1e-9, atol=1e-12)
+    assert calls == [1]
+
+
+def test_spd_solve_falls_back_to_superlu_when_cholmod_finds_the_matrix_indefinite():
+    A = _spd(100, 4) - 50.0 * sp.identity(100)   # symmetric, regular, indefinite
+    A = sp.csc_matrix(A)
+    b = np.ones(100)
+    x = spd_solve(A, b)
+    assert np.linalg.norm(A @ x - b) <= 1e-9 * np.linalg.norm(b)
 
 
 def test_spd_solve_without_cholmod_matches(monkeypatch):
@@ -33,12 +43,12 @@ def test_spd_solve_without_cholmod_matches(monkeypatch):
 
     real_import = builtins.__import__
 
-    def no_sksparse(name, *a, **k):
-        if name.startswith("sksparse"):
+    def no_kvxopt(name, *a, **k):
+        if name.startswith("kvxopt"):
             raise ImportError("hidden for this test")
         return real_import(name, *a, **k)
 
-    monkeypatch.setattr(builtins, "__import__", no_sksparse)
+    monkeypatch.setattr(builtins, "__import__", no_kvxopt)
     A = _spd(200, 3)
     b = np.ones(200)
     x = spd_solve(A, b)

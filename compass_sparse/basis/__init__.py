@@ -1,7 +1,9 @@
 """Basis manager of the pivotal path: sparse LU of B with Forrest-Tomlin updates.
 
 ``B = P^T S^{-1} L U Q^T`` with unit columns ordered first (they cost nothing), a sparse LU
-(SuperLU, or UMFPACK when available) of the remaining block, Forrest-Tomlin column
+of the remaining block (SuperLU in a fill-reducing ordering chosen once per pattern, or
+SuiteSparse UMFPACK: :mod:`~compass_sparse.basis.backends`,
+:mod:`~compass_sparse.basis.ordering`), Forrest-Tomlin column
 replacement with a row-eta file, refactorization triggers (update count, fill, stability,
 periodic residual check) and rank repair of singular bases. See
 :mod:`compass_sparse.basis.manager` for the mathematics and

@@ -145,3 +145,50 @@ def warmup():
     dead = np.zeros(1, dtype=np.bool_)
     utsolve(i1, i00, f0, dead, 1, i0, i0, i00, f0, d, w, 0, 1)
     dot_from(w, w, 0)
+    assemble_triangle(1, 0, i0, i00, f0, True, i0, i00, f0, i0)
+    assemble_triangle(1, 0, i0, i00, f0, False, i0, i00, f0, i0)
+
+
+@njit(cache=True)
+def assemble_triangle(n, m1, Kp, Ki, Kx, lower, Cp, Ci, Cx, rowpos):
+    """CSC arrays (data, indices, indptr) of the n x n factor of B over positions.
+
+    Column ``m1 + j`` holds the strictly lower (``lower``) or strictly upper part of column
+    j of the block factor (Kp, Ki, Kx), rows shifted by m1, preceded (upper only) by the
+    entries of column j of C = (Cp, Ci, Cx) whose row has a position ``rowpos[i] < m1``
+    (the unit-covered rows).  Columns 0..m1-1 are empty.  Two passes: count, then fill.
+    """
+    mk = Kp.shape[0] - 1
+    indptr = np.zeros(n + 1, np.int64)
+    for j in range(mk):
+        cnt = 0
+        if not lower:
+            for e in range(Cp[j], Cp[j + 1]):
+                if rowpos[Ci[e]] < m1:
+                    cnt += 1
+        for e in range(Kp[j], Kp[j + 1]):
+            r = Ki[e]
+            if (lower and r > j) or ((not lower) and r < j):
+                cnt += 1
+        indptr[m1 + j + 1] = cnt
+    for c in range(n):
+        indptr[c + 1] += indptr[c]
+    nnz = indptr[n]
+    ind = np.empty(nnz, np.int64)
+    val = np.empty(nnz)
+    for j in range(mk):
+        q = indptr[m1 + j]
+        if not lower:
+            for e in range(Cp[j], Cp[j + 1]):
+                p = rowpos[Ci[e]]
+                if p < m1:
+                    ind[q] = p
+                    val[q] = Cx[e]
+                    q += 1
+        for e in range(Kp[j], Kp[j + 1]):
+            r = Ki[e]
+            if (lower and r > j) or ((not lower) and r < j):
+                ind[q] = r + m1
+                val[q] = Kx[e]
+                q += 1
+    return val, ind, indptr

@@ -4,24 +4,101 @@ A backend factors a square sparse matrix K (CSC) as
 
     diag(s[row_order]) K[row_order, :][:, col_order] = L U
 
-with L unit lower triangular and U upper triangular (``s`` an optional row scaling, ones
+with L unit lower triangular and U upper triangular (``s`` an optional row scaling, None
 for SuperLU). ``row_order[t]`` is the row of K pivoted at position t, ``col_order[t]`` its
 column. A backend raises :class:`SingularFactorError` when the matrix is exactly singular.
 
-SuperLU (``scipy.sparse.linalg.splu``) is always available; UMFPACK is used when
-``scikits.umfpack`` is importable (imported lazily here and nowhere else).
+* :class:`SuperLUBackend` (``scipy.sparse.linalg.splu``, always available) factors K in the
+  fill-reducing ordering of :mod:`compass_sparse.basis.ordering`: with ``colamd`` SuperLU
+  orders the columns itself and pivots rows partially (threshold ``diag_pivot_thresh``,
+  default 1.0); with a symmetric ordering (``amd``, ``metis``: rows matched to a zero-free
+  diagonal, then permuted symmetrically) it keeps the column order and pivots rows with
+  the threshold ``diag_pivot_thresh`` (default :data:`SYMMETRIC_PIVOT_THRESH` = 0.1),
+  preferring the diagonal the ordering was computed for.
+* :class:`UmfpackBackend` (SuiteSparse UMFPACK from the ``kvxopt`` wheels) chooses its own
+  ordering and strategy.  UMFPACK computes ``P R K Q = L U`` with R a diagonal row scaling
+  (kvxopt returns P, Q and R as sparse matrices; ``R`` multiplies), i.e.
+  ``row_order[t]`` = the column of P's nonzero in row t, ``col_order[t]`` = the row of
+  Q's nonzero in column t and ``s = diag(R)``, pinned by a test against a dense solve.
+  The symbolic analysis is kept per pattern: a refactorization of the same pattern
+  (Newton steps, crash steps, refactorization after updates) is numeric only.
+
+The ordering (and the symbolic analysis) is computed once per sparsity pattern and reused;
+``last`` on a backend describes the latest factorization (:class:`FactorInfo`).
+
+Budget: before a factorization the backend compares the symbolic estimate of the ordering
+(flops, bytes of L + U) with the limits of a :class:`FactorBudget` and raises
+:class:`FactorBudgetError` instead of starting a factorization that cannot finish in the
+time left or would not fit in memory.
 """
 
 from __future__ import annotations
 
+import logging
+import os
+import time
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
+from ..exceptions import FactorBudgetError
+from .ordering import Ordering, OrderingCache
+
+log = logging.getLogger(__name__)
+
+_I = np.int64
+
+FLOP_RATE = 2.0e9
+"""Flops per second assumed by the time check (a fast single core on the supernodal
+kernels: the check must never stop a factorization that would have finished).  Measured
+rates on the CGE Jacobians were 0.5-2e9 (SuperLU with nested dissection, one core)."""
+
+BYTES_PER_ENTRY = 16.0
+"""Bytes per stored entry of L + U (value + index), plus the manager's copies: x 2."""
+
+SYMMETRIC_PIVOT_THRESH = 0.1
+"""Row-pivoting threshold of SuperLU under a symmetric ordering: the diagonal is kept while
+``|a_jj| >= 0.1 max_i |a_ij|``.  Measured on the CGE Jacobians against 0.5 and 1.0:
+fill 2.0e6 / 2.2e6 / 4.2e6 (static n = 1e4) and 1.6e6 / 1.9e6 / 2.0e6 (dynamic).  The
+accuracy threshold pivoting gives up on ill-conditioned bases (forward errors 30x above
+partial pivoting at cond 1e9) is won back by the refinement step of the periodic residual
+checks (:meth:`BasisManager._refine`, and the BTRAN check)."""
+
+AUTO_SYMMETRIC_MIN_N = 400
+"""``backend="auto"``: blocks of at least this order are factored by SuperLU in a
+symmetric fill-reducing ordering (AMD / nested dissection); smaller ones by SuperLU with
+COLAMD, whose set-up costs least (every choice takes about a millisecond there).
+Crossovers measured on CGE Jacobian blocks: ``benchmarks/bench_basis_lu.py``,
+``benchmarks/basis.md``."""
+
+
 
 class SingularFactorError(Exception):
     """The backend found an exactly zero pivot."""
+
+
+@dataclass
+class FactorBudget:
+    """Limits a factorization is checked against (None = no limit).
+
+    ``deadline`` is a ``time.perf_counter()`` value, ``memory_bytes`` the bytes L + U may
+    take (default: 80% of the memory the system reports available when the budget is
+    created)."""
+
+    deadline: float | None = None
+    memory_bytes: float | None = None
+
+    @staticmethod
+    def available_memory() -> float | None:
+        try:
+            with open("/proc/meminfo") as fh:
+                for line in fh:
+                    if line.startswith("MemAvailable:"):
+                        return float(line.split()[1]) * 1024.0
+        except OSError:
+            pass
+        return None
 
 
 @dataclass
@@ -33,78 +110,320 @@ class LUFactors:
     row_scale: np.ndarray | None = None   # indexed by row of K; None = no scaling
 
 
+@dataclass
+class FactorInfo:
+    """The latest factorization of a backend: ``backend`` and ``ordering`` used, the
+    symbolic estimates (-1 when none), the fill obtained, the seconds spent ordering
+    (0 when reused) and factoring."""
+
+    backend: str = ""
+    ordering: str = ""
+    order: int = 0
+    nnz: int = 0
+    est_nnz_lu: int = -1
+    est_flops: float = -1.0
+    nnz_lu: int = 0
+    time_ordering: float = 0.0
+    time_factor: float = 0.0
+    ordering_reused: bool = False
+
+    @property
+    def est_bytes(self) -> float:
+        return BYTES_PER_ENTRY * self.est_nnz_lu if self.est_nnz_lu >= 0 else -1.0
+
+
 def umfpack_available() -> bool:
     try:
-        import scikits.umfpack  # noqa: F401
+        import kvxopt.umfpack  # noqa: F401
     except Exception:
         return False
     return True
 
 
+def metis_available() -> bool:
+    try:
+        import pymetis  # noqa: F401
+    except Exception:
+        return False
+    return True
+
+
+def _check_budget(info: FactorInfo, budget: FactorBudget | None):
+    if budget is None:
+        return
+    if budget.memory_bytes is not None and info.est_nnz_lu >= 0 \
+            and info.est_bytes > budget.memory_bytes:
+        raise FactorBudgetError(
+            "memory", f"a {info.order} x {info.order} factorization would need about "
+            f"{info.est_bytes / 2**30:.1f} GiB for L + U (ordering {info.ordering}, "
+            f"{info.est_nnz_lu:.3g} entries); {budget.memory_bytes / 2**30:.1f} GiB allowed")
+    if budget.deadline is not None and info.est_flops >= 0:
+        left = budget.deadline - time.perf_counter()
+        need = info.est_flops / FLOP_RATE
+        if need > left:
+            raise FactorBudgetError(
+                "time", f"a {info.order} x {info.order} factorization needs about "
+                f"{need:.0f} s ({info.est_flops:.3g} flops, ordering {info.ordering}); "
+                f"{max(left, 0.0):.0f} s left")
+
+
+def _inverse(p):
+    inv = np.empty_like(p)
+    inv[p] = np.arange(p.size, dtype=p.dtype)
+    return inv
+
+
+def _permute(K, rows, cols):
+    """``K[rows, :][:, cols]`` for CSC K, without the row-indexing copy of scipy."""
+    Kc = K[:, cols]
+    Kp = sp.csc_matrix((Kc.data, _inverse(rows)[Kc.indices], Kc.indptr), shape=Kc.shape)
+    Kp.has_sorted_indices = False
+    Kp.sort_indices()
+    return Kp
+
+
 class SuperLUBackend:
+    """SuperLU in the ordering of an :class:`~compass_sparse.basis.ordering.OrderingCache`."""
+
     name = "superlu"
 
-    def __init__(self, permc_spec="COLAMD", diag_pivot_thresh=1.0):
-        self.permc_spec = permc_spec
+    def __init__(self, ordering="auto", diag_pivot_thresh=None, budget=None):
+        self.orderings = OrderingCache(ordering)
         self.diag_pivot_thresh = diag_pivot_thresh
+        self.budget = budget
+        self.last = FactorInfo(backend=self.name)
 
-    def factor(self, K) -> LUFactors:
+    def splu(self, K, strict=False):
+        """(SuperLU object of the ordered K, ordering): ``lu`` factors
+        ``K[o.rows][:, o.cols]`` under a symmetric ordering, K itself under COLAMD.
+        ``strict`` = COLAMD and partial pivoting, for rank detection."""
         from scipy.sparse.linalg import splu
 
+        K = sp.csc_matrix(K)
+        n = K.shape[0]
+        before = self.orderings.computed
+        # rank detection keeps to COLAMD with partial pivoting: with a symmetric ordering
+        # (fixed column order) the tiny pivots of a singular block marked more columns
+        # than its rank deficiency (measured on the rank-repair tests)
+        o = Ordering("colamd") if strict else self.orderings.get(K)
+        fresh = self.orderings.computed > before
+        info = FactorInfo(self.name, o.method, n, int(K.nnz), o.nnz_lu, o.flops,
+                          time_ordering=o.time if fresh else 0.0, ordering_reused=not fresh)
+        self.last = info
+        _check_budget(info, self.budget)
+        t0 = time.perf_counter()
+        if o.method == "colamd":
+            A, spec, thresh, symm = K, "COLAMD", 1.0, False
+        else:
+            A, spec, thresh, symm = _permute(K, o.rows, o.cols), "NATURAL", SYMMETRIC_PIVOT_THRESH, True
+        if self.diag_pivot_thresh is not None:
+            thresh = self.diag_pivot_thresh
+        if strict:
+            thresh = 1.0
         try:
-            lu = splu(K, permc_spec=self.permc_spec,
-                      diag_pivot_thresh=self.diag_pivot_thresh,
-                      options=dict(SymmetricMode=False))
+            lu = splu(A, permc_spec=spec, diag_pivot_thresh=thresh,
+                      options=dict(SymmetricMode=symm))
         except RuntimeError as exc:  # "Factor is exactly singular"
             raise SingularFactorError(str(exc)) from exc
-        # Pr K Pc = L U: row i of K sits at position perm_r[i], column j at perm_c[j].
-        row_order = np.empty(lu.perm_r.size, dtype=np.int64)
-        row_order[lu.perm_r] = np.arange(lu.perm_r.size, dtype=np.int64)
-        col_order = np.empty(lu.perm_c.size, dtype=np.int64)
-        col_order[lu.perm_c] = np.arange(lu.perm_c.size, dtype=np.int64)
-        return LUFactors(sp.csc_matrix(lu.L), sp.csc_matrix(lu.U), row_order, col_order)
+        info.time_factor = time.perf_counter() - t0
+        return lu, o
+
+    def factor(self, K, strict=False) -> LUFactors:
+        """LU of K; ``strict`` asks for COLAMD with partial pivoting, whose tiny pivots
+        mark dependent columns reliably (rank repair)."""
+        t0 = time.perf_counter()
+        lu, o = self.splu(K, strict)
+        # Pr A Pc = L U: row i of A sits at position perm_r[i], column j at perm_c[j].
+        row_order = _inverse(lu.perm_r.astype(_I))
+        col_order = _inverse(lu.perm_c.astype(_I))
+        if o.method != "colamd":
+            row_order = o.rows[row_order]
+            col_order = o.cols[col_order]
+        L, U = lu.L, lu.U
+        self.last.nnz_lu = int(L.nnz + U.nnz)
+        self.last.time_factor = time.perf_counter() - t0
+        return LUFactors(L, U, row_order, col_order)
+
+    def solve(self, K, b):
+        """x with K x = b, from one factorization (no factors extracted)."""
+        lu, o = self.splu(K)
+        b = np.asarray(b, dtype=np.float64)
+        if o.method == "colamd":
+            return lu.solve(b)
+        x = np.empty_like(b)
+        x[o.cols] = lu.solve(b[o.rows])
+        return x
+
+
+def _structure_key(K) -> bytes:
+    """Hash of the stored structure of a CSC matrix, stored zeros included: UMFPACK's
+    symbolic analysis belongs to the exact structure (the ordering key,
+    :func:`~compass_sparse.basis.ordering.pattern_key`, ignores stored zeros)."""
+    import hashlib
+
+    h = hashlib.blake2b(digest_size=16)
+    h.update(np.asarray(K.shape, dtype=_I).tobytes())
+    h.update(np.ascontiguousarray(K.indptr, dtype=_I).tobytes())
+    h.update(np.ascontiguousarray(K.indices, dtype=_I).tobytes())
+    return h.digest()
+
+
+def _kvx_matrix(K):
+    from kvxopt import matrix, spmatrix
+
+    cols = np.repeat(np.arange(K.shape[1], dtype=_I), np.diff(K.indptr))
+    return spmatrix(matrix(np.ascontiguousarray(K.data, dtype=np.float64)),
+                    matrix(K.indices.astype(_I)), matrix(cols), K.shape)
+
+
+def _from_kvx(M):
+    cp, ri, v = M.CCS
+    return sp.csc_matrix((np.asarray(v).ravel(), np.asarray(ri, dtype=_I).ravel(),
+                          np.asarray(cp, dtype=_I).ravel()), shape=M.size)
 
 
 class UmfpackBackend:
+    """UMFPACK (kvxopt); symbolic analysis kept per pattern, numeric factorization each
+    time.  UMFPACK orders by itself, so the ordering option must be "auto"."""
+
     name = "umfpack"
 
-    def factor(self, K) -> LUFactors:
-        import scikits.umfpack as um
+    def __init__(self, budget=None, cache_size=4):
+        self.budget = budget
+        self._symbolic = {}
+        self._cache_size = cache_size
+        self.last = FactorInfo(backend=self.name)
+        self.symbolic_reused = 0
 
-        try:
-            lu = um.splu(K)
-        except Exception as exc:
-            raise SingularFactorError(str(exc)) from exc
-        U = sp.csc_matrix(lu.U)
-        if U.shape[0] and np.any(U.diagonal() == 0.0):
-            raise SingularFactorError("UMFPACK: zero pivot")
-        # UMFPACK: P R A Q = L U with a row scaling R (multiplied or divided, depending on
-        # the build) -- the conventions of the wrapper are settled by a probe product.
+    def factor(self, K, strict=False) -> LUFactors:
+        from kvxopt import umfpack
+
+        del strict   # kvxopt exposes no pivot tolerance: UMFPACK's defaults apply
+
+        K = sp.csc_matrix(K)
+        K.sort_indices()
         n = K.shape[0]
-        L = sp.csc_matrix(lu.L)
-        pr = np.asarray(lu.perm_r, dtype=np.int64)
-        pc = np.asarray(lu.perm_c, dtype=np.int64)
-        R = np.asarray(getattr(lu, "R", np.ones(n)), dtype=float).ravel()
-        x = np.random.default_rng(0).standard_normal(n)
-        lux = L @ (U @ x)
-        inv = np.empty_like(pr)
-        inv[pr] = np.arange(n)
-        for ro in (pr, inv):
-            for co in (pc, np.argsort(pc)):
-                for s in (R, 1.0 / R):
-                    y = s[ro] * (K[ro, :][:, co] @ x)
-                    if np.linalg.norm(y - lux) <= 1e-8 * (np.linalg.norm(lux) + 1.0):
-                        return LUFactors(L, U, ro, co, s)
-        raise SingularFactorError("UMFPACK factors could not be interpreted")
+        key = _structure_key(K)
+        A = _kvx_matrix(K)
+        t0 = time.perf_counter()
+        Fs = self._symbolic.pop(key, None)
+        reused = Fs is not None
+        if reused:
+            self.symbolic_reused += 1
+        else:
+            try:
+                Fs = umfpack.symbolic(A)
+            except (ArithmeticError, ValueError) as exc:
+                raise SingularFactorError(f"UMFPACK symbolic: {exc}") from exc
+        self._symbolic[key] = Fs                  # most recent last
+        while len(self._symbolic) > self._cache_size:
+            self._symbolic.pop(next(iter(self._symbolic)))
+        info = FactorInfo(self.name, "umfpack", n, int(K.nnz),
+                          time_ordering=0.0 if reused else time.perf_counter() - t0,
+                          ordering_reused=reused)
+        self.last = info
+        _check_budget(info, self.budget)
+        t1 = time.perf_counter()
+        try:
+            Fn = umfpack.numeric(A, Fs)
+        except (ArithmeticError, ValueError) as exc:
+            raise SingularFactorError(f"UMFPACK: {exc}") from exc
+        Lk, Uk, Pk, Qk, Rk = umfpack.get_numeric(A, Fn)
+        L, U = _from_kvx(Lk), _from_kvx(Uk)
+        # P: one entry per column; row t of P selects row_order[t] of K
+        Ps, Qs, Rs = _from_kvx(Pk), _from_kvx(Qk), _from_kvx(Rk)
+        row_order = np.empty(n, dtype=_I)
+        row_order[Ps.indices] = np.repeat(np.arange(n, dtype=_I), np.diff(Ps.indptr))
+        col_order = Qs.indices.astype(_I)
+        s = Rs.diagonal().copy()
+        d = U.diagonal()
+        if n and (np.any(d == 0.0) or not np.all(np.isfinite(d))):
+            raise SingularFactorError("UMFPACK: zero pivot")
+        info.nnz_lu = int(L.nnz + U.nnz)
+        info.time_factor = time.perf_counter() - t1
+        return LUFactors(L, U, row_order, col_order, s)
 
 
-def make_backend(name, permc_spec="COLAMD", diag_pivot_thresh=1.0):
-    if name == "auto":
-        name = "umfpack" if umfpack_available() else "superlu"
+_ENV = "COMPASS_SPARSE_LU"
+"""Environment override of the automatic choices, "backend" or "backend:ordering" (e.g.
+"superlu:metis", "umfpack"): lets the whole test suite run under every combination."""
+
+
+def resolve(backend="auto", ordering="auto"):
+    """The (backend, ordering) pair an ``auto`` choice stands for: the environment
+    variable ``COMPASS_SPARSE_LU`` first (applies only to the ``auto`` fields), then the
+    defaults.  ``ordering`` "auto" under SuperLU is chosen per block by the ordering
+    cache (see :mod:`compass_sparse.basis.ordering`)."""
+    env = os.environ.get(_ENV, "").strip()
+    if env:
+        b, _, o = env.partition(":")
+        if backend == "auto" and b and not (b == "umfpack" and ordering != "auto"):
+            backend = b           # (an explicit ordering keeps SuperLU, which takes it)
+        if ordering == "auto" and o and backend != "umfpack":
+            ordering = o
+    if backend == "auto":
+        backend = "superlu"
+    return backend, ordering
+
+
+class AutoBackend:
+    """SuperLU, with COLAMD on blocks below :data:`AUTO_SYMMETRIC_MIN_N` and the ordering
+    cache's choice (AMD or nested dissection) above."""
+
+    name = "auto"
+
+    def __init__(self, ordering="auto", diag_pivot_thresh=None, budget=None):
+        self.small = SuperLUBackend("colamd", diag_pivot_thresh, budget)
+        self.large = SuperLUBackend(ordering, diag_pivot_thresh, budget)
+        self.last = self.small.last
+
+    def factor(self, K, strict=False) -> LUFactors:
+        b = self.small if K.shape[0] < AUTO_SYMMETRIC_MIN_N else self.large
+        try:
+            return b.factor(K, strict)
+        finally:
+            self.last = b.last
+
+
+def solve_sparse(A, b):
+    """Solve A x = b (A square sparse) by one LU in the automatic ordering (or the
+    environment's choice, as for the basis); raises :class:`SingularFactorError` when A is
+    exactly singular.  For the crash, whose reduced Jacobians are large CGE blocks too."""
+    b_ = make_backend()
+    if isinstance(b_, AutoBackend):
+        b_ = b_.small if A.shape[0] < AUTO_SYMMETRIC_MIN_N else b_.large
+    if isinstance(b_, SuperLUBackend):
+        return b_.solve(A, b)
+    f = b_.factor(sp.csc_matrix(A))     # UMFPACK: solve with its factors
+    from scipy.sparse.linalg import spsolve_triangular
+
+    w = (f.row_scale * np.asarray(b, dtype=np.float64))[f.row_order]
+    L = sp.csr_matrix(f.L)
+    y = spsolve_triangular(L, w, lower=True, unit_diagonal=True)
+    y = spsolve_triangular(sp.csr_matrix(f.U), y, lower=False)
+    x = np.empty_like(y)
+    x[f.col_order] = y
+    return x
+
+
+def make_backend(name="auto", ordering="auto", diag_pivot_thresh=None, budget=None):
+    """A backend for ``BasisOptions.backend`` / ``ordering`` (validated there)."""
+    from ..exceptions import OptionError
+
+    forced = name != "auto"
+    name, ordering = resolve(name, ordering)
     if name == "umfpack":
         if not umfpack_available():
-            from ..exceptions import OptionError
-
-            raise OptionError("backend='umfpack' needs the optional package scikits.umfpack")
-        return UmfpackBackend()
-    return SuperLUBackend(permc_spec, diag_pivot_thresh)
+            raise OptionError("backend='umfpack' needs the package kvxopt (SuiteSparse "
+                              "wheels): pip install kvxopt")
+        if ordering != "auto":
+            raise OptionError(f"backend='umfpack' orders by itself; ordering={ordering!r} "
+                              "needs backend='superlu'")
+        return UmfpackBackend(budget)
+    if name != "superlu":
+        raise OptionError(f"unknown LU backend {name!r} (from {_ENV}?)")
+    if ordering == "metis" and not metis_available():
+        raise OptionError("ordering='metis' needs the package pymetis")
+    if not forced and ordering == "auto":
+        return AutoBackend(ordering, diag_pivot_thresh, budget)
+    return SuperLUBackend(ordering, diag_pivot_thresh, budget)

@@ -55,12 +55,16 @@ import scipy.sparse as sp
 
 from ..exceptions import CompassError, ProblemError, ShapeError, SingularBasisError
 from . import _kernels as kern
-from .backends import make_backend
+from .backends import FactorBudget, make_backend
 from .repair import select_regular_block
 from .types import (KIND_DENSE, KIND_M, KIND_UNIT, BasisOptions, BasisStats,
                     FactorReport, UpdateStatus)
 
 _I = np.int64
+
+_REFINE_ABOVE = 1e-14
+"""A residual check that finds a backward error above this (and below the residual
+tolerance) refines the solution once (:meth:`BasisManager._refine`)."""
 
 
 def _readonly(a):
@@ -87,8 +91,13 @@ class BasisManager:
 
     def __init__(self, M, options: BasisOptions | None = None):
         self.options = options if options is not None else BasisOptions()
-        self._backend = make_backend(self.options.backend, self.options.permc_spec,
-                                     self.options.diag_pivot_thresh)
+        o = self.options
+        mem = o.memory_limit
+        if mem is None:
+            avail = FactorBudget.available_memory()
+            mem = 0.8 * avail if avail is not None else None
+        self.budget = FactorBudget(o.deadline, None if mem == np.inf else mem)
+        self._backend = make_backend(o.backend, o.ordering, o.diag_pivot_thresh, self.budget)
         self._load_matrix(M, first=True)
         n = self.n
         self._r = None
@@ -321,8 +330,7 @@ class BasisManager:
         Ud = np.ones(n)
         Ud[:m1] = self._signs[units]
         rscale = None
-        li, lj, lx = [np.zeros(0, _I)], [np.zeros(0, _I)], [np.zeros(0)]
-        ui, uj, ux = [np.zeros(0, _I)], [np.zeros(0, _I)], [np.zeros(0)]
+        # L and U of B as CSC arrays over positions (compiled assembly, no sort)
         if mk:
             krows = R2[rows_k][fac.row_order]          # global row at K position t
             kcols = cols_k[fac.col_order]              # BS column at K position t
@@ -331,27 +339,17 @@ class BasisManager:
             if fac.row_scale is not None:
                 rscale = np.ones(n)
                 rscale[R2[rows_k]] = fac.row_scale
-            Lk = sp.coo_matrix(fac.L)
-            msk = Lk.row > Lk.col
-            li.append(Lk.row[msk].astype(_I) + m1)
-            lj.append(Lk.col[msk].astype(_I) + m1)
-            lx.append(Lk.data[msk])
-            Uk = sp.coo_matrix(fac.U)
-            msk = Uk.row < Uk.col
-            ui.append(Uk.row[msk].astype(_I) + m1)
-            uj.append(Uk.col[msk].astype(_I) + m1)
-            ux.append(Uk.data[msk])
-            Ud[m1:] = fac.U.diagonal()
-            # C block: entries of kept non-unit columns in unit-covered rows
-            Bk = sp.coo_matrix(BS[:, kcols])
-            cov = rowpos[Bk.row] < m1
-            ui.append(rowpos[Bk.row[cov]])
-            uj.append(Bk.col[cov].astype(_I) + m1)
-            ux.append(Bk.data[cov])
-        L = sp.csc_matrix((np.concatenate(lx), (np.concatenate(li), np.concatenate(lj))),
+            Lk, Uk = sp.csc_matrix(fac.L), sp.csc_matrix(fac.U)
+            C = BS[:, kcols]       # its entries in unit-covered rows form the C block
+            Ud[m1:] = Uk.diagonal()
+            parts = [(F.indptr.astype(_I), F.indices.astype(_I), F.data) for F in (Lk, Uk, C)]
+        else:
+            e = (np.zeros(1, _I), np.zeros(0, _I), np.zeros(0))
+            parts = [e, e, e]
+        L = sp.csc_matrix(kern.assemble_triangle(n, m1, *parts[0], True, *parts[2], rowpos),
                           shape=(n, n))
         Lr = L.tocsr()
-        U = sp.csc_matrix((np.concatenate(ux), (np.concatenate(ui), np.concatenate(uj))),
+        U = sp.csc_matrix(kern.assemble_triangle(n, m1, *parts[1], False, *parts[2], rowpos),
                           shape=(n, n))
         cap_cols = n + o.update_limit + 2
         self._Lp, self._Li, self._Lx = L.indptr.astype(_I), L.indices.astype(_I), L.data
@@ -395,16 +393,30 @@ class BasisManager:
         self._nnz_base = self._nnzL + self._nnzU
         self._rebuild_maps()
         self._factored = True
+        self._threshold_pivoting = bool(mk) and self._backend.last.ordering in ("amd", "metis")
         self._residual_refactored = False
         self._cache = None
         self._version += 1
         st = self.stats
         st.factorizations += 1
         st.nnz_L, st.nnz_U, st.nnz_eta = self._nnzL, self._nnzU, 0
+        if mk:
+            self._record_lu(self._backend.last)
         st.time_factor += time.perf_counter() - t0
         report.ok = True
         self.last_report = report
         return report
+
+    def _record_lu(self, info):
+        st = self.stats
+        st.backend, st.ordering = info.backend, info.ordering
+        if not info.ordering_reused:
+            st.orderings_computed += 1
+            st.time_ordering += info.time_ordering
+        st.est_nnz_lu = max(st.est_nnz_lu, info.est_nnz_lu)
+        st.est_flops = max(st.est_flops, info.est_flops)
+        st.est_bytes = max(st.est_bytes, info.est_bytes)
+        st.max_nnz_lu = max(st.max_nnz_lu, info.nnz_lu)
 
     # ------------------------------------------------------------------ solves
     def _require(self):
@@ -482,6 +494,22 @@ class BasisManager:
         c = np.asarray(c, dtype=np.float64).ravel()
         if c.shape != (self.n,):
             raise ShapeError(f"c must have length {self.n}")
+        y = self._btran_work(c)
+        f = self.options.residual_check_frequency
+        self.stats.btran_calls += 1
+        if f and self.stats.btran_calls % f == 0 and self._threshold_pivoting:
+            # the transposed counterpart of the FTRAN check: refine once when the
+            # backward error is above machine level (threshold pivoting only)
+            self.stats.residual_checks += 1
+            err = self._backward_error_t(y, c)
+            if np.isfinite(err) and err > _REFINE_ABOVE:
+                y2 = y + self._btran_work(c - self.rmatvec(y))
+                if np.all(np.isfinite(y2)) and self._backward_error_t(y2, c) < err:
+                    y = y2
+        self.stats.time_solve += time.perf_counter() - t0
+        return y
+
+    def _btran_work(self, c):
         N = self.n + self._k
         w = self._work()
         w[self._pos_of_slot] = c
@@ -491,9 +519,25 @@ class BasisManager:
         y = w[self._rowpos]
         if self._rscale is not None:
             y = y * self._rscale
-        self.stats.time_solve += time.perf_counter() - t0
-        self.stats.btran_calls += 1
         return y
+
+    def rmatvec(self, y):
+        """B^T @ y (indexed by slot) for y indexed by row."""
+        k, i, s = self._kinds, self._indices, self._signs
+        out = np.zeros(self.n)
+        m = k == KIND_M
+        out[m] = s[m] * (self._M.T @ y)[i[m]]
+        u = k == KIND_UNIT
+        out[u] = s[u] * y[i[u]]
+        d = k == KIND_DENSE
+        if np.any(d):
+            out[d] = s[d] * float(self._r @ y)
+        return out
+
+    def _backward_error_t(self, y, c):
+        res = np.abs(self.rmatvec(y) - c).max()
+        den = np.abs(c).max() + self._norm_inf_B() * np.abs(y).max()
+        return float(res / den) if den > 0 else float(res)
 
     # ---------------------------------------------------------- residual check
     def matvec(self, x):
@@ -543,8 +587,25 @@ class BasisManager:
         self.stats.residual_checks += 1
         err = self.backward_error(x, rhs)
         if err <= self.options.residual_tolerance:
+            if err > _REFINE_ABOVE:
+                x = self._refine(x, rhs, err, col)
             return x
         return self._recover(x, rhs, col)
+
+    def _refine(self, x, rhs, err, col):
+        """One step of iterative refinement, kept when it lowers the backward error.
+        Threshold pivoting (symmetric orderings) may leave a backward error well above
+        machine precision though below the residual tolerance; the check that measured
+        it makes the correction cheap (one more solve)."""
+        w = self._work()
+        self._scatter_rhs(w, np.arange(self.n), rhs - self.matvec(x))
+        dx, _ = self._ftran_work(w, False)
+        x2 = x + dx
+        if np.all(np.isfinite(x2)) and self.backward_error(x2, rhs) < err:
+            x = x2
+            if col is not None and self._cache is not None:
+                self._cache.d = x
+        return x
 
     def _recover(self, x, rhs, col):
         if rhs is None:

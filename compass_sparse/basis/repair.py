@@ -132,7 +132,10 @@ def select_regular_block(K, backend, rank_tol, dense_limit, max_rounds=30):
             return rows, cols, None
         Kk = sp.csc_matrix(K[rows, :][:, cols])
         try:
-            fac = backend.factor(Kk)
+            # COLAMD and partial pivoting from here on: with threshold pivoting in a
+            # symmetric ordering a small pivot may fall on an independent column and
+            # more columns be dropped than the rank deficiency
+            fac = backend.factor(Kk, strict=True)
             bad = _tiny_pivots(fac, Kk, rank_tol)
         except SingularFactorError:
             fac, bad = None, None
@@ -151,7 +154,7 @@ def select_regular_block(K, backend, rank_tol, dense_limit, max_rounds=30):
             sg = np.where(dg < 0.0, -1.0, 1.0)
             Kp = sp.csc_matrix(Kk + sp.diags(sg * cn * (0.01 * max(rank_tol, 1e-14))))
             try:
-                fac_p = backend.factor(Kp)
+                fac_p = backend.factor(Kp, strict=True)
             except SingularFactorError as exc:
                 raise SingularBasisError(
                     "rank repair failed: perturbed block still singular") from exc

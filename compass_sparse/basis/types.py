@@ -32,6 +32,7 @@ KIND_DENSE = 2
 """Slot kind: ``sign * r``, the dense covering vector (index ignored)."""
 
 _BACKENDS = ("superlu", "umfpack", "auto")
+_ORDERINGS = ("auto", "colamd", "amd", "metis")
 
 
 @dataclass(frozen=True)
@@ -70,12 +71,28 @@ class BasisOptions:
         Non-unit blocks up to this order are rank-repaired with a dense QR with column
         pivoting; larger ones by repeated sparse LU with tiny-pivot detection.
     backend : {"superlu", "umfpack", "auto"}, default "auto"
-        Sparse LU of the non-unit block. "auto" = UMFPACK when ``scikits.umfpack`` is
-        importable, else SuperLU.
-    permc_spec : str, default "COLAMD"
-        SuperLU column ordering ("NATURAL", "MMD_ATA", "MMD_AT_PLUS_A", "COLAMD").
-    diag_pivot_thresh : float, default 1.0, range [0, 1]
-        SuperLU threshold for partial pivoting (1.0 = classical partial pivoting).
+        Sparse LU of the non-unit block (:mod:`compass_sparse.basis.backends`). "auto" =
+        SuperLU with COLAMD below 400 columns and with the ``ordering`` above (measured
+        crossovers in ``benchmarks/basis.md``); "umfpack" = SuiteSparse UMFPACK (kvxopt),
+        which orders by itself (``ordering`` must then be "auto"). The environment
+        variable ``COMPASS_SPARSE_LU`` ("backend[:ordering]") replaces "auto" values.
+    ordering : {"auto", "colamd", "amd", "metis"}, default "auto"
+        Fill-reducing ordering of the block (:mod:`compass_sparse.basis.ordering`),
+        computed once per sparsity pattern. "auto" = the cheaper of AMD and METIS nested
+        dissection by the symbolic flop estimate (COLAMD when the block has no zero-free
+        diagonal).
+    diag_pivot_thresh : float or None, default None, range [0, 1]
+        SuperLU threshold for row pivoting; None = 1.0 (partial pivoting) under COLAMD and
+        0.1 under a symmetric ordering (the diagonal is kept while it is at least 0.1 of
+        the largest entry of its column).
+    deadline : float or None, default None
+        ``time.perf_counter()`` value by which a factorization must end: one whose
+        symbolic flop estimate cannot finish in the time left is not started
+        (:class:`~compass_sparse.basis.backends.FactorBudgetError`, kind "time").
+    memory_limit : float or None, default None, range > 0
+        Bytes the factors may take; a factorization estimated to need more is not
+        started (kind "memory"). None = 80% of the memory available when the manager is
+        created; ``math.inf`` = no limit.
     """
 
     update_limit: int = 50
@@ -87,8 +104,10 @@ class BasisOptions:
     rank_tolerance: float = 1e-11
     dense_rank_limit: int = 3000
     backend: str = "auto"
-    permc_spec: str = "COLAMD"
-    diag_pivot_thresh: float = 1.0
+    ordering: str = "auto"
+    diag_pivot_thresh: float | None = None
+    deadline: float | None = None
+    memory_limit: float | None = None
 
     def __post_init__(self):
         def bad(name, why):
@@ -113,10 +132,14 @@ class BasisOptions:
             bad("dense_rank_limit", "must be >= 0")
         if self.backend not in _BACKENDS:
             bad("backend", f"must be one of {_BACKENDS}")
-        if self.permc_spec not in ("NATURAL", "MMD_ATA", "MMD_AT_PLUS_A", "COLAMD"):
-            bad("permc_spec", "must be NATURAL, MMD_ATA, MMD_AT_PLUS_A or COLAMD")
-        if not 0.0 <= self.diag_pivot_thresh <= 1.0:
-            bad("diag_pivot_thresh", "must be in [0, 1]")
+        if self.ordering not in _ORDERINGS:
+            bad("ordering", f"must be one of {_ORDERINGS}")
+        if self.backend == "umfpack" and self.ordering != "auto":
+            bad("ordering", "UMFPACK orders by itself: use backend='superlu' to force one")
+        if self.diag_pivot_thresh is not None and not 0.0 <= self.diag_pivot_thresh <= 1.0:
+            bad("diag_pivot_thresh", "must be None or in [0, 1]")
+        if self.memory_limit is not None and not self.memory_limit > 0:
+            bad("memory_limit", "must be None or > 0")
 
 
 @dataclass
@@ -126,6 +149,10 @@ class BasisStats:
     ``refactor_by_*`` count the replacements that were carried out by a fresh
     factorization, one counter per trigger; ``nnz_L``, ``nnz_U`` (including its diagonal)
     and ``nnz_eta`` describe the current factors. Times are wall-clock seconds.
+    ``backend`` and ``ordering`` name those of the latest sparse LU, ``orderings_computed``
+    counts the fill-reducing orderings computed (the others were reused for an unchanged
+    pattern); ``est_nnz_lu``, ``est_flops`` and ``est_bytes`` are the largest symbolic
+    estimates met (-1: none computed), ``max_nnz_lu`` the largest nnz(L + U) obtained.
     """
 
     factorizations: int = 0
@@ -145,6 +172,14 @@ class BasisStats:
     nnz_L: int = 0
     nnz_U: int = 0
     nnz_eta: int = 0
+    backend: str = ""
+    ordering: str = ""
+    orderings_computed: int = 0
+    time_ordering: float = 0.0
+    est_nnz_lu: int = -1
+    est_flops: float = -1.0
+    est_bytes: float = -1.0
+    max_nnz_lu: int = 0
 
 
 class UpdateStatus(enum.IntEnum):

@@ -7,7 +7,6 @@ import scipy.sparse as sp
 from basis_helpers import check_solves, dominant_matrix, family_start
 from compass_sparse.basis import (KIND_DENSE, KIND_M, KIND_UNIT, BasisManager,
                                   BasisOptions, BasisStats, FactorReport, UpdateStatus)
-from compass_sparse.basis.backends import umfpack_available
 from compass_sparse.exceptions import CompassError, OptionError, ProblemError, ShapeError
 
 TOL = 1e-9
@@ -122,8 +121,9 @@ def test_input_validation():
 @pytest.mark.parametrize("kw", [dict(update_limit=-1), dict(fill_factor=0.5),
                                 dict(pivot_tolerance=1.0), dict(stability_tolerance=0.0),
                                 dict(residual_check_frequency=-2), dict(backend="klu"),
-                                dict(permc_spec="foo"), dict(diag_pivot_thresh=2.0),
-                                dict(rank_tolerance=-1.0)])
+                                dict(ordering="foo"), dict(diag_pivot_thresh=2.0),
+                                dict(rank_tolerance=-1.0), dict(memory_limit=0.0),
+                                dict(backend="umfpack", ordering="metis")])
 def test_options_validation(kw):
     with pytest.raises(OptionError):
         BasisOptions(**kw)
@@ -135,37 +135,24 @@ def test_factor_report_type():
     assert isinstance(rep, FactorReport) and rep.ok and rep.rank_deficiency == 0
 
 
-def test_superlu_options():
-    rng = np.random.default_rng(3)
-    n = 80
-    M = dominant_matrix(n, 0.05, rng)
-    for spec in ("NATURAL", "MMD_ATA", "COLAMD"):
-        bm = BasisManager(M, BasisOptions(backend="superlu", permc_spec=spec,
-                                          diag_pivot_thresh=0.1))
-        bm.factor(*family_start(n, rng))
-        check_solves(bm, M, None, rng, TOL)
-
-
-@pytest.mark.skipif(not umfpack_available(),
-                    reason="optional UMFPACK backend: scikits.umfpack is not installed")
-def test_umfpack_backend():
+@pytest.mark.parametrize("backend,ordering", [("superlu", "colamd"), ("superlu", "amd"),
+                                              ("superlu", "metis"), ("umfpack", "auto"),
+                                              ("auto", "auto")])
+def test_lu_backends_and_orderings_solve_and_update(backend, ordering, monkeypatch):
+    monkeypatch.delenv("COMPASS_SPARSE_LU", raising=False)   # the options alone decide
     rng = np.random.default_rng(4)
     n = 80
     M = dominant_matrix(n, 0.05, rng)
-    bm = BasisManager(M, BasisOptions(backend="umfpack"))
+    bm = BasisManager(M, BasisOptions(backend=backend, ordering=ordering))
     bm.factor(*family_start(n, rng))
     check_solves(bm, M, None, rng, TOL)
     for j in range(10):
         s = max(bm.slot_of_m(j), bm.slot_of_unit(j))
         bm.replace(s, KIND_M if bm.kinds[s] == KIND_UNIT else KIND_UNIT, j, 1.0)
         check_solves(bm, M, None, rng, TOL)
-
-
-def test_umfpack_unavailable_is_an_option_error():
-    if umfpack_available():
-        pytest.skip("scikits.umfpack is installed")
-    with pytest.raises(OptionError):
-        BasisManager(sp.eye(3, format="csc"), BasisOptions(backend="umfpack"))
+    assert bm.stats.backend == (backend if backend != "auto" else "superlu")
+    assert bm.stats.ordering == {"auto": bm.stats.ordering, "colamd": "colamd", "amd": "amd",
+                                 "metis": "metis"}[ordering]
 
 
 def test_both_bases_implement_the_basis_protocol_and_agree():

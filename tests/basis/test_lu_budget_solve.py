@@ -1,0 +1,54 @@
+"""A solve stops with TIME_LIMIT / MEMORY_LIMIT instead of starting a factorization its
+symbolic estimate says cannot finish or fit; the Result reports the LU figures."""
+
+import numpy as np
+import pytest
+
+import compass_sparse as cs
+from compass_sparse.basis import backends
+from compass_sparse.generators import structured_quadratic
+from compass_sparse.result import Status
+
+
+@pytest.fixture
+def problem():
+    g = structured_quadratic(900, seed=3)
+    return g
+
+
+def _natural(res, p):
+    f = p.F(res.x)
+    return float(np.abs(res.x - np.clip(res.x - f, p.lb, p.ub)).max())
+
+
+def test_solve_reports_lu_estimates_and_peak_memory(problem, lu_choice):
+    res = cs.solve_mcp(problem.problem)
+    assert res.status is Status.SOLVED and _natural(res, problem.problem) <= 1e-6
+    lu = res.lu
+    assert lu["max_nnz_lu"] > 0 and lu["peak_rss_bytes"] > 0
+    if lu["ordering"] in ("amd", "metis"):
+        assert lu["est_nnz_lu"] >= 0 and lu["est_bytes"] > 0 and lu["est_flops"] > 0
+
+
+def test_solve_stops_with_time_limit_before_a_factorization_that_cannot_finish(
+        problem, monkeypatch, lu_choice):
+    monkeypatch.setattr(backends, "FLOP_RATE", 1e-3)     # every factorization 'too slow'
+    res = cs.solve_mcp(problem.problem, options={"time_limit": 3600})
+    if lu_choice in ("superlu:colamd", "umfpack"):
+        # no symbolic estimate under these orderings: the check cannot fire
+        assert res.status is Status.SOLVED
+        return
+    assert res.status is Status.TIME_LIMIT and "not started" in res.message
+    assert res.x is not None and np.all(np.isfinite(res.x))
+    assert res.time < 3600
+
+
+def test_solve_stops_with_memory_limit_when_the_factors_would_not_fit(
+        problem, monkeypatch, lu_choice):
+    monkeypatch.setattr(backends.FactorBudget, "available_memory", staticmethod(lambda: 1e3))
+    res = cs.solve_mcp(problem.problem)
+    if lu_choice in ("superlu:colamd", "umfpack"):
+        assert res.status is Status.SOLVED
+        return
+    assert res.status is Status.MEMORY_LIMIT and res.status.path_code() == 10
+    assert "GiB" in res.message and np.all(np.isfinite(res.x))
