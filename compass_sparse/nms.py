@@ -498,8 +498,15 @@ class NMSSolver:
         self._last_J = None
         try:
             start = z0
+            if self.opt0.homotopy == "only":
+                self._consider(*vars(self._point(z0)).values())
+                raise _Stop(Status.NO_PROGRESS, self._homotopy(z0))
             while True:
                 why = self._run(start, opt)
+                if (self.opt0.homotopy == "auto" and "homotopy" not in self.passes and
+                        self.restarts >= min(self.opt0.homotopy_after_restarts,
+                                             self.opt0.restart_limit)):
+                    why = self._homotopy(z0)
                 if self.restarts >= self.opt0.restart_limit:
                     status, message = Status.NO_PROGRESS, f"{why}; restart limit reached"
                     break
@@ -534,10 +541,21 @@ class NMSSolver:
             crash_iterations=self.crash_its, restarts=self.restarts,
             gradient_steps=self.grad_steps, lm_steps=self.lm_steps,
             factorizations=(bm.stats.factorizations if bm is not None else 0)
-            + self.passes["crash"].factorizations,
+            + self.passes["crash"].factorizations
+            + self.passes.get("homotopy", PassStats()).factorizations,
             updates=bm.stats.updates if bm is not None else 0,
             basis=self.basis, passes=self.passes,
         )
+
+    def _homotopy(self, start):
+        """The homotopy pass from ``start`` (a solution stops the solve from inside)."""
+        from .homotopy import HomotopyStatus, homotopy_pass
+
+        polish = None if self.opt0.homotopy == "only" else (lambda z: self._run(z, self.opt0))
+        out = homotopy_pass(self, start, polish=polish)
+        if out.status is HomotopyStatus.TIME_LIMIT:
+            raise _Stop(Status.TIME_LIMIT, "time limit reached on the homotopy path")
+        return f"homotopy {out.status.value} ({out.message})"
 
     def _near_best(self):
         z = self.best.z

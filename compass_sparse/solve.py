@@ -205,7 +205,7 @@ def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> 
                   else Status.MAJOR_ITERATION_LIMIT)
         msg = ("the start point is a solution" if status is Status.SOLVED
                else "major_iteration_limit = 0: start point evaluated")
-        for k in ("crash", "path", "fallback"):
+        for k in ("crash", "path", "fallback", "homotopy"):
             passes[k] = PassStats(reason="start point already solved"
                                   if status is Status.SOLVED else "major_iteration_limit = 0")
         return _finish(problem, pre, status, msg, z0, opt, t0, passes, evalr,
@@ -220,6 +220,8 @@ def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> 
         out = solver.solve(z0)
     passes.update(out.passes)
     passes["nms"] = PassStats(ran=True, iterations=out.nit)
+    passes.setdefault("homotopy", PassStats(
+        reason="homotopy off" if opt.homotopy == "off" else "NMS did not stall"))
     res = _finish(problem, pre, out.status, out.message, out.best.z, opt, t0, passes, evalr,
                   f_reduced=out.best.f, nit=out.nit, minor_iterations=out.minor,
                   crash_iterations=out.crash_iterations, restarts=out.restarts,
