@@ -198,7 +198,7 @@ class _Bordered:
         self.dense = dense
         if dense:
             B = np.empty((n + 1, n + 1))
-            B[:n, :n] = A.toarray() if sp.issparse(A) else A
+            B[:n, :n] = A
             B[:n, n] = c[:n]
             B[n, :] = v
             B[n, n] = v[n]
@@ -294,7 +294,12 @@ class _Tracker:
         if self.dense is None:
             self.dense = self.n <= DENSE_MAX_N or J.nnz >= DENSE_DENSITY * self.n * self.n
         # H_x = lam (J D + I - D) + (1 - lam) I = lam J D + I - lam D
-        Hx = (lam * (J @ sp.diags(dx)) + sp.diags(1.0 - lam * dx)).tocsc()
+        if self.dense:
+            Hx = J.toarray()
+            Hx *= lam * dx  # scales column j by lam dx_j
+            Hx[np.diag_indices(self.n)] += 1.0 - lam * dx
+        else:
+            Hx = (lam * (J @ sp.diags(dx)) + sp.diags(1.0 - lam * dx)).tocsc()
         # dH/dlam = G - (x - a) + lam (J - I) dp/dmu * dmu/dlam,  dmu/dlam = -mu0
         dGdmu = J @ dmu - dmu
         Hlam = G - (x - a) - lam * self.mu0 * dGdmu

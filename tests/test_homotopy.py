@@ -1,0 +1,192 @@
+"""The probability-one homotopy pass (compass_sparse.homotopy): the smoothed projection,
+path tracking to a solution where the stabilized Newton method stalls at a stationary
+point of its merit function, the divergence and time-limit statuses, and the pass table."""
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import compass_sparse.homotopy as hom
+from compass_sparse import MCP, Options, solve_mcp
+from compass_sparse._evaluate import GuardedEvaluator
+from compass_sparse.generators import thesis_family
+from compass_sparse.homotopy import HomotopyStatus, SmoothedNormalMap, track_paths
+from compass_sparse.merit import fb_gradient, fb_phi, natural_residual
+from compass_sparse.result import Status
+
+
+def _quadratic(D, A, b):
+    D, A, b = (np.asarray(v, dtype=float) for v in (D, A, b))
+
+    def F(x):
+        return D * x * x + A @ x + b
+
+    def J(x):
+        return sp.csc_matrix(np.diag(2.0 * D * x) + A)
+
+    return F, J
+
+
+# A one-dimensional MCP on the box [-3.04, 3.18] with F(x) = 0.27 x^2 - 0.69 x - 5.68 < 0
+# on the whole box: its only solution is the upper bound.  The merit function has a
+# stationary point over the box at the lower bound (F decreases there, so the Newton
+# model pushes the wrong way and no descent direction stays in the box).
+STATIONARY = dict(D=[0.27], A=[[-0.69]], b=[-5.68], lb=[-3.04], ub=[3.18], x0=[-2.9])
+
+
+def _stationary_problem():
+    d = STATIONARY
+    F, J = _quadratic(d["D"], d["A"], d["b"])
+    return F, J, np.array(d["lb"]), np.array(d["ub"]), np.array(d["x0"])
+
+
+def _projected_gradient(F, J, z, lb, ub):
+    f = F(z)
+    g = fb_gradient(z, f, J(z), lb, ub, fb_phi(z, f, lb, ub))
+    return z - np.clip(z - g, lb, ub)
+
+
+def test_nms_stalls_at_a_stationary_point_where_the_homotopy_reaches_the_solution():
+    F, J, lb, ub, x0 = _stationary_problem()
+    stalled = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "off", "restart_limit": 0})
+    assert not stalled.success
+    assert stalled.residual.fb_norm > 0.1
+    # ... at a stationary point of the merit function over the box, not a solution:
+    assert np.linalg.norm(_projected_gradient(F, J, stalled.x, lb, ub)) <= 1e-8
+    assert natural_residual(stalled.x, F(stalled.x), lb, ub) > 0.1
+
+    res = solve_mcp(F, J, lb, ub, x0, options={"restart_limit": 0})
+    assert res.success and res.status is Status.SOLVED
+    assert natural_residual(res.x, F(res.x), lb, ub) <= 1e-6
+    assert res.x == pytest.approx(ub, abs=1e-6)  # the unique solution
+    h = res.passes["homotopy"]
+    assert h.ran and h.iterations > 0 and h.factorizations > 0 and h.time > 0
+
+
+def test_homotopy_alone_reaches_the_solution_of_the_stationary_problem():
+    F, J, lb, ub, x0 = _stationary_problem()
+    res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"})
+    assert res.success
+    assert natural_residual(res.x, F(res.x), lb, ub) <= 1e-6
+    assert res.nit == 0  # no major iteration of the stabilized Newton method ran
+
+
+@pytest.mark.parametrize("family,n,seed", [(1, 30, 0), (2, 20, 1)])
+def test_homotopy_alone_solves_thesis_instances(family, n, seed):
+    g = thesis_family(n, family, seed=seed)
+    res = solve_mcp(g.problem, options={"homotopy": "only"})
+    assert res.success, res.message
+    info = g.info
+    f = info["D"] * res.x ** 2 + info["A"] @ res.x + info["b"]
+    assert natural_residual(res.x, f, info["lb"], info["ub"]) <= 1e-6
+
+
+def _diverging_problem(n=2):
+    # F(x) = -x on free variables: the solution is 0, but the zero curve of
+    # H = lam (-x) + (1 - lam)(x - a) is x = (1 - lam) a / (1 - 2 lam), unbounded at lam = 1/2.
+    def F(x):
+        return -x
+
+    def J(x):
+        return -sp.identity(x.size, format="csc")
+
+    return F, J, np.full(n, -np.inf), np.full(n, np.inf), np.ones(n)
+
+
+def test_path_divergence_is_reported_with_its_status():
+    F, J, lb, ub, x0 = _diverging_problem()
+    ev = GuardedEvaluator(MCP(F, J, lb, ub, x0))
+    seen = []
+    out = track_paths(ev, lb, ub, x0, Options(homotopy_path_limit=2),
+                      on_point=lambda z, f, phi, psi: seen.append(psi),
+                      rng=np.random.default_rng(0))
+    assert out.status is HomotopyStatus.DIVERGED
+    assert out.path_status == [HomotopyStatus.DIVERGED] * 2
+    assert out.lam == pytest.approx(0.5, abs=1e-3)  # where (1 - 2 lam) vanishes
+    # the best point is kept: the lowest merit seen on the paths
+    assert out.z is not None and 0.5 * np.sum(F(out.z) ** 2) == pytest.approx(min(seen))
+
+
+def test_solve_reports_a_diverged_homotopy_as_no_progress_with_the_best_point():
+    F, J, lb, ub, x0 = _diverging_problem()
+    res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"})
+    assert res.status is Status.NO_PROGRESS and not res.success
+    assert "diverged" in res.message
+    assert res.passes["homotopy"].reason.startswith("diverged")
+    assert res.residual.fb_norm <= np.linalg.norm(F(x0))  # never worse than the start
+
+
+def test_homotopy_time_limit_status_keeps_the_best_point():
+    g = thesis_family(60, 1, seed=3)
+    res = solve_mcp(g.problem, options={"homotopy": "only", "time_limit": 0.05})
+    assert res.status is Status.TIME_LIMIT
+    assert res.x.shape == (60,) and np.all(np.isfinite(res.x))
+    assert res.passes["homotopy"].ran
+
+
+def test_pass_table_says_why_the_homotopy_did_not_run():
+    F, J = _quadratic([0.0, 0.0], [[2.0, 0.0], [0.0, 3.0]], [-1.0, 1.0])
+    res = solve_mcp(F, J, 0.0, np.inf, [1.0, 1.0])
+    assert res.success
+    h = res.passes["homotopy"]
+    assert not h.ran and h.reason == "NMS did not stall"
+    off = solve_mcp(F, J, 0.0, np.inf, [1.0, 1.0], options={"homotopy": "off"})
+    assert off.passes["homotopy"].reason == "homotopy off"
+
+
+# ------------------------------------------------------------------ the smoothed projection
+@pytest.mark.parametrize("mu", [1e-1, 1e-4, 1e-8])
+def test_smoothed_projection_tends_to_the_projection_with_error_at_most_mu(mu):
+    lb = np.array([-1.0, -1.0, -np.inf, -np.inf, 0.0])
+    ub = np.array([2.0, np.inf, 3.0, np.inf, 0.0])
+    sm = SmoothedNormalMap(lb, ub)
+    rng = np.random.default_rng(0)
+    for x in list(rng.uniform(-5, 5, (50, 5))) + [np.array([-1e12, 1e12, 1e12, -1e12, 1.0])]:
+        p, dx, dmu = sm.project(x, mu)
+        # |s_mu(r) - max(r, 0)| <= mu, and both bounds contribute at most mu each
+        assert np.all(np.abs(p - np.clip(x, lb, ub)) <= 2 * mu + 1e-12 * np.abs(x))
+        assert np.all((dx >= 0) & (dx <= 1))
+        assert np.all(np.isfinite(dmu))
+
+
+def test_smoothed_projection_derivatives_match_finite_differences():
+    lb = np.array([-1.0, -1.0, -np.inf, -np.inf])
+    ub = np.array([2.0, np.inf, 3.0, np.inf])
+    sm = SmoothedNormalMap(lb, ub)
+    x = np.array([-0.9, 0.3, 2.95, 7.0])
+    mu, h = 0.05, 1e-7
+    p, dx, dmu = sm.project(x, mu)
+    fd_x = (sm.project(x + h, mu)[0] - sm.project(x - h, mu)[0]) / (2 * h)
+    fd_mu = (sm.project(x, mu + h)[0] - sm.project(x, mu - h)[0]) / (2 * h)
+    assert dx == pytest.approx(fd_x, rel=1e-6, abs=1e-8)
+    assert dmu == pytest.approx(fd_mu, rel=1e-6, abs=1e-8)
+
+
+def test_sparse_bordered_solve_follows_the_same_path_as_the_dense_one(monkeypatch):
+    g = thesis_family(15, 1, seed=2)
+    dense = solve_mcp(g.problem, options={"homotopy": "only"})
+    monkeypatch.setattr(hom, "DENSE_MAX_N", 0)
+    monkeypatch.setattr(hom, "DENSE_DENSITY", 2.0)
+    sparse = solve_mcp(thesis_family(15, 1, seed=2).problem, options={"homotopy": "only"})
+    assert dense.success and sparse.success
+    assert sparse.x == pytest.approx(dense.x, abs=1e-5)
+    assert sparse.passes["homotopy"].iterations == pytest.approx(
+        dense.passes["homotopy"].iterations, rel=0.2)
+
+
+@pytest.mark.parametrize("tol", [1e-4, 1e-8, 1e-10])
+def test_homotopy_meets_each_convergence_tolerance(tol):
+    F, J, lb, ub, x0 = _stationary_problem()
+    res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only",
+                                               "convergence_tolerance": tol})
+    assert res.success and res.residual.fb_norm <= tol
+
+
+def test_homotopy_options_are_validated():
+    from compass_sparse.exceptions import OptionError
+
+    with pytest.raises(OptionError):
+        Options(homotopy="sometimes")
+    with pytest.raises(OptionError):
+        Options(homotopy_end_lambda=1.5)
+    with pytest.raises(OptionError):
+        Options(homotopy_smoothing=0.0)
