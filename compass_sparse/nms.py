@@ -499,7 +499,8 @@ class NMSSolver:
         try:
             start = z0
             if self.opt0.homotopy == "only":
-                self._consider(*vars(self._point(z0)).values())
+                pt = self._point(z0)  # defined: the driver evaluated F(z0) already
+                self._consider(pt.z, pt.f, pt.phi, pt.psi)
                 raise _Stop(Status.NO_PROGRESS, self._homotopy(z0))
             while True:
                 why = self._run(start, opt)

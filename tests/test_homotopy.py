@@ -190,3 +190,20 @@ def test_homotopy_options_are_validated():
         Options(homotopy_end_lambda=1.5)
     with pytest.raises(OptionError):
         Options(homotopy_smoothing=0.0)
+
+
+def test_tight_path_tracking_reaches_the_same_solution(monkeypatch):
+    # CORRECTOR_TOLERANCE only decides how closely the path is followed; a 1e4 times
+    # tighter value must follow the same curve to the same end point (the stationary
+    # problem's unique solution, and the same solution of a thesis instance).
+    F, J, lb, ub, x0 = _stationary_problem()
+    g = thesis_family(25, 2, seed=4)
+    loose = [solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"}),
+             solve_mcp(g.problem, options={"homotopy": "only"})]
+    monkeypatch.setattr(hom, "CORRECTOR_TOLERANCE", hom.CORRECTOR_TOLERANCE * 1e-4)
+    tight = [solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"}),
+             solve_mcp(thesis_family(25, 2, seed=4).problem, options={"homotopy": "only"})]
+    for a, b in zip(loose, tight):
+        assert a.success and b.success
+        assert a.x == pytest.approx(b.x, abs=1e-6)
+        assert b.passes["homotopy"].iterations >= a.passes["homotopy"].iterations
