@@ -248,6 +248,8 @@ def main(argv=None):
                     help="append to --out and skip solves already in it")
     ap.add_argument("--summarize", type=Path, default=None, metavar="CSV",
                     help="print the tables of an existing CSV and exit")
+    ap.add_argument("--path-only", action="store_true",
+                    help="PATH only (e.g. to add PATH's rows to a CSV with --resume)")
     ap.add_argument("--homotopy", choices=("auto", "off", "only"), default=None,
                     help="compass_sparse's homotopy option (default: the solver's default)")
     ap.add_argument("--tolerances", action="store_true",
@@ -265,6 +267,8 @@ def main(argv=None):
     if not a.no_path and not use_path:
         print("# PATH (gamspy) not available: compass_sparse only", flush=True)
     solvers = [s for s in SOLVERS if s == "compass_sparse" or use_path]
+    if a.path_only:
+        solvers = [s for s in solvers if s == "PATH"]
     tl = a.time_limit if a.time_limit is not None else (20.0 if a.quick else 60.0)
     hard = 2.0 * tl + 30.0
     worker = Worker(warm_up, dict(with_path=use_path))

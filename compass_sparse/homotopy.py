@@ -110,6 +110,8 @@ are factorized densely."""
 DENSE_MAX_N = 300
 NEWTON_ITERATIONS = 20
 """Iterations of the normal-map Newton end game per attempt."""
+END_GAP = 1e-10
+"""A path point with lam >= 1 - END_GAP is the end of the path."""
 NEWTON_STEP_MAX = 1.0
 """Longest end-game Newton step, relative to 1 + ||x||_inf."""
 
@@ -121,6 +123,7 @@ class HomotopyStatus(enum.Enum):
     END_REACHED = "end reached"  #: lam = 1 reached but the end game missed the tolerance
     DIVERGED = "diverged"  #: ||x|| exceeded the divergence bound (unbounded curve)
     STEP_TOO_SMALL = "step too small"  #: the corrector failed down to the minimum step
+    SINGULAR = "singular"  #: the augmented Jacobian [H_x, H_lam] lost rank (not a regular path)
     STEP_LIMIT = "step limit"  #: homotopy_step_limit steps without reaching lam = 1
     RETURNED = "returned"  #: the curve came back below lam = 0 (numerical failure)
     EVALUATION_ERROR = "evaluation error"  #: F or J undefined along the path
@@ -316,7 +319,7 @@ class _Tracker:
 
     # -------------------------------------------------------------- one path
     def follow(self, a, polish=None):
-        """Track gamma_a from (a, 0).  Returns (status, message, last z, last lam)."""
+        """Track gamma_a from (a, 0).  Returns (status, message, last point (x, lam))."""
         opt = self.opt
         n = self.n
         y = np.append(a, 0.0)
@@ -340,7 +343,8 @@ class _Tracker:
                 e[-1] = 1.0
                 w = Bf.solve(e)
             except (np.linalg.LinAlgError, RuntimeError):
-                return HomotopyStatus.STEP_TOO_SMALL, "singular augmented Jacobian", y
+                return (HomotopyStatus.SINGULAR,
+                        f"singular augmented Jacobian at lam = {y[-1]:.6f}", y)
             tau = w / np.linalg.norm(w)
             if tau @ v < 0:  # keep the orientation
                 tau = -tau
@@ -384,9 +388,9 @@ class _Tracker:
             if out is None:
                 return HomotopyStatus.EVALUATION_ERROR, "F or J undefined on the path", y
             H, Hx, Hlam = out
-            if lam >= lam_end or lam >= 1.0 - 1e-12:
+            if lam >= lam_end or lam >= 1.0 - END_GAP:
                 z_end = self.end_game(y[:-1])  # raises _Stop(SOLVED) on success
-                if lam >= 1.0 - 1e-12:
+                if lam >= 1.0 - END_GAP:
                     if polish is not None and z_end is not None:
                         polish(z_end)
                     return (HomotopyStatus.END_REACHED,
@@ -403,6 +407,7 @@ class _Tracker:
         h = max(float(np.linalg.norm(yp - self._y)), 1e-300)
         first = prev = None
         kappa = 0.0
+        tol_y = CORRECTOR_TOLERANCE * (1.0 + float(np.linalg.norm(yp)))
         for _ in range(CORRECTOR_ITERATIONS):
             r = self.residual(y, a, False)
             if r is None:
@@ -416,10 +421,12 @@ class _Tracker:
                     return None, False
             else:
                 first = dn
-                if first > DISTANCE_MAX * h:
+                # The base point itself is only on the curve to the tracking tolerance:
+                # a correction of that size is not the predictor's error.
+                if first > max(DISTANCE_MAX * h, 10.0 * tol_y):
                     return None, False
             y = y + d
-            if dn <= CORRECTOR_TOLERANCE * (1.0 + np.linalg.norm(y)):
+            if dn <= tol_y:
                 factor = max(kappa / KAPPA_NOMINAL, first / (DISTANCE_NOMINAL * h))
                 return (y, float(np.clip(factor, 0.5, 2.0))), True
             prev = dn

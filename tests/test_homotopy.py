@@ -207,3 +207,29 @@ def test_tight_path_tracking_reaches_the_same_solution(monkeypatch):
         assert a.success and b.success
         assert a.x == pytest.approx(b.x, abs=1e-6)
         assert b.passes["homotopy"].iterations >= a.passes["homotopy"].iterations
+
+
+def test_corrector_accepts_tiny_steps_from_a_base_point_on_the_curve_to_tracking_accuracy():
+    # The accepted points are on the curve only to CORRECTOR_TOLERANCE; a first correction
+    # of that size must not reject a tiny step (it once rejected every step down to 1e-9
+    # and ended paths of family 2 at n = 500 as "step too small").
+    F, J, lb, ub, x0 = _stationary_problem()
+    ev = GuardedEvaluator(MCP(F, J, lb, ub, x0))
+    tr = hom._Tracker(ev, lb, ub, Options(), deadline=None, on_point=None, tol=1e-12, log=None)
+    a = x0.copy()
+    y = np.append(a, 0.3)
+    for _ in range(30):  # Newton in x at fixed lam: onto the curve ...
+        H, Hx, Hlam = tr.residual(y, a, True)
+        y[:-1] += np.linalg.solve(Hx, -H)
+    assert np.linalg.norm(tr.residual(y, a, False)[0]) <= 1e-12
+    y[:-1] += 0.5 * hom.CORRECTOR_TOLERANCE  # ... then off it by half the tolerance
+    H, Hx, Hlam = tr.residual(y, a, True)
+    v = np.array([0.0, 1.0])
+    Bf = tr.factor(Hx, Hlam, v)
+    tau = Bf.solve(np.array([0.0, 1.0]))
+    tau /= np.linalg.norm(tau)
+    tr._y = y
+    out, ok = tr._correct(y + 1e-9 * tau, a, Bf, v)
+    assert ok
+    yc = out[0]
+    assert np.linalg.norm(tr.residual(yc, a, False)[0]) <= 1e-6
