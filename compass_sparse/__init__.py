@@ -14,6 +14,8 @@ Public names::
     Result, Status, PointStatus          outcome
     exceptions                           CompassError and subclasses
 """
+import logging as _logging
+
 from .exceptions import (BoundsError, CompassError, EvaluationError, JacobianPatternError,
                          OptionError, ProblemError, ShapeError, StartPointError)
 from .options import Options
@@ -22,6 +24,9 @@ from .result import IntermediateResult, PassStats, PointStatus, Result, Status
 from .solve import MCPSolver, solve_lcp, solve_mcp
 
 __version__ = "0.1.0"
+
+# A library only emits log records; handlers, levels and propagation are the application's.
+_logging.getLogger("compass_sparse").addHandler(_logging.NullHandler())
 
 __all__ = [
     "solve_mcp", "solve_lcp", "MCPSolver", "MCP", "Options", "Result", "Status",

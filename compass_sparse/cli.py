@@ -7,6 +7,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 import time
 
@@ -14,11 +15,19 @@ import numpy as np
 
 
 def _opts(args):
-    # The command prints the summary itself; -v adds the major-iteration log.
-    d = {"verbosity": 2 if args.verbose else 0, "convergence_tolerance": args.tol}
+    # The command prints the summary itself; -v adds the major-iteration log, -vv the
+    # pivots of every path.
+    d = {"verbosity": min(3, 1 + args.verbose) if args.verbose else 0,
+         "convergence_tolerance": args.tol, "progress": args.progress}
     if args.time_limit:
         d["time_limit"] = args.time_limit
     return d
+
+
+def _show_log(args):
+    """The application side of logging: the library's records, as plain lines."""
+    if args.verbose:
+        logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stdout)
 
 
 def _print_result(name, n, res, problem=None, build_time=None):
@@ -132,7 +141,9 @@ def main(argv=None) -> int:
                        help="convergence tolerance on ||Phi_FB||_2 (default 1e-6)")
         p.add_argument("--time-limit", type=float, default=None, help="seconds")
         p.add_argument("-v", "--verbose", action="count", default=0,
-                       help="print the crash and major-iteration log")
+                       help="print the crash and major-iteration log (-vv: every pivot)")
+        p.add_argument("--progress", action="store_true",
+                       help="one-line progress display on a terminal for long solves")
 
     d = sub.add_parser("demo", help="solve a bundled default problem and print the summary")
     d.add_argument("--problem", default="structured",
@@ -153,6 +164,8 @@ def main(argv=None) -> int:
     common(c)
     sub.add_parser("options", help="list every solver option with its default")
     args = ap.parse_args(argv)
+    if args.cmd in ("demo", "cge"):
+        _show_log(args)
     if args.cmd == "demo":
         return _demo(args)
     if args.cmd == "cge":

@@ -7,7 +7,9 @@ them there,
 
 and the direction solves the reduced Newton system J_II d_I = F_I (d_A = 0), perturbed to
 J_II + eps I when J_II is singular (Billups).  The search is along the projected path
-z(alpha) = pi(z_k - alpha d), alpha = 1, 1/2, 1/4, ..., accepting the first alpha with
+z(alpha) = pi(z_k - alpha d) (``crash_searchtype = "arc"``; "line" searches the segment
+z_k + alpha (pi(z_k - d) - z_k) instead), alpha = 1, 1/2, 1/4, ..., accepting the first
+alpha with
 
     ||F_B(x(alpha))|| <= (1 - sigma alpha) ||F_B(x(0))||,
 
@@ -29,9 +31,9 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .merit import fb_phi, project
+from .merit import fb_phi, normal_map_at, project
 
-__all__ = ["CrashResult", "crash", "normal_map_at"]
+__all__ = ["CrashResult", "crash"]
 
 CRASH_MEMORY = 4
 CRASH_START_FACTOR = 2.0
@@ -48,19 +50,6 @@ class CrashResult:
     time: float
     factorizations: int
     log: list
-
-
-def normal_map_at(z, f, lb, ub):
-    """(x, F_B(x)) for the x with pi(x) = z that minimizes ||F_B(x)|| (thesis (2.5.8))."""
-    at_l = z <= lb
-    at_u = (z >= ub) & ~at_l
-    w = np.where(at_l, np.maximum(f, 0.0), 0.0)  # absorbed at the lower bound
-    v = np.where(at_u, np.maximum(-f, 0.0), 0.0)
-    fixed = lb == ub
-    w = np.where(fixed, np.maximum(f, 0.0), w)
-    v = np.where(fixed, np.maximum(-f, 0.0), v)
-    x = z - w + v
-    return x, f - w + v
 
 
 def _solve_reduced(Jii, rhs, perturb, eps0):
@@ -85,11 +74,12 @@ def _solve_reduced(Jii, rhs, perturb, eps0):
 
 def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=None,
           log=None) -> CrashResult:
-    """Projected-Newton crash from z0 (in the box).  ``evalr`` is a GuardedEvaluator."""
+    """Projected-Newton crash from z0, a point of the box.  ``evalr`` is the problem's
+    :class:`~compass_sparse.evaluation.Evaluator`; ``f0``, ``J0``: F and J at z0 when known."""
     t0 = time.perf_counter()
     opt = options
     tol = opt.convergence_tolerance if tol is None else tol
-    z = project(np.asarray(z0, dtype=float), lb, ub)
+    z = np.asarray(z0, dtype=float)
     f = evalr.f(z) if f0 is None else f0
     if f is None:
         return CrashResult(z, np.full(z.size, np.nan), z, 0, np.inf, "domain error at start",
@@ -164,11 +154,12 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
                 it -= 1
                 break
             d[inact] = di
-        # Projected search on ||F_B||.
+        # Search on ||F_B||: along the projected path (arc) or the segment to its end (line).
         alpha = 1.0
         accepted = False
+        seg = project(z - d, lb, ub) - z if opt.crash_searchtype == "line" else None
         while alpha >= opt.crash_stepsize_minimum:
-            zt = project(z - alpha * d, lb, ub)
+            zt = project(z - alpha * d if seg is None else z + alpha * seg, lb, ub)
             ft = evalr.f(zt)
             if ft is not None:
                 xt, nmt = normal_map_at(zt, ft, lb, ub)

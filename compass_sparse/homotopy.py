@@ -47,9 +47,12 @@ without special treatment) by a predictor-corrector method:
 * corrector: chord Newton iterations on {H(y) = 0, v^T (y - y_p) = 0} with the bordered
   matrix factorized at the last accepted point (one factorization per accepted step serves
   both the tangent and the corrector);
-* step control: a corrector that needs at most two iterations doubles h, one that fails
-  to contract (ratio > ``CONTRACTION_MAX``) or needs more than ``CORRECTOR_ITERATIONS``
-  halves it and retries; h below ``homotopy_step_minimum`` ends the path.
+* step control (after Allgower & Georg): a corrector whose corrections do not contract
+  (ratio > ``CONTRACTION_MAX``), whose first correction is long compared with the step, or
+  that needs more than ``CORRECTOR_ITERATIONS`` iterations halves h and retries; an
+  accepted step rescales h by the observed contraction and first correction against
+  their nominal values (at most doubling it); h below ``homotopy_step_minimum`` ends the
+  path.  Points are followed to the relative accuracy ``CORRECTOR_TOLERANCE`` only.
 
 The bordered matrix is factorized densely (LAPACK) when the Jacobian is dense or small and
 by SuperLU otherwise (the border adds one dense row and column).
@@ -63,9 +66,9 @@ D_B the 0/1 diagonal of pi' (Robinson's normal-map Newton), accepting only decre
 (the gap 1 - lam shrinks tenfold).  The caller may also pass a ``polish`` function (the
 stabilized Newton method) that receives the end point of the path.
 
-Every evaluated point is offered to the caller (``on_point``), so the best point is kept
-whatever happens; a path that fails is followed by a new one from another random start,
-up to ``homotopy_path_limit`` paths.
+Every accepted path point and every end-game point is offered to the caller
+(``on_point``), so the best point is kept whatever happens; a path that fails is followed
+by a new one from a random point of the box, up to ``homotopy_path_limit`` paths.
 """
 from __future__ import annotations
 
@@ -80,6 +83,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from .merit import fb_phi, fb_psi, project
+from .restarts import random_point
 from .result import PassStats
 
 logger = logging.getLogger("compass_sparse")
@@ -494,16 +498,6 @@ def _one_blas_thread():
     return threadpool_limits(limits=1, user_api="blas")
 
 
-def random_start(lb, ub, z0, rng, margin=0.05):
-    """A point of the box drawn uniformly away from its faces (unbounded sides: a range
-    that grows with the start point's magnitude)."""
-    spread = 10.0 * (1.0 + np.abs(z0))
-    lo = np.where(np.isfinite(lb), lb, z0 - spread)
-    hi = np.where(np.isfinite(ub), ub, z0 + spread)
-    w = hi - lo
-    return lo + w * rng.uniform(margin, 1.0 - margin, size=lo.size)
-
-
 def track_paths(evalr, lb, ub, z_start, opt, *, on_point=None, rng, deadline=None, tol=1e-6,
                 polish=None, log=None, _tracker_out=None) -> HomotopyOutcome:
     """Follow up to ``opt.homotopy_path_limit`` homotopy paths, the first from ``z_start``,
@@ -523,7 +517,7 @@ def track_paths(evalr, lb, ub, z_start, opt, *, on_point=None, rng, deadline=Non
     a = project(np.asarray(z_start, float), lb, ub)
     for k in range(opt.homotopy_path_limit):
         if k > 0:
-            a = random_start(lb, ub, np.asarray(z_start, float), rng)
+            a = random_point(rng, np.asarray(z_start, float), lb, ub)
         try:
             status, message, y = tr.follow(a, polish=polish)
         except _Stop as stop:

@@ -39,6 +39,7 @@ __all__ = [
     "fb_gradient",
     "project",
     "normal_map",
+    "normal_map_at",
     "natural_residual",
     "min_map",
     "ResidualReport",
@@ -75,8 +76,9 @@ def _fischer_grad(a, b):
     return ga, gb
 
 
-def _as_bounds(lb, ub, z):
-    """Broadcast scalar (or array) bounds to the shape of z."""
+def _broadcast_box(lb, ub, z):
+    """Broadcast scalar (or array) bounds to the shape of z (no validation: that is
+    :func:`compass_sparse.problem.as_bounds`, for user input)."""
     return (np.broadcast_to(np.asarray(lb, dtype=float), z.shape),
             np.broadcast_to(np.asarray(ub, dtype=float), z.shape))
 
@@ -91,7 +93,7 @@ def fb_phi(z, f, lb, ub):
     """The Fischer–Burmeister vector Phi(z) for given F values f = F(z)."""
     z = np.asarray(z, dtype=float)
     f = np.asarray(f, dtype=float)
-    lb, ub = _as_bounds(lb, ub, z)
+    lb, ub = _broadcast_box(lb, ub, z)
     lo, up, box, free = _kinds(lb, ub)
     phi = np.empty_like(z)
     if lo.any():
@@ -114,7 +116,7 @@ def fb_jacobian_diagonals(z, f, lb, ub):
     """Diagonals (da, db) with H = diag(da) + diag(db) J an element of d Phi(z)."""
     z = np.asarray(z, dtype=float)
     f = np.asarray(f, dtype=float)
-    lb, ub = _as_bounds(lb, ub, z)
+    lb, ub = _broadcast_box(lb, ub, z)
     lo, up, box, free = _kinds(lb, ub)
     da = np.zeros_like(z)
     db = np.zeros_like(z)
@@ -200,10 +202,10 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5) -> ResidualRe
     """
     z = np.asarray(z, dtype=float)
     f = np.asarray(f, dtype=float)
-    lb, ub = _as_bounds(lb, ub, z)
+    lb, ub = _broadcast_box(lb, ub, z)
     phi = fb_phi(z, f, lb, ub)
     mm = np.abs(min_map(z, f, lb, ub))
-    nm = _normal_map_at(z, f, lb, ub)
+    nm = normal_map_at(z, f, lb, ub)[1]
     aphi = np.abs(phi)
     k = min(k_worst, z.size)
     idx = np.argpartition(-aphi, k - 1)[:k] if k > 0 else np.array([], dtype=int)
@@ -234,14 +236,17 @@ def _norm2(v) -> float:
     return m * float(np.sqrt(np.dot(v / m, v / m)))
 
 
-def _normal_map_at(z, f, lb, ub):
-    """min over x with pi(x) = z of |F_B(x)|, componentwise: F minus the part of it that the
-    normal cone of the box at z absorbs (thesis (2.5.8)-(2.5.9))."""
+def normal_map_at(z, f, lb, ub):
+    """(x, F_B(x)) for the x with pi(x) = z that minimizes ||F_B(x)|| componentwise:
+    F_B(x) is F minus the part of F that the normal cone of the box at z absorbs (thesis
+    (2.5.8)-(2.5.9)): at a lower bound x_i = z_i - max(F_i, 0), at an upper bound
+    x_i = z_i + max(-F_i, 0), a fixed variable absorbs all of F_i."""
     at_l = z <= lb
-    at_u = z >= ub
-    r = f.copy()
-    r[at_l] = np.minimum(f[at_l], 0.0) if at_l.any() else r[at_l]
-    r[at_u & ~at_l] = np.maximum(f[at_u & ~at_l], 0.0) if at_u.any() else r[at_u & ~at_l]
-    fixed = at_l & at_u
-    r[fixed] = 0.0
-    return r
+    at_u = (z >= ub) & ~at_l
+    w = np.where(at_l, np.maximum(f, 0.0), 0.0)  # absorbed at the lower bound
+    v = np.where(at_u, np.maximum(-f, 0.0), 0.0)
+    fixed = lb == ub
+    w = np.where(fixed, np.maximum(f, 0.0), w)
+    v = np.where(fixed, np.maximum(-f, 0.0), v)
+    x = z - w + v
+    return x, f - w + v

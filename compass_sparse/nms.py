@@ -21,10 +21,12 @@ point x_N.  Acceptance (merit Psi = 0.5 ||Phi_FB||^2):
   watchdog limit is reached, take a Levenberg–Marquardt step and/or projected-gradient
   steps on Psi from the best point found.
 
-Restarts when progress stops use PATH's three configurations (proximal perturbation
-0.01 * residual without crash; no perturbation with a short memory and m-steps every
-step; crash with more basis changes and arc searches), then — as the thesis proposes —
-restarts near the best point and, when stuck repeatedly, from new points in the box.
+With ``nms = False`` the same loop is a monotone line search: no d-steps, a memory of one
+checkpoint and the reference value Psi(z_k), so every accepted step decreases the merit.
+
+Restarts when progress stops follow :mod:`compass_sparse.restarts`: PATH's three
+configurations, then, as the thesis proposes, new points in the box and points near the
+best one.
 The best point is kept through everything and every exit returns it.
 
 Major-iteration log (verbosity >= 2), fixed-width columns as in PATH:
@@ -44,10 +46,12 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from .crash import crash, normal_map_at
+from .crash import crash
 from .fallback import gradient_steps, lm_step
-from .merit import fb_gradient, fb_phi, fb_psi, project
-from .path import LinearCode, PivotalPath, WarmBasis
+from .merit import fb_gradient, fb_phi, fb_psi, normal_map_at, project
+from .path import LinearCode, WarmBasis, solve_linear_mcp
+from .progress import ProgressLine
+from .restarts import FROM_RANDOM, FROM_START, RestartSchedule, near_point, random_point
 from .result import PassStats, Status
 
 logger = logging.getLogger("compass_sparse")
@@ -58,8 +62,6 @@ LOCAL_FACTOR = 1e-3
 """Below this fraction of a run's starting residual the NMS accepts only steps that do not
 raise the merit (d-steps included); larger steps go to the watchdog's backtracking."""
 
-PROGRESS_AFTER = 1.0
-"""Seconds after which ``progress=True`` starts its one-line display."""
 
 
 class _Stop(Exception):
@@ -70,10 +72,13 @@ class _Stop(Exception):
 
 @dataclass
 class Point:
+    """An evaluated point: z, F(z), Phi_FB(z), Psi(z) and, when known, J(z)."""
+
     z: np.ndarray
     f: np.ndarray
     phi: np.ndarray
     psi: float
+    J: sp.csc_matrix | None = None
 
     @property
     def fbn(self) -> float:
@@ -130,25 +135,72 @@ class Linearizer:
         return M
 
 
-def _restart_configs(opt, residual):
-    """PATH's restart configurations, then the thesis' restarts near the best point."""
-    return [
-        dict(proximal_perturbation=0.01 * min(1.0, residual), crash_method="none",
-             nms_initial_reference_factor=2.0),
-        dict(proximal_perturbation=0.0, crash_method="none", crash_perturb=False,
-             nms_initial_reference_factor=10.0, nms_memory_size=2, nms_mstep_frequency=1),
-        dict(crash_method="pnewton", crash_nbchange_limit=10, nms_initial_reference_factor=2.0,
-             crash_searchtype="arc", nms_searchtype="arc", gradient_searchtype="arc"),
-    ]
+@dataclass
+class NMSState:
+    """The state of one NMS run from a start point (thesis §3.4)."""
+
+    cur: Point  #: the current iterate z_k
+    x: np.ndarray  #: its normal-map point, pi(x) = z_k
+    memory: list  #: merits of the last checkpoints; R = max(memory)
+    memory_size: int
+    ckpt: tuple  #: (Point, x) of the last checkpoint
+    delta: float  #: d-step radius
+    eps: float  #: proximal perturbation of the next linearization
+    best_seen: float  #: best merit when the stall count was last reset
+    fbn_start: float  #: ||Phi|| at the run's start
+    ckpt_newton: object = None  #: the path computed at the checkpoint, when it was
+    n_d: int = 0  #: consecutive d-steps
+    watchdogs: int = 0  #: watchdog returns since the last checkpoint
+    stall: int = 0  #: major iterations without a 0.1% better best merit
+
+    def checkpoint(self, pt: Point, x):
+        """pt becomes the current point and a checkpoint, its merit enters the memory."""
+        self.cur, self.x = pt, x
+        self.memory = (self.memory + [pt.psi])[-self.memory_size:]
+        self.ckpt, self.ckpt_newton = (pt, x), None
+
+    def fresh_checkpoint(self, pt: Point, x):
+        """After a fallback step the new point starts a monotone phase: it is the only
+        checkpoint and the reference value is its own merit."""
+        self.cur, self.x = pt, x
+        self.memory = [pt.psi]
+        self.ckpt, self.ckpt_newton = (pt, x), None
+
+
+def reference_value(memory, psi, fbn, fbn_start):
+    """(R, large): the reference value R = max(memory) and the factor by which a d-step
+    may exceed it (100).  Within ``LOCAL_FACTOR`` of the run's starting residual the
+    iteration turns monotone: R <= Psi(z_k) and large = 1, so a Newton step that raises
+    the merit there (a singular or non-Lipschitz Jacobian, e.g. a sector shutting down
+    in a CGE model) goes to the watchdog's backtracking search instead of being accepted
+    against old, large reference values."""
+    R = max(memory)
+    if fbn <= LOCAL_FACTOR * fbn_start:
+        return min(R, psi), 1.0
+    return R, 100.0
+
+
+def classify_step(psi, R, large, dist, delta, d_allowed, sigma, descent_ok):
+    """The NMS test of a Newton point with merit psi at distance dist (inf-norm):
+    'D' d-step (d-steps allowed, dist <= delta, psi <= large R), 'O' a d-step that also
+    passes the m-step test, 'M' m-step (``descent_ok()``: sufficient decrease against R),
+    None: rejected (watchdog)."""
+    if d_allowed and dist <= delta and psi <= large * max(R, 1e-300):
+        if psi < R * (1.0 - sigma) and descent_ok():
+            return "O"
+        return "D"
+    if descent_ok():
+        return "M"
+    return None
 
 
 class NMSSolver:
     """The stabilized Newton method on one MCP (after presolve)."""
 
-    def __init__(self, problem, evalr, options, *, manager_factory, callback=None,
-                 deadline=None, log_major=None):
+    def __init__(self, problem, options, *, manager_factory, callback=None,
+                 deadline=None, log_major=None, log_minor=None):
         self.p = problem
-        self.ev = evalr
+        self.ev = problem.evaluator
         self.opt0 = options
         self.lb, self.ub = problem.lb, problem.ub
         self.n = problem.n
@@ -156,6 +208,7 @@ class NMSSolver:
         self.callback = callback
         self.deadline = deadline
         self.log_major = log_major
+        self.log_minor = log_minor
         self.tol = options.convergence_tolerance
         self.best: Point | None = None
         self.nit = 0
@@ -178,13 +231,13 @@ class NMSSolver:
         if np.sqrt(2.0 * psi) <= self.tol:
             raise _Stop(Status.SOLVED, "solution found")
 
-    def _point(self, z, f=None):
+    def _point(self, z, f=None, J=None):
         if f is None:
             f = self.ev.f(z)
             if f is None:
                 return None
         phi = fb_phi(z, f, self.lb, self.ub)
-        return Point(z, f, phi, fb_psi(phi))
+        return Point(z, f, phi, fb_psi(phi), J)
 
     def _check_limits(self, opt):
         if self.deadline is not None and time.perf_counter() > self.deadline:
@@ -196,21 +249,9 @@ class NMSSolver:
             raise _Stop(Status.MINOR_ITERATION_LIMIT,
                         f"cumulative pivot limit ({opt.cumulative_limit(self.n)}) reached")
 
-    def _progress(self, cur: Point, opt, final=False):
-        """One-line progress display on stderr for solves longer than a second."""
-        if not opt.progress:
-            return
-        elapsed = time.perf_counter() - self._t_start
-        if elapsed < PROGRESS_AFTER and not final:
-            return
-        import sys
-
-        sys.stderr.write(f"\r[compass_sparse] major {self.nit:5d}  pivots {self.minor:8d}  "
-                         f"residual {cur.fbn:10.3e}  best {self.best.fbn:10.3e}  "
-                         f"restarts {self.restarts:3d}  {elapsed:8.1f} s")
-        if final:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
+    def _progress(self, cur: Point, final=False):
+        self.progress.update(self.nit, self.minor, cur.fbn, self.best.fbn, self.restarts,
+                             final=final)
 
     def _callback(self, cur: Point):
         if self.callback is None:
@@ -228,7 +269,7 @@ class NMSSolver:
 
     # ------------------------------------------------------------------ Newton point
     def _newton_point(self, cur: Point, x, eps, opt):
-        J = self.ev.jac(cur.z, cur.f)
+        J = cur.J if cur.J is not None else self.ev.jac(cur.z, cur.f)
         self._last_J = J
         if J is None:
             return None, None, LinearCode.ERROR
@@ -243,20 +284,11 @@ class NMSSolver:
         r = cur.f + x - cur.z  # normal map of the linearization at x
         limit = opt.minor_limit(self.n)
         t0 = time.perf_counter()
-        path = PivotalPath(M, q, self.lb, self.ub, self.bm, opt, minor_limit=limit,
-                           deadline=self.deadline)
         start_ray = opt.lemke_start == "always" or (opt.lemke_start == "first" and self.nit == 0)
-        res = path.run(x, warm=self.basis, ray_start=start_ray, r=r)
-        if (res.code is not LinearCode.SOLVED and opt.lemke_start == "automatic"
-                and res.t < 0.5 and not start_ray):
-            res2 = PivotalPath(M, q, self.lb, self.ub, self.bm, opt, minor_limit=limit,
-                               deadline=self.deadline).run(x, ray_start=True)
-            res2.pivots += res.pivots
-            res2.factorizations += res.factorizations
-            if res2.code is LinearCode.SOLVED or res2.t > res.t:
-                res = res2
-            else:
-                res.pivots = res2.pivots
+        # A warm path that stalls before half-way is retried from the Lemke start.
+        res = solve_linear_mcp(M, q, self.lb, self.ub, self.bm, opt, x, warm=self.basis, r=r,
+                               ray_start=start_ray, retry_below=0.5, minor_limit=limit,
+                               deadline=self.deadline, log=self.log_minor)
         st = self.passes["path"]
         st.ran = True
         st.time += time.perf_counter() - t0
@@ -295,11 +327,11 @@ class NMSSolver:
         return out
 
     # ------------------------------------------------------------------ one run
-    def _run(self, z0, opt):
-        """Crash + NMS from z0 with options opt.  Returns when stuck (for a restart)."""
+    def _run(self, start, opt):
+        """Crash + NMS from ``start`` (a point of the box, or an evaluated Point) with
+        options opt.  Returns when stuck (for a restart)."""
         lb, ub = self.lb, self.ub
-        z = project(z0, lb, ub)
-        cur = self._point(z)
+        cur = start if isinstance(start, Point) else self._point(start)
         if cur is None:
             return "domain error at the start point"
         self._consider(cur.z, cur.f, cur.phi, cur.psi)
@@ -309,7 +341,7 @@ class NMSSolver:
                 and opt.crash_iteration_limit > 0):
             t0 = time.perf_counter()
             nf0, nj0 = self.p.counters.nfev, self.p.counters.njev
-            cr = crash(self.ev, cur.z, lb, ub, opt, f0=cur.f, tol=self.tol,
+            cr = crash(self.ev, cur.z, lb, ub, opt, f0=cur.f, J0=cur.J, tol=self.tol,
                        deadline=self.deadline, log=self._crash_log)
             st = self.passes["crash"]
             st.ran = True
@@ -329,114 +361,93 @@ class NMSSolver:
                 "crash_method none" if opt.crash_method == "none"
                 else f"n < crash_minimum_dimension ({opt.crash_minimum_dimension})")
         # --- NMS
-        memory = [opt.nms_initial_reference_factor * cur.psi]
-        ckpt = (cur, x)
-        ckpt_newton = None
-        delta = 10.0 * max(1.0, float(np.max(np.abs(cur.z))) if cur.z.size else 1.0)
-        n_d = 0
-        watchdogs = 0
-        eps = opt.proximal_perturbation
-        stall = 0
-        best_seen = self.best.psi
-        fbn_start = cur.fbn
+        # nms = False: a monotone line search -- no d-steps, and the reference value is
+        # the merit of the current point (a memory of one checkpoint, no initial slack).
+        monotone = not opt.nms
+        st = NMSState(
+            cur=cur, x=x, memory_size=1 if monotone else opt.nms_memory_size,
+            memory=[cur.psi if monotone else opt.nms_initial_reference_factor * cur.psi],
+            ckpt=(cur, x),
+            delta=10.0 * max(1.0, float(np.max(np.abs(cur.z))) if cur.z.size else 1.0),
+            eps=opt.proximal_perturbation, best_seen=self.best.psi, fbn_start=cur.fbn)
         while True:
             self._check_limits(opt)
-            self._callback(cur)
-            self._progress(cur, opt)
-            res, J, code = self._newton_point(cur, x, eps, opt)
+            self._callback(st.cur)
+            self._progress(st.cur)
+            res, J, code = self._newton_point(st.cur, st.x, st.eps, opt)
             self.nit += 1
             if res is None:  # J could not be evaluated at z_k
                 fb = self._fallback(opt)
                 if fb is None:
                     return "evaluation failure and no fallback progress"
-                cur, x, memory, ckpt, ckpt_newton = self._fresh_checkpoint(fb)
-                self._log(code, self._last_fallback, cur, eps, res)
+                st.fresh_checkpoint(fb, normal_map_at(fb.z, fb.f, lb, ub)[0])
+                self._log(code, self._last_fallback, st.cur, st.eps, res)
                 continue
-            if cur is ckpt[0]:
-                ckpt_newton = res
+            cur = st.cur
+            if cur is st.ckpt[0]:
+                st.ckpt_newton = res
             # A failed path that did not move (t ~ 0) offers no candidate point.
             usable = res.code is LinearCode.SOLVED or (
                 res.t > 1e-8 and bool(np.any(res.z != cur.z)))
             step = None
-            new = None
-            if usable:
-                zN = res.z
-                cand = self._point(zN)
-                if cand is not None:
-                    self._consider(cand.z, cand.f, cand.phi, cand.psi)
-                    R = max(memory)
-                    large = 100.0  # d-steps may raise the merit up to 100 R far away
-                    if cur.fbn <= LOCAL_FACTOR * fbn_start:
-                        # Close to a solution the iteration turns monotone: a Newton step
-                        # that raises the merit there (a singular or non-Lipschitz
-                        # Jacobian, e.g. a sector shutting down in a CGE model) goes to
-                        # the watchdog's backtracking search instead of being accepted
-                        # against the old, large reference values.
-                        R = min(R, cur.psi)
-                        large = 1.0
-                    dist = float(np.max(np.abs(zN - cur.z))) if zN.size else 0.0
-                    if n_d < opt.nms_mstep_frequency and dist <= delta and \
-                            cand.psi <= large * max(R, 1e-300):
-                        step, new = "D", cand
-                        n_d += 1
-                        delta = max(delta * opt.nms_delta_shrink_factor, opt.nms_delta_min)
-                        if cand.psi < R * (1.0 - opt.nms_sigma):
-                            step = "O" if self._descent_ok(cur, cand, R, opt) else "D"
-                    elif self._descent_ok(cur, cand, R, opt):
-                        step, new = "M", cand
-                        n_d = 0
-            if new is not None:
-                xN = res.x if new.z is res.z else normal_map_at(new.z, new.f, lb, ub)[0]
-                cur, x = new, xN
-                if step in ("M", "O") or cur.psi < min(memory):
-                    memory = (memory + [cur.psi])[-opt.nms_memory_size:]
-                    ckpt, ckpt_newton = (cur, x), None
-                    watchdogs = 0
-                eps *= opt.proximal_shrink_factor
-                self._log(res.code, step, cur, eps, res)
+            cand = self._point(res.z) if usable else None
+            if cand is not None:
+                self._consider(cand.z, cand.f, cand.phi, cand.psi)
+                R, large = reference_value(st.memory, cur.psi, cur.fbn, st.fbn_start)
+                dist = float(np.max(np.abs(cand.z - cur.z))) if cand.z.size else 0.0
+                step = classify_step(
+                    cand.psi, R, large, dist, st.delta,
+                    not monotone and st.n_d < opt.nms_mstep_frequency, opt.nms_sigma,
+                    lambda: self._descent_ok(cur, cand, R, opt))
+                if step in ("D", "O"):
+                    st.n_d += 1
+                    st.delta = max(st.delta * opt.nms_delta_shrink_factor, opt.nms_delta_min)
+                elif step == "M":
+                    st.n_d = 0
+            if step is not None:
+                xN = res.x if cand.z is res.z else normal_map_at(cand.z, cand.f, lb, ub)[0]
+                st.cur, st.x = cand, xN
+                if step in ("M", "O") or cand.psi < min(st.memory):
+                    st.checkpoint(cand, xN)
+                    st.watchdogs = 0
+                st.eps *= opt.proximal_shrink_factor
+                self._log(res.code, step, st.cur, st.eps, res)
             else:
                 # Watchdog: back to the checkpoint, search towards its Newton point.
-                if usable and eps == 0.0 and res.code is not LinearCode.SOLVED:
-                    eps = 0.01 * min(1.0, cur.fbn)
+                if usable and st.eps == 0.0 and res.code is not LinearCode.SOLVED:
+                    st.eps = 0.01 * min(1.0, cur.fbn)
                 elif not usable:
-                    eps = max(eps * opt.proximal_increase_factor, 1e-6 * min(1.0, cur.fbn))
-                watchdogs += 1
+                    st.eps = max(st.eps * opt.proximal_increase_factor,
+                                 1e-6 * min(1.0, cur.fbn))
+                st.watchdogs += 1
                 found = None
-                if watchdogs <= opt.nms_maximum_watchdogs and ckpt_newton is not None and (
-                        ckpt_newton.code is LinearCode.SOLVED or ckpt_newton.t > 0):
-                    R = max(memory)
-                    if ckpt[0].fbn <= LOCAL_FACTOR * fbn_start:
-                        R = min(R, ckpt[0].psi)  # monotone near a solution, as above
-                    found = self._watchdog_search(ckpt, ckpt_newton, R, opt)
+                newton = st.ckpt_newton
+                if st.watchdogs <= opt.nms_maximum_watchdogs and newton is not None and (
+                        newton.code is LinearCode.SOLVED or newton.t > 0):
+                    c = st.ckpt[0]
+                    R = reference_value(st.memory, c.psi, c.fbn, st.fbn_start)[0]
+                    found = self._watchdog_search(st.ckpt, newton, R, opt)
                 if found is not None:
-                    cur, x = found
-                    memory = (memory + [cur.psi])[-opt.nms_memory_size:]
-                    ckpt, ckpt_newton = (cur, x), None
-                    n_d = 0
-                    self._log(res.code, "W", cur, eps, res)
+                    st.checkpoint(*found)
+                    st.n_d = 0
+                    self._log(res.code, "W", st.cur, st.eps, res)
                 else:
                     fb = self._fallback(opt)
                     if fb is None:
-                        self._log(res.code, "G", self.best, eps, res)
+                        self._log(res.code, "G", self.best, st.eps, res)
                         return "no descent from the best point"
-                    cur, x, memory, ckpt, ckpt_newton = self._fresh_checkpoint(fb)
-                    n_d = 0
-                    watchdogs = 0
-                    self._log(res.code, self._last_fallback, cur, eps, res)
+                    st.fresh_checkpoint(fb, normal_map_at(fb.z, fb.f, lb, ub)[0])
+                    st.n_d = 0
+                    st.watchdogs = 0
+                    self._log(res.code, self._last_fallback, st.cur, st.eps, res)
             # Stationarity: restart when the best merit has not improved for a while.
-            if self.best.psi < best_seen * (1.0 - 1e-3):
-                best_seen = self.best.psi
-                stall = 0
+            if self.best.psi < st.best_seen * (1.0 - 1e-3):
+                st.best_seen = self.best.psi
+                st.stall = 0
             else:
-                stall += 1
-                if stall >= opt.restart_stationary_limit:
-                    return f"no progress in {stall} major iterations"
-
-    def _fresh_checkpoint(self, pt: Point):
-        """After a fallback step the new point starts a monotone phase: it is the only
-        checkpoint and the reference value is its own merit."""
-        x, _ = normal_map_at(pt.z, pt.f, self.lb, self.ub)
-        return pt, x, [pt.psi], (pt, x), None
+                st.stall += 1
+                if st.stall >= opt.restart_stationary_limit:
+                    return f"no progress in {st.stall} major iterations"
 
     def _descent_ok(self, cur, cand, R, opt):
         # The directional derivative of Psi at z_k uses the Jacobian of this major iteration.
@@ -489,18 +500,17 @@ class NMSSolver:
             f" ({self.p.row_label(idx)})")
 
     # ------------------------------------------------------------------ driver
-    def solve(self, x0) -> Outcome:
+    def solve(self, start: Point) -> Outcome:
+        """Run from ``start``, the evaluated start point (in the box, with F and J)."""
         opt = self.opt0
-        self._t_start = time.perf_counter()
-        z0 = project(np.asarray(x0, dtype=float), self.lb, self.ub)
+        self.progress = ProgressLine(opt.progress)
+        start0, z0 = start, start.z
         status, message = Status.NO_PROGRESS, ""
-        configs = None
+        schedule = RestartSchedule(self.opt0)
         self._last_J = None
         try:
-            start = z0
             if self.opt0.homotopy == "only":
-                pt = self._point(z0)  # defined: the driver evaluated F(z0) already
-                self._consider(pt.z, pt.f, pt.phi, pt.psi)
+                self._consider(start.z, start.f, start.phi, start.psi)
                 raise _Stop(Status.NO_PROGRESS, self._homotopy(z0))
             while True:
                 why = self._run(start, opt)
@@ -514,28 +524,20 @@ class NMSSolver:
                 self.restarts += 1
                 if self.log_major is not None:
                     self.log_major(f"restart {self.restarts}: {why}")
-                if configs is None:
-                    configs = _restart_configs(self.opt0, self.best.fbn)
-                k = self.restarts - 1
-                if k < len(configs):
-                    # PATH's configurations, from the user's start point.
-                    opt = self.opt0.replace(**configs[k])
-                    start = z0
-                elif k % 2 == 0:
-                    # Multi-start: crash + NMS from a new point in the box.
-                    opt = self.opt0.replace(crash_method="pnewton", crash_minimum_dimension=1)
-                    start = self._random_point(z0)
+                opt, where = schedule.plan(self.restarts - 1, self.best.fbn)
+                if where == FROM_START:
+                    start = start0
+                elif where == FROM_RANDOM:
+                    start = random_point(self.rng, z0, self.lb, self.ub)
                 else:
-                    # Near the best point, with the perturbation of PATH's first restart.
-                    opt = self.opt0.replace(**configs[0])
-                    start = self._near_best()
+                    start = near_point(self.rng, self.best.z, self.lb, self.ub)
                 self.basis = None
         except _Stop as stop:
             status, message = stop.status, stop.message
         except KeyboardInterrupt:
             status, message = Status.USER_INTERRUPT, "interrupted by the user (Ctrl-C)"
-        if self.best is not None and time.perf_counter() - self._t_start >= PROGRESS_AFTER:
-            self._progress(self.best, self.opt0, final=True)
+        if self.best is not None:
+            self._progress(self.best, final=True)
         bm = self.bm
         return Outcome(
             status, message, self.best, nit=self.nit, minor=self.minor,
@@ -557,15 +559,3 @@ class NMSSolver:
         if out.status is HomotopyStatus.TIME_LIMIT:
             raise _Stop(Status.TIME_LIMIT, "time limit reached on the homotopy path")
         return f"homotopy {out.status.value} ({out.message})"
-
-    def _near_best(self):
-        z = self.best.z
-        width = np.where(np.isfinite(self.ub - self.lb), self.ub - self.lb, 1.0 + np.abs(z))
-        return project(z + 0.1 * width * self.rng.uniform(-1, 1, z.size), self.lb, self.ub)
-
-    def _random_point(self, z0):
-        # Unbounded directions: a range that grows with the start point's magnitude.
-        spread = 10.0 * (1.0 + np.abs(z0))
-        lo = np.where(np.isfinite(self.lb), self.lb, z0 - spread)
-        hi = np.where(np.isfinite(self.ub), self.ub, z0 + spread)
-        return self.rng.uniform(lo, hi)

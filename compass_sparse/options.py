@@ -59,16 +59,15 @@ class Options(OptionsMixin):
                               lo=0.0, hi=1.0, lo_open=True)
     crash_stepsize_minimum: float = _opt(2.0 ** -12, "smallest crash step (thesis 2^-12)",
                                          lo=0.0, hi=1.0, lo_open=True)
-    crash_searchtype: str = _opt("line", "crash search: 'line' (halving) or 'arc'",
-                                 choices=("line", "arc"))
+    crash_searchtype: str = _opt(
+        "arc", "crash search: 'arc' (the projected path pi(z - alpha d), thesis (2.5.5)) or "
+        "'line' (the segment from z to pi(z - d))", choices=("line", "arc"))
 
     # --- pivotal path (thesis §3.3) ----------------------------------------------------
     lemke_start: str = _opt(
         "automatic", "'automatic' (warm basis, Lemke ray start as fallback), 'first' (ray "
         "start in the first major iteration only), 'always' (ray start every time)",
         choices=("automatic", "first", "always"))
-    lemke_rank_deficiency_iterations: int = _opt(
-        10, "attempts to repair a rank-deficient start basis", lo=0)
     lemke_cycle_limit: int = _opt(
         20, "a variable entering the basis more often than this in one path signals cycling",
         lo=1)
@@ -83,7 +82,8 @@ class Options(OptionsMixin):
         50, "Forrest–Tomlin updates before a fresh factorization", lo=1)
 
     # --- non-monotone stabilization (thesis §3.4) ---------------------------------------
-    nms: bool = _opt(True, "non-monotone stabilization (False: monotone line search)")
+    nms: bool = _opt(True, "non-monotone stabilization (False: a monotone line search: "
+                     "every step must decrease the merit of the current point)")
     nms_memory_size: int = _opt(10, "checkpoint merits kept for the reference value", lo=1)
     nms_mstep_frequency: int = _opt(10, "at most this many d-steps between m-steps", lo=1)
     nms_initial_reference_factor: float = _opt(
@@ -132,7 +132,6 @@ class Options(OptionsMixin):
         "iterations (PATH: 10; 3 measured best on the thesis families: same successes, "
         "restarts 3-8x cheaper; waiting 10 in the first four runs solved a few more "
         "instances but tripled the median time of a success)", lo=1)
-    return_best_point: bool = _opt(True, "return the best point found on failure")
     seed: int = _opt(0, "seed of the random restart points", lo=0)
 
     # --- homotopy fallback (Billups & Watson 2002; module compass_sparse.homotopy) --------
@@ -170,12 +169,12 @@ class Options(OptionsMixin):
 
     # --- passes -------------------------------------------------------------------------
     presolve: bool = _opt(True, "run the preprocessor when the problem has linear structure")
-    project_start: bool = _opt(True, "project the start point onto the box")
 
     # --- output ---------------------------------------------------------------------
     verbosity: int = _opt(0, "0 silent, 1 summary, 2 major-iteration log, 3 minor log",
                           lo=0, hi=3)
-    progress: bool = _opt(False, "one-line progress display on stderr for long solves")
+    progress: bool = _opt(False, "one-line progress display on stderr for solves longer "
+                          "than a second, shown only when stderr is a terminal")
 
     def __post_init__(self):
         self.validate()

@@ -52,12 +52,10 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ._path_kernels import project_slots, ratio_test
-from .basis import KIND_DENSE, KIND_M, KIND_UNIT
-from .exceptions import SingularBasisError
+from ._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
+from .basis import KIND_DENSE, KIND_M, KIND_UNIT, UpdateStatus
+from .exceptions import ShapeError, SingularBasisError
 
-# Basic-variable kinds of a slot.
-VAR_Z, VAR_W, VAR_V, VAR_A, VAR_T, VAR_S = 0, 1, 2, 3, 4, 5
 _VAR_NAMES = "zwvatS"
 
 
@@ -96,6 +94,8 @@ class PathResult:
     basis: WarmBasis | None = None
     ray_start: bool = False
     unbounded: bool = False  #: RAY because the entering variable grows without bound
+    ray: np.ndarray | None = None  #: unbounded: direction of z along the ray
+    ray_base: np.ndarray | None = None  #: unbounded: the z where the ray starts
     time: float = 0.0
     message: str = ""
 
@@ -122,11 +122,60 @@ def default_basis(z, lb, ub, previous: WarmBasis | None = None) -> np.ndarray:
     fixed = lb == ub
     basic[at_l] = VAR_W
     basic[at_u] = VAR_V
-    if previous is not None and previous.basic.shape == z.shape:
+    if previous is not None:
+        if previous.basic.shape != z.shape:
+            raise ShapeError(f"warm basis of shape {previous.basic.shape} for a linear MCP "
+                             f"of {z.size} variables")
         keep_z = (previous.basic == VAR_Z) & (at_l | at_u)
         basic[keep_z] = VAR_Z
     basic[fixed] = VAR_S
     return basic
+
+
+def solve_linear_mcp(M, q, lb, ub, basis, options, x, *, warm: WarmBasis | None = None,
+                     r=None, ray_start: bool = False, retry_below: float = np.inf,
+                     keep_ray: bool = False, minor_limit=None, deadline=None,
+                     log=None) -> PathResult:
+    """One linear MCP by the pivotal path from x (warm-started from ``warm``), retried
+    from the Lemke ray start when ``options.lemke_start`` is "automatic", the first path
+    failed and reached only t < ``retry_below``.  The retry's result is kept when it
+    solves, reaches a larger t, or (``keep_ray``) ends in a genuine ray, which is what
+    an infeasibility verdict needs; pivots and factorizations of both paths are counted.
+    """
+    kw = dict(minor_limit=minor_limit, deadline=deadline, log=log)
+    res = PivotalPath(M, q, lb, ub, basis, options, **kw).run(x, warm=warm,
+                                                              ray_start=ray_start, r=r)
+    if (res.code is LinearCode.SOLVED or ray_start or options.lemke_start != "automatic"
+            or res.t >= retry_below):
+        return res
+    res2 = PivotalPath(M, q, lb, ub, basis, options, **kw).run(x, ray_start=True)
+    pivots = res.pivots + res2.pivots
+    factorizations = res.factorizations + res2.factorizations
+    if (res2.code is LinearCode.SOLVED or res2.t > res.t
+            or (keep_ray and res2.code is LinearCode.RAY and res2.unbounded)):
+        res = res2
+    res.pivots, res.factorizations = pivots, factorizations
+    return res
+
+
+@dataclass
+class PathState:
+    """Everything one run of :meth:`PivotalPath.run` changes, set afresh by every run."""
+
+    art_sign: np.ndarray  #: sign of the artificial unit column of each row
+    sk: np.ndarray | None = None  #: slot table: kind (VAR_*) of each slot's basic variable
+    si: np.ndarray | None = None  #: slot table: index of each slot's basic variable
+    xb: np.ndarray | None = None  #: values of the basic variables, by slot
+    zval: np.ndarray | None = None  #: values of z (basic ones refreshed from xb)
+    r: np.ndarray | None = None  #: the covering vector
+    displaced: dict = field(default_factory=dict)  #: artificial row -> z index it displaced
+    t: float = 0.0  #: the path parameter
+    t_slot: int = -1  #: the slot holding t (-1: t nonbasic)
+    best: tuple = (0.0, None)  #: (largest t, its x), for a path that does not reach t = 1
+    breakpoints: list = field(default_factory=list)  #: (t, x) with t increasing
+    pivots: int = 0
+    unbounded: bool = False  #: RAY because the entering variable grows without bound
+    ray: tuple | None = None  #: (base z, direction dz) of that ray
 
 
 class PivotalPath:
@@ -136,7 +185,8 @@ class PivotalPath:
     ----------
     M : sparse (n, n)
     q, lb, ub : arrays (n,)
-    manager : object with the BasisManager interface (sparse FT manager or dense reference)
+    manager : a :class:`~compass_sparse.basis.protocol.Basis` (the sparse BasisManager or
+        the DenseBasis)
     options : compass_sparse.Options
     """
 
@@ -164,7 +214,7 @@ class PivotalPath:
         ck[isz] = KIND_M
         ck[~isz] = KIND_UNIT
         cs[(kinds == VAR_W) | (kinds == VAR_S)] = -1
-        cs[kinds == VAR_A] = self.art_sign[idx[kinds == VAR_A]] if np.any(kinds == VAR_A) else 1
+        cs[kinds == VAR_A] = self.st.art_sign[idx[kinds == VAR_A]] if np.any(kinds == VAR_A) else 1
         ist = kinds == VAR_T
         ck[ist] = KIND_DENSE
         ci[ist] = 0
@@ -178,14 +228,14 @@ class PivotalPath:
         if kind in (VAR_W, VAR_S):
             return KIND_UNIT, index, -1
         if kind == VAR_A:
-            return KIND_UNIT, index, int(self.art_sign[index])
+            return KIND_UNIT, index, int(self.st.art_sign[index])
         return KIND_UNIT, index, 1
 
     def run(self, x_start, *, warm: WarmBasis | None = None, ray_start: bool = False,
             r=None) -> PathResult:
         t0 = time.perf_counter()
         n, lb, ub = self.n, self.lb, self.ub
-        self.art_sign = np.ones(n, dtype=np.int64)
+        self.st = PathState(art_sign=np.ones(n, dtype=np.int64))  # a path may run again
         slack_basis = None
         if ray_start:
             z, w, v, r, basic = self._lemke_start()
@@ -206,8 +256,8 @@ class PivotalPath:
                 if np.any(inward):
                     slack_basis = basic.copy()
                     basic[inward] = VAR_Z
-        self.r = r
-        self.zval = z.copy()  # values of z (basic or not); basic ones refreshed from xb
+        self.st.r = r
+        self.st.zval = z.copy()  # values of z (basic or not); basic ones refreshed from xb
         st0 = self._stats0()
         if not np.any(r):
             # Already a solution of the linear problem: nothing to pivot.
@@ -219,26 +269,26 @@ class PivotalPath:
         self.bm.set_dense_column(r)
         code, msg = self._factor(initial=True)
         if slack_basis is not None and (
-                code is not None or np.any(self.sk == VAR_A)):
+                code is not None or np.any(self.st.sk == VAR_A)):
             self._reset_slots(slack_basis, z, w, v)
             code, msg = self._factor(initial=True)
         if code is not None:
             return self._finish(code, 0.0, t0, st0, ray_start, msg)
-        self.t = 0.0
-        self.t_slot = -1
-        self.best = (0.0, None)
-        self.breakpoints = []
+        self.st.t = 0.0
+        self.st.t_slot = -1
+        self.st.best = (0.0, None)
+        self.st.breakpoints = []
         code, msg = self._pivot_loop()
         if code is LinearCode.SOLVED:
             code, msg = self._verify_solution()
-        return self._finish(code, self.t, t0, st0, ray_start, msg)
+        return self._finish(code, self.st.t, t0, st0, ray_start, msg)
 
     def _verify_solution(self):
         """t reached 1: the point solves the linear MCP only if no artificial is left
         nonzero and the equation holds to working accuracy (else never report 'S')."""
-        art = self.sk == VAR_A
-        tol = 1e-9 * (1.0 + float(np.max(np.abs(self.q))) + float(np.max(np.abs(self.r))))
-        if np.any(art) and np.max(np.abs(self.xb[art])) > tol:
+        art = self.st.sk == VAR_A
+        tol = 1e-9 * (1.0 + float(np.max(np.abs(self.q))) + float(np.max(np.abs(self.st.r))))
+        if np.any(art) and np.max(np.abs(self.st.xb[art])) > tol:
             return LinearCode.SINGULAR, "t reached 1 with nonzero artificial variables"
         for attempt in range(2):
             z, w, v = self._current_point()
@@ -255,14 +305,14 @@ class PivotalPath:
     def _reset_slots(self, basic, z, w, v):
         """Slot table: slot i holds index i's basic variable at its value in (z, w, v)."""
         n = self.n
-        self.sk = basic.astype(np.int64)  # slot variable kind (VAR_*)
-        self.si = np.arange(n, dtype=np.int64)  # slot variable index
+        self.st.sk = basic.astype(np.int64)  # slot variable kind (VAR_*)
+        self.st.si = np.arange(n, dtype=np.int64)  # slot variable index
         xb = np.where(basic == VAR_Z, z, np.where(basic == VAR_W, w, v))
         xb = np.where(basic == VAR_S, w - v, xb)
-        self.xb = xb.astype(float)
-        self.zval = z.copy()
-        self.art_sign = np.ones(n, dtype=np.int64)
-        self.displaced = {}  # artificial row -> z index it displaced
+        self.st.xb = xb.astype(float)
+        self.st.zval = z.copy()
+        self.st.art_sign = np.ones(n, dtype=np.int64)
+        self.st.displaced = {}  # artificial row -> z index it displaced
 
     def _stats0(self):
         s = self.bm.stats
@@ -290,65 +340,69 @@ class PivotalPath:
 
     # ------------------------------------------------------------------ factorization
     def _factor(self, initial=False):
-        """Factor the current slot table; repair singularity with artificials."""
-        ck, ci, cs = self._columns_for(self.sk, self.si)
-        for _attempt in range(max(1, self.opt.lemke_rank_deficiency_iterations)):
-            try:
-                rep = self.bm.factor(ck, ci, cs)
-            except SingularBasisError:
-                return LinearCode.SINGULAR, "the basis could not be factorized or repaired"
-            if rep.ok and not rep.replaced:
-                break
-            if not rep.ok:
-                return LinearCode.SINGULAR, "the basis could not be factorized"
-            for (slot, okind, oidx, osign, new_row) in rep.replaced:
-                vk = self.sk[slot]
-                if vk == VAR_T:
-                    return LinearCode.SINGULAR, "the covering vector is dependent on the basis"
-                if vk != VAR_Z and vk != VAR_A:
-                    return LinearCode.SINGULAR, "slack columns are dependent"
-                if vk == VAR_Z:
-                    j = int(self.si[slot])
-                    self.zval[j] = self.xb[slot]  # stranded on the right-hand side
-                    self.displaced[int(new_row)] = j
-                else:
-                    j = self.displaced.pop(int(self.si[slot]), None)
-                    if j is not None:
-                        self.displaced[int(new_row)] = j
-                self.sk[slot] = VAR_A
-                self.si[slot] = new_row
-                self.art_sign[new_row] = 1
-            ck, ci, cs = self._columns_for(self.sk, self.si)
-            # The manager already holds the repaired basis; recompute basic values.
-            break
+        """Factor the current slot table; the basis repairs singularity with artificials
+        (one factorization repairs every dependent column)."""
+        ck, ci, cs = self._columns_for(self.st.sk, self.st.si)
+        try:
+            rep = self.bm.factor(ck, ci, cs)
+        except SingularBasisError:
+            return LinearCode.SINGULAR, "the basis could not be factorized or repaired"
+        if not rep.ok:
+            return LinearCode.SINGULAR, "the basis could not be factorized"
+        code, msg = self._apply_repairs(rep.replaced)
+        if code is not None:
+            return code, msg
         self._recompute_values()
+        return None, ""
+
+    def _apply_repairs(self, replaced):
+        """Follow the basis' repair in the slot table: a z column that could not stay is
+        moved to the right-hand side at its current value and an artificial takes its
+        slot (thesis §3.3.1)."""
+        for (slot, _okind, _oidx, _osign, new_row) in replaced:
+            vk = self.st.sk[slot]
+            if vk == VAR_T:
+                return LinearCode.SINGULAR, "the covering vector is dependent on the basis"
+            if vk != VAR_Z and vk != VAR_A:
+                return LinearCode.SINGULAR, "slack columns are dependent"
+            if vk == VAR_Z:
+                j = int(self.st.si[slot])
+                self.st.zval[j] = self.st.xb[slot]  # stranded on the right-hand side
+                self.st.displaced[int(new_row)] = j
+            else:
+                j = self.st.displaced.pop(int(self.st.si[slot]), None)
+                if j is not None:
+                    self.st.displaced[int(new_row)] = j
+            self.st.sk[slot] = VAR_A
+            self.st.si[slot] = new_row
+            self.st.art_sign[new_row] = 1
         return None, ""
 
     def _recompute_values(self):
         """x_B = B^{-1} (r - q - M_N z_N - t r) for the nonbasic values (no drift)."""
-        zn = self.zval.copy()
-        zb = self.sk == VAR_Z
-        zn[self.si[zb]] = 0.0
-        t_nb = 0.0 if getattr(self, "t_slot", -1) >= 0 else getattr(self, "t", 0.0)
-        rhs = self.r * (1.0 - t_nb) - self.q - self.M @ zn
+        zn = self.st.zval.copy()
+        zb = self.st.sk == VAR_Z
+        zn[self.st.si[zb]] = 0.0
+        t_nb = 0.0 if self.st.t_slot >= 0 else self.st.t
+        rhs = self.st.r * (1.0 - t_nb) - self.q - self.M @ zn
         xb = self.bm.ftran(rhs)
         # Artificials whose value is ~0 are exactly 0: they were placed there.
-        self.xb = xb
-        ts = np.flatnonzero(self.sk == VAR_T)
+        self.st.xb = xb
+        ts = np.flatnonzero(self.st.sk == VAR_T)
         if ts.size:
-            self.t = float(xb[ts[0]])
+            self.st.t = float(xb[ts[0]])
         self._project()
 
     # ------------------------------------------------------------------ pivoting
     def _project(self):
-        project_slots(self.sk, self.si, self.xb, self.lb, self.ub)
+        project_slots(self.st.sk, self.st.si, self.st.xb, self.lb, self.ub)
 
     def _pivot_loop(self):
         opt = self.opt
         entering = (VAR_T, 0, 1.0, 0.0)  # (kind, index, direction, start value)
         enter_count = {}
         pivots = 0
-        self.pivots = 0
+        self.st.pivots = 0
         cycle_limit = opt.lemke_cycle_limit
         while True:
             if pivots >= self.minor_limit:
@@ -364,8 +418,8 @@ class PivotalPath:
             d = self.bm.ftran_column(*col)
             if ek == VAR_Z and es == 0.0:
                 # direction free (after an artificial left): increase t.
-                if self.t_slot >= 0 and d[self.t_slot] != 0.0:
-                    es = -np.sign(d[self.t_slot])
+                if self.st.t_slot >= 0 and d[self.st.t_slot] != 0.0:
+                    es = -np.sign(d[self.st.t_slot])
                 else:
                     es = 1.0
                 entering = (ek, ei, es, ev)
@@ -373,49 +427,60 @@ class PivotalPath:
             theta_self = self._entering_room(ek, ei, es, ev)
             leave, theta, leave_up = self._ratio_test(rate, d)
             if leave < 0 and not np.isfinite(theta_self):
-                # Ray termination: the entering variable grows without bound.
+                # Ray termination: the entering variable grows without bound; z moves
+                # along dz (basic z's at their rates, an entering z at its direction).
+                self.st.unbounded = True
+                dz = np.zeros(self.n)
+                m = self.st.sk == VAR_Z
+                dz[self.st.si[m]] = rate[m]
+                if ek == VAR_Z:
+                    dz[ei] += es
+                self.st.ray = (self._current_point()[0], dz)
                 return LinearCode.RAY, f"ray: {_VAR_NAMES[ek]}[{ei}] unbounded"
             if leave < 0 or theta_self <= theta:
                 # The entering variable reaches its own bound first.
                 theta = theta_self
-                self.xb += theta * rate
+                self.st.xb += theta * rate
                 self._project()
                 if ek == VAR_T:
                     # t reaches 1 with the basis unchanged: no pivot was made.
-                    self.t = 1.0
+                    self.st.t = 1.0
                     return LinearCode.SOLVED, ""
                 pivots += 1
-                self.pivots = pivots
+                self.st.pivots = pivots
                 if ek == VAR_Z:
                     # Bound flip: z_i moves to its other bound; its other slack enters.
                     newv = self.ub[ei] if es > 0 else self.lb[ei]
-                    self.zval[ei] = newv
+                    self.st.zval[ei] = newv
                     entering = (VAR_V, ei, 1.0, 0.0) if es > 0 else (VAR_W, ei, 1.0, 0.0)
                     self._update_t()
                     self._record()
+                    if self.log is not None:
+                        self.log(f"minor {pivots:7d} t {self.st.t:.6e} z[{ei}] to its other "
+                                 "bound")
                     continue
                 return LinearCode.ERROR, "bounded entering slack"  # cannot happen
             # A basic variable blocks: update values and exchange columns.
-            self.xb += theta * rate
+            self.st.xb += theta * rate
             new_val = ev + es * theta
-            lk, li = int(self.sk[leave]), int(self.si[leave])
+            lk, li = int(self.st.sk[leave]), int(self.st.si[leave])
             leave_at_upper = bool(leave_up)
             leave_val = self._bound_of(lk, li, leave_at_upper)
             status = self.bm.replace(leave, *col)
             pivots += 1
-            self.pivots = pivots
-            if getattr(status, "name", str(status)) == "REFUSED":
-                # Tiny pivot: fall back to a fresh factorization with repair.
-                self._set_slot(leave, ek, ei, new_val, lk, li, leave_val)
+            self.st.pivots = pivots
+            self._set_slot(leave, ek, ei, new_val, lk, li, leave_val)
+            if status is UpdateStatus.REFUSED or status is UpdateStatus.REPAIRED:
+                # Tiny pivot, or the basis lost its regularity: factorize the path's
+                # table afresh, repairing it with artificials.
                 code, msg = self._factor()
-                if code is not None:
-                    return code, msg
+            elif status is UpdateStatus.REFACTORED:
+                self._recompute_values()  # fresh factors: basic values without drift
+                code = None
             else:
-                self._set_slot(leave, ek, ei, new_val, lk, li, leave_val)
-                if getattr(status, "name", "") == "REFACTORED":
-                    code, msg = self._resync_after_refactor()
-                    if code is not None:
-                        return code, msg
+                code = None
+            if code is not None:
+                return code, msg
             self._project()
             self._update_t()
             if lk == VAR_T:
@@ -423,6 +488,9 @@ class PivotalPath:
                     return LinearCode.SOLVED, ""
                 return LinearCode.RAY, "t decreased to 0"
             self._record()
+            if self.log is not None:
+                self.log(f"minor {pivots:7d} t {self.st.t:.6e} in {_VAR_NAMES[ek]}[{ei}] "
+                         f"out {_VAR_NAMES[lk]}[{li}] ({status.name})")
             # Complement rule.
             if lk == VAR_W:
                 entering = (VAR_Z, li, 1.0, self.lb[li])
@@ -431,23 +499,12 @@ class PivotalPath:
             elif lk == VAR_Z:
                 entering = (VAR_V, li, 1.0, 0.0) if leave_at_upper else (VAR_W, li, 1.0, 0.0)
             elif lk == VAR_A:
-                j = self.displaced.pop(li, None)
+                j = self.st.displaced.pop(li, None)
                 if j is None:
                     return LinearCode.ERROR, "artificial without a displaced variable"
-                entering = (VAR_Z, j, 0.0, self.zval[j])
+                entering = (VAR_Z, j, 0.0, self.st.zval[j])
             else:
                 return LinearCode.ERROR, f"unexpected leaving kind {lk}"
-
-    def _resync_after_refactor(self):
-        """A fresh factorization inside the manager may have repaired the basis; keep the
-        slot table in step with the manager's and recompute the basic values."""
-        ck, ci, cs = self._columns_for(self.sk, self.si)
-        if (np.array_equal(np.asarray(self.bm.kinds), ck)
-                and np.array_equal(np.asarray(self.bm.indices)[ck != KIND_DENSE],
-                                   ci[ck != KIND_DENSE])):
-            self._recompute_values()
-            return None, ""
-        return self._factor()
 
     def _bound_of(self, kind, index, upper):
         """The bound a leaving basic variable stops at."""
@@ -459,25 +516,25 @@ class PivotalPath:
 
     def _set_slot(self, slot, ek, ei, new_val, lk, li, leave_val):
         if lk == VAR_Z:
-            self.zval[li] = leave_val
+            self.st.zval[li] = leave_val
         if lk == VAR_T:
-            self.t = leave_val
-            self.t_slot = -1
-        self.sk[slot] = ek
-        self.si[slot] = ei
-        self.xb[slot] = new_val
+            self.st.t = leave_val
+            self.st.t_slot = -1
+        self.st.sk[slot] = ek
+        self.st.si[slot] = ei
+        self.st.xb[slot] = new_val
         if ek == VAR_T:
-            self.t_slot = slot
+            self.st.t_slot = slot
         if ek == VAR_Z:
-            self.zval[ei] = new_val
+            self.st.zval[ei] = new_val
 
     def _update_t(self):
-        if self.t_slot >= 0:
-            self.t = float(self.xb[self.t_slot])
+        if self.st.t_slot >= 0:
+            self.st.t = float(self.st.xb[self.st.t_slot])
 
     def _entering_room(self, ek, ei, es, ev):
         if ek == VAR_T:
-            return max(0.0, 1.0 - self.t)
+            return max(0.0, 1.0 - self.st.t)
         if ek == VAR_Z:
             bound = self.ub[ei] if es > 0 else self.lb[ei]
             return abs(bound - ev) if np.isfinite(bound) else np.inf
@@ -486,23 +543,23 @@ class PivotalPath:
     def _ratio_test(self, rate, d):
         """Two-pass (Harris) ratio test.  Returns (slot, theta, leaves_at_upper)."""
         scale = max(1.0, float(np.max(np.abs(d)))) if d.size else 1.0
-        return ratio_test(self.sk, self.si, self.xb, rate, self.lb, self.ub,
+        return ratio_test(self.st.sk, self.st.si, self.st.xb, rate, self.lb, self.ub,
                           self.opt.pivot_tolerance * scale, self.opt.ratio_tolerance)
 
     def _record(self):
-        if self.t > self.best[0] + 1e-15:
+        if self.st.t > self.st.best[0] + 1e-15:
             x = self._current_x()
-            self.best = (self.t, x)
+            self.st.best = (self.st.t, x)
             # Breakpoints keep copies of x: at most 200, and at most ~5e6 numbers in all
             # (a long path at n = 1e6 would otherwise hold gigabytes).
-            if len(self.breakpoints) < min(200, max(1, 5_000_000 // self.n)):
-                self.breakpoints.append((self.t, x))
+            if len(self.st.breakpoints) < min(200, max(1, 5_000_000 // self.n)):
+                self.st.breakpoints.append((self.st.t, x))
 
     def _current_point(self):
-        z = self.zval.copy()
+        z = self.st.zval.copy()
         w = np.zeros(self.n)
         v = np.zeros(self.n)
-        sk, si, xb = self.sk, self.si, self.xb
+        sk, si, xb = self.st.sk, self.st.si, self.st.xb
         m = sk == VAR_Z
         z[si[m]] = xb[m]
         m = sk == VAR_W
@@ -522,34 +579,36 @@ class PivotalPath:
 
     def _finish(self, code, t, t0, st0, ray_start, msg):
         s = self.bm.stats
-        if code in (LinearCode.SOLVED,) or not hasattr(self, "best") or self.best[1] is None:
-            z, w, v = self._current_point() if hasattr(self, "xb") else (self.zval, 0, 0)
+        if code is LinearCode.SOLVED or self.st.best[1] is None:
+            z, w, v = self._current_point() if self.st.xb is not None else (self.st.zval, 0, 0)
         else:
             # Not solved: return the point with the largest t (PATH's return-best-point).
             cur = self._current_point()
-            if self.t >= self.best[0]:
+            if self.st.t >= self.st.best[0]:
                 z, w, v = cur
             else:
-                x = self.best[1]
+                x = self.st.best[1]
                 z, w, v = components(x, self.lb, self.ub)
-                t = self.best[0]
+                t = self.st.best[0]
         if not isinstance(w, np.ndarray):
             w = np.zeros(self.n)
             v = np.zeros(self.n)
         basic = np.full(self.n, VAR_Z, dtype=np.int8)
-        if hasattr(self, "sk"):
+        if self.st.sk is not None:
             basic = default_basis(z, self.lb, self.ub)
             for kind in (VAR_Z, VAR_W, VAR_V, VAR_S):
-                m = self.sk == kind
-                basic[self.si[m]] = kind
+                m = self.st.sk == kind
+                basic[self.st.si[m]] = kind
         res = PathResult(
             code, z, w, v, float(t if code is not LinearCode.SOLVED else 1.0),
-            pivots=getattr(self, "pivots", 0),
+            pivots=self.st.pivots,
             factorizations=s.factorizations - st0[0], updates=s.updates - st0[1],
-            artificials=int(np.sum(self.sk == VAR_A)) if hasattr(self, "sk") else 0,
-            breakpoints=getattr(self, "breakpoints", []),
+            artificials=int(np.sum(self.st.sk == VAR_A)) if self.st.sk is not None else 0,
+            breakpoints=self.st.breakpoints,
             basis=WarmBasis(basic), ray_start=ray_start, message=msg,
         )
-        res.unbounded = code is LinearCode.RAY and msg.startswith("ray:")
+        res.unbounded = code is LinearCode.RAY and self.st.unbounded
+        if res.unbounded and self.st.ray is not None:
+            res.ray_base, res.ray = self.st.ray
         res.time = time.perf_counter() - t0
         return res

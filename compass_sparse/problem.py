@@ -21,42 +21,25 @@ give it:
   groups of structurally orthogonal columns together (greedy column colouring, as in
   Curtis–Powell–Reid), so one Jacobian costs (number of colours) extra F evaluations.
 
-Evaluations go through :class:`MCP` methods, which pass *copies* of x to the user's
-callbacks, count evaluations, check shapes and return J in canonical CSC form whose
-``indptr``/``indices`` are those of the pattern recorded at the first call.
+Evaluations go through the problem's :class:`~compass_sparse.evaluation.Evaluator`
+(``MCP.evaluator``), the only code that calls the user's functions: it passes *copies* of
+x, counts evaluations, memoizes the last point, checks shapes and returns J in canonical
+CSC form whose ``indptr``/``indices`` are those of the pattern recorded at the first call.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
 import scipy.sparse as sp
 
-from .exceptions import (
-    BoundsError,
-    CompassError,
-    EvaluationError,
-    JacobianPatternError,
-    ProblemError,
-    ShapeError,
-    StartPointError,
-)
+from .evaluation import EvalCounters, Evaluator
+from .exceptions import BoundsError, ProblemError, ShapeError, StartPointError
 
 INFINITY = 1e20
 """Bounds at or beyond this magnitude are infinite (PATH uses the same value)."""
 
 __all__ = ["MCP", "INFINITY", "EvalCounters", "as_bounds"]
-
-
-@dataclass
-class EvalCounters:
-    """Evaluations made through an :class:`MCP` (shared by every pass of one solve)."""
-
-    nfev: int = 0  # F evaluations requested by the solver (finite-difference ones counted too)
-    njev: int = 0  # Jacobian evaluations
-    nfev_fd: int = 0  # of nfev: extra F calls spent on finite differences
-    domain_errors: int = 0  # evaluations that raised or returned NaN/Inf
 
 
 def as_bounds(lb, ub, n: int, names: Sequence[str] | None = None):
@@ -107,25 +90,6 @@ def _var_label(names, i: int) -> str:
     if names is not None:
         return f"variable {names[i]!r} (index {i})"
     return f"variable {i}"
-
-
-def _canonical_csc(J, n: int) -> sp.csc_matrix:
-    if sp.issparse(J):
-        if J.shape != (n, n):
-            raise ShapeError(f"the Jacobian has shape {J.shape}, expected ({n}, {n})")
-        C = sp.csc_matrix(J, dtype=float, copy=True)
-    else:
-        A = np.asarray(J, dtype=float)
-        if A.shape != (n, n):
-            raise ShapeError(f"the Jacobian has shape {A.shape}, expected ({n}, {n})")
-        # A dense array: its pattern is the full matrix, so zeros stay stored.
-        C = sp.csc_matrix(np.ones((n, n)))
-        C.data = A.T.ravel().copy()
-        return C
-    if not C.has_canonical_format:
-        C.sum_duplicates()  # sorts indices too
-    C.sort_indices()
-    return C
 
 
 class MCP:
@@ -181,8 +145,6 @@ class MCP:
                 "no Jacobian: give jac=callable, jac=True, or a jac_sparsity pattern for "
                 "finite differences"
             )
-        self._F = F
-        self._jac = jac
         n = self._infer_n(n, x0, lb, ub, jac_sparsity)
         self.n = n
         self.var_names = self._check_names(var_names, "var_names")
@@ -200,24 +162,31 @@ class MCP:
                 "must be finite"
             )
         self.x0 = np.clip(x0, self.lb, self.ub)
-        self.fd_step = float(fd_step)
-        self.counters = EvalCounters()
-        self._pattern: sp.csc_matrix | None = None
-        self._colors: np.ndarray | None = None
-        if jac_sparsity is not None:
-            if sp.issparse(jac_sparsity):
-                S = _canonical_csc(jac_sparsity, n)  # stored entries define the structure
-            else:
-                S = _canonical_csc(sp.csc_matrix(np.asarray(jac_sparsity) != 0), n)
-            S.data[:] = 1.0
-            if jac is None:
-                self._pattern = S
-        self._constant_spec = constant_jac
-        self.constant_mask: np.ndarray | None = None
-        if self._pattern is not None:  # finite differences: the pattern is known now
-            self._set_constant_mask()
+        pattern = None
+        if jac_sparsity is not None and jac is None:
+            # Differences: the stored entries of jac_sparsity (or the nonzeros of an array)
+            # are the pattern, known now.
+            pattern = (jac_sparsity if sp.issparse(jac_sparsity)
+                       else sp.csc_matrix(np.asarray(jac_sparsity) != 0))
+        self.evaluator = Evaluator(F, jac, n, pattern=pattern, constant_jac=constant_jac,
+                                   fd_step=fd_step, ub=self.ub, row_label=self.row_label,
+                                   var_label=self.var_label)
         if check:
             self.check_start()
+
+    @classmethod
+    def from_evaluator(cls, evaluator: Evaluator, lb, ub, x0, *, var_names=None,
+                       eqn_names=None) -> "MCP":
+        """An MCP whose F and J are those of an existing evaluator (e.g. the restriction
+        built by :meth:`Evaluator.restrict` for the preprocessor's reduced problem)."""
+        self = cls.__new__(cls)
+        self.n = evaluator.n
+        self.var_names = self._check_names(var_names, "var_names")
+        self.eqn_names = self._check_names(eqn_names, "eqn_names")
+        self.lb, self.ub = as_bounds(lb, ub, self.n, self.var_names)
+        self.x0 = np.clip(np.asarray(x0, dtype=float), self.lb, self.ub)
+        self.evaluator = evaluator
+        return self
 
     # -- construction helpers -------------------------------------------------------
     @staticmethod
@@ -271,196 +240,51 @@ class MCP:
             return f"F({self.var_names[i]})"
         return f"F[{i}]"
 
-    # -- evaluation -----------------------------------------------------------------
-    def _call_F(self, x):
-        out = self._F(np.array(x, dtype=float, copy=True))
-        if self._jac is True:
-            if not (isinstance(out, tuple) and len(out) == 2):
-                raise ShapeError("with jac=True, F(x) must return the pair (f, J)")
-            f, J = out
-        else:
-            f, J = out, None
-        f = np.asarray(f, dtype=float)
-        if f.shape != (self.n,):
-            if f.size == self.n:
-                f = f.reshape(self.n)
-            else:
-                raise ShapeError(f"F(x) returned shape {f.shape}, expected ({self.n},)")
-        return f, J
+    # -- evaluation (delegated to the evaluation layer) ------------------------------
+    @property
+    def counters(self) -> EvalCounters:
+        """Calls of the user's F and J so far (see :class:`~compass_sparse.evaluation.EvalCounters`)."""
+        return self.evaluator.counters
 
-    def F_uncounted(self, x) -> np.ndarray:
-        """F(x) without touching the counters (for independent residual checks)."""
-        return self._call_F(x)[0]
+    @property
+    def constant_mask(self) -> np.ndarray | None:
+        """Mask over the pattern entries (CSC order) declared constant, or None."""
+        return self.evaluator.constant_mask
 
-    def J_uncounted(self, x) -> sp.csc_matrix:
-        """J(x) without touching the counters (for wrappers that count on their own)."""
-        saved = (self.counters.nfev, self.counters.njev, self.counters.nfev_fd)
-        try:
-            return self.J(x)
-        finally:
-            self.counters.nfev, self.counters.njev, self.counters.nfev_fd = saved
-
-    def FJ_uncounted(self, x):
-        """(F(x), J(x)) without touching the counters."""
-        saved = (self.counters.nfev, self.counters.njev, self.counters.nfev_fd)
-        try:
-            return self.FJ(x)
-        finally:
-            self.counters.nfev, self.counters.njev, self.counters.nfev_fd = saved
+    @property
+    def fd_step(self) -> float:
+        return self.evaluator.fd_step
 
     def F(self, x) -> np.ndarray:
-        """F(x) as a float array of shape (n,).  Counts one evaluation."""
-        self.counters.nfev += 1
-        f, _ = self._call_F(x)
-        return f
-
-    def FJ(self, x) -> tuple[np.ndarray, sp.csc_matrix]:
-        """F(x) and J(x) together (one F and one J evaluation)."""
-        if self._jac is True:
-            self.counters.nfev += 1
-            self.counters.njev += 1
-            f, J = self._call_F(x)
-            return f, self._fix_pattern(_canonical_csc(J, self.n))
-        f = self.F(x)
-        return f, self._jac_given_f(x, f)
+        """F(x) as a float array of shape (n,)."""
+        return self.evaluator.F(x)
 
     def J(self, x) -> sp.csc_matrix:
         """J(x) in canonical CSC form with the problem's fixed pattern."""
-        if self._jac is True:
-            return self.FJ(x)[1]
-        if self._jac is None:
-            return self._jac_given_f(x, self.F(x))
-        return self._jac_given_f(x, None)
+        return self.evaluator.J(x)
 
-    def _jac_given_f(self, x, f):
-        self.counters.njev += 1
-        if self._jac is None:
-            return self._fd_jacobian(np.asarray(x, dtype=float), f)
-        J = self._jac(np.array(x, dtype=float, copy=True))
-        return self._fix_pattern(_canonical_csc(J, self.n))
+    def FJ(self, x) -> tuple[np.ndarray, sp.csc_matrix]:
+        """F(x) and J(x) together."""
+        return self.evaluator.FJ(x)
+
+    def F_uncounted(self, x) -> np.ndarray:
+        """F(x) outside the counters and the memo (for independent residual checks)."""
+        return self.evaluator.F_uncounted(x)
 
     @property
     def pattern(self) -> sp.csc_matrix:
         """The structural pattern of J (CSC, data = 1).  Evaluates J at x0 if unknown."""
-        if self._pattern is None:
-            self.J(self.x0)
-        P = self._pattern.copy()
-        P.data = np.ones_like(P.data)
+        P = self.evaluator.pattern
+        if P is None:
+            self.evaluator.J(self.x0)
+            P = self.evaluator.pattern
         return P
-
-    def _fix_pattern(self, C: sp.csc_matrix) -> sp.csc_matrix:
-        if self._pattern is None:
-            self._pattern = C.copy()
-            self._set_constant_mask()
-            return C
-        P = self._pattern
-        if (C.indptr.shape == P.indptr.shape and C.indices.shape == P.indices.shape
-                and np.array_equal(C.indptr, P.indptr) and np.array_equal(C.indices, P.indices)):
-            return C
-        raise JacobianPatternError(self._pattern_change_message(P, C))
-
-    def _pattern_change_message(self, P, C) -> str:
-        Pc, Cc = P.tocoo(), C.tocoo()
-        n = self.n
-        kp = set((Pc.col.astype(np.int64) * n + Pc.row).tolist())
-        kc = set((Cc.col.astype(np.int64) * n + Cc.row).tolist())
-        added = sorted(kc - kp)
-        removed = sorted(kp - kc)
-        first = min(added[:1] + removed[:1])
-        j, i = divmod(first, n)
-        what = "appeared" if added and first == added[0] else "disappeared"
-        return (
-            f"the Jacobian's structural pattern changed: entry (row {self.row_label(i)}, "
-            f"column {self.var_label(j)}) {what} ({len(added)} entries added, {len(removed)} "
-            "removed since the first call). Return J with a fixed index structure: store "
-            "explicit zeros (e.g. build it from fixed (row, col) index arrays with "
-            "scipy.sparse.csc_matrix((data, (rows, cols)), shape) rather than from a dense "
-            "array, which drops zeros)"
-        )
-
-    def _set_constant_mask(self):
-        spec = self._constant_spec
-        if spec is None or self._pattern is None:
-            return
-        S = sp.csc_matrix(spec, copy=True)
-        if S.shape != (self.n, self.n):
-            raise ShapeError(f"constant_jac has shape {S.shape}, expected ({self.n}, {self.n})")
-        S.sum_duplicates()  # canonical: column-major keys, sorted and unique
-        S.sort_indices()
-        P = self._pattern  # canonical CSC, so its keys are sorted and unique too
-        n = self.n
-        keys_p = np.repeat(np.arange(n, dtype=np.int64), np.diff(P.indptr)) * n + P.indices
-        keys_s = np.repeat(np.arange(n, dtype=np.int64), np.diff(S.indptr)) * n + S.indices
-        pos = np.searchsorted(keys_p, keys_s)
-        inside = pos < keys_p.size
-        inside[inside] = keys_p[pos[inside]] == keys_s[inside]
-        if not inside.all():
-            k = keys_s[~inside][0]
-            j, i = divmod(int(k), n)
-            raise ProblemError(
-                f"constant_jac declares entry (row {self.row_label(i)}, column "
-                f"{self.var_label(j)}) that is not in the Jacobian's pattern"
-            )
-        mask = np.zeros(P.nnz, dtype=bool)
-        mask[pos] = True
-        self.constant_mask = mask
-
-    # -- finite differences -----------------------------------------------------------
-    def _fd_jacobian(self, x, f):
-        from ._coloring import color_columns
-
-        P = self._pattern
-        if self._colors is None:
-            self._colors = color_columns(P.indptr, P.indices, self.n)
-        if f is None:
-            f = self.F(x)
-        colors = self._colors
-        ncol = int(colors.max()) + 1 if colors.size else 0
-        h = self.fd_step * np.maximum(1.0, np.abs(x))
-        # Step inward when an upper bound is near, so F is never evaluated outside the box.
-        h = np.where(x + h > self.ub, -h, h)
-        h = (x + h) - x  # the step actually taken in floating point
-        data = np.empty(P.nnz)
-        col_of_entry = np.repeat(np.arange(self.n), np.diff(P.indptr))
-        for c in range(ncol):
-            cols = colors == c
-            xp = x.copy()
-            xp[cols] += h[cols]
-            self.counters.nfev_fd += 1
-            fp = self.F(xp)
-            diff = fp - f
-            sel = cols[col_of_entry]
-            data[sel] = diff[P.indices[sel]] / h[col_of_entry[sel]]
-        J = sp.csc_matrix((data, P.indices.copy(), P.indptr.copy()), shape=(self.n, self.n))
-        return J
 
     # -- validation -------------------------------------------------------------------
     def check_start(self):
-        """Evaluate F and J at x0 and raise on wrong shapes or non-finite values."""
-        x = self.x0
-        try:
-            f, J = self.FJ(x)
-        except CompassError:  # our own diagnostics (shapes, pattern, ...) pass through
-            raise
-        except Exception as exc:  # the user's code failed at the start point
-            raise EvaluationError(f"F or J raised at the start point: {exc!r}") from exc
-        bad = np.flatnonzero(~np.isfinite(f))
-        if bad.size:
-            i = bad[0]
-            raise EvaluationError(
-                f"F is {f[i]} in row {self.row_label(i)} at the start point "
-                f"({bad.size} non-finite rows)"
-            )
-        if not np.all(np.isfinite(J.data)):
-            k = int(np.flatnonzero(~np.isfinite(J.data))[0])
-            j = int(np.searchsorted(J.indptr, k, side="right") - 1)
-            i = int(J.indices[k])
-            raise EvaluationError(
-                f"J is {J.data[k]} at (row {self.row_label(i)}, column {self.var_label(j)}) at "
-                "the start point"
-            )
-        self._f0, self._J0 = f, J
-        return f, J
+        """Evaluate F and J at x0 and raise on wrong shapes or non-finite values.  The
+        values stay in the evaluator's memo, so the solve does not ask for them again."""
+        return self.evaluator.check_at(self.x0)
 
     def with_start(self, x0) -> "MCP":
         """A shallow copy of this problem with another start point (pattern kept)."""
@@ -473,7 +297,7 @@ class MCP:
         if not np.all(np.isfinite(x0)):
             raise StartPointError("the start point must be finite")
         other.x0 = np.clip(x0, self.lb, self.ub)
-        other.counters = EvalCounters()
+        other.evaluator = self.evaluator.fresh()
         return other
 
     def __repr__(self):

@@ -11,34 +11,33 @@ exception of :mod:`compass_sparse.exceptions` before any work is done.
 from __future__ import annotations
 
 import logging
-import sys
 import time
 
 import numpy as np
 import scipy.sparse as sp
 
-from .crash import crash, normal_map_at
-from .merit import fb_phi, fb_psi, residual_report
-from .nms import NMSSolver
+from .crash import crash
+from .merit import fb_phi, fb_psi, normal_map_at, residual_report
+from .nms import NMSSolver, Point
 from .options import Options
-from .path import LinearCode, PivotalPath, WarmBasis
+from .exceptions import ShapeError
+from .path import LinearCode, WarmBasis, default_basis, solve_linear_mcp
 from .problem import MCP
 from .result import PassStats, PointStatus, Result, Status
-from ._evaluate import GuardedEvaluator
 
 logger = logging.getLogger("compass_sparse")
 
 __all__ = ["solve_mcp", "solve_lcp", "MCPSolver"]
 
 DENSE_BASIS_MAX_N = 300
-"""Below this dimension the dense reference basis is used (0: always the sparse manager)."""
+"""Up to this dimension the dense basis is used (0: always the sparse manager)."""
 
 
 def _manager_factory(opt: Options):
     def make(M):
         n = M.shape[0]
         if n <= DENSE_BASIS_MAX_N:
-            from ._dense_basis import DenseBasis
+            from .basis.dense import DenseBasis
 
             return DenseBasis(M)
         from .basis import BasisManager, BasisOptions
@@ -63,15 +62,15 @@ def _blas_threads(n: int):
     return threadpool_limits(limits=1, user_api="blas")
 
 
-def _setup_logging(opt: Options):
-    if opt.verbosity > 0 and not logger.handlers and not logging.getLogger().handlers:
-        h = logging.StreamHandler(sys.stdout)
-        h.setFormatter(logging.Formatter("%(message)s"))
-        logger.addHandler(h)
-        logger.propagate = False
-    if opt.verbosity > 0:
-        logger.setLevel(logging.INFO if opt.verbosity >= 2 else logging.WARNING)
-    return (lambda s: logger.info(s)) if opt.verbosity >= 2 else None
+def _loggers(opt: Options):
+    """(major-iteration log, minor log) callables for verbosity >= 2 and >= 3, or None.
+
+    The library only emits records (at INFO) on the ``compass_sparse`` logger; showing
+    them is the application's choice (``logging.basicConfig(level=logging.INFO)``; the
+    command-line tool does so)."""
+    major = logger.info if opt.verbosity >= 2 else None
+    minor = logger.info if opt.verbosity >= 3 else None
+    return major, minor
 
 
 def _as_problem(F, jac, lb, ub, x0, kwargs) -> MCP:
@@ -102,7 +101,8 @@ def _result(problem: MCP, status: Status, message: str, z, f, opt: Options, t0, 
         x=np.asarray(z, dtype=float).copy(), fun=np.asarray(f, dtype=float).copy(),
         success=status is Status.SOLVED, status=status, point_status=pstat, message=message,
         nfev=c.nfev, njev=c.njev, residual=rep, time=time.perf_counter() - t0,
-        lb=problem.lb, ub=problem.ub, tolerance=opt.convergence_tolerance, **counts,
+        domain_errors=c.domain_errors, lb=problem.lb, ub=problem.ub,
+        tolerance=opt.convergence_tolerance, **counts,
     )
 
 
@@ -142,7 +142,7 @@ def solve_mcp(F, jac=None, lb=0.0, ub=np.inf, x0=None, *, options=None, callback
     return _solve_problem(problem, opt, callback=callback, basis=basis)
 
 
-def _presolve_pass(problem, opt):
+def _presolve_pass(problem, opt, f0, J0):
     """Run the preprocessor when the problem declares linear structure."""
     st = PassStats()
     if not opt.presolve:
@@ -164,26 +164,65 @@ def _presolve_pass(problem, opt):
         st.reason = "preprocessor unavailable"
         return None, st
     t0 = time.perf_counter()
-    pre = run_presolve(problem)
+    pre = run_presolve(problem, f0=f0, J0=J0)
     st.ran = True
     st.time = time.perf_counter() - t0
     return pre, st
 
 
 def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> Result:
+    try:
+        return _solve_evaluated(problem, opt, callback=callback, basis=basis)
+    finally:
+        # The user's functions may read data that changes before the next solve.
+        problem.evaluator.forget()
+
+
+def _check_basis(basis, n: int) -> WarmBasis | None:
+    """A warm-start basis of the user's problem, or an error naming the mismatch."""
+    if basis is None:
+        return None
+    b = np.asarray(basis.basic if isinstance(basis, WarmBasis) else basis)
+    if b.shape != (n,):
+        raise ShapeError(f"the warm-start basis has shape {b.shape} but the problem has {n} "
+                         "variables: pass the Result.basis of a solve of this problem")
+    return WarmBasis(b.astype(np.int8))
+
+
+def _postsolve_basis(pre, basis: WarmBasis | None, z, lb, ub) -> WarmBasis | None:
+    """The basis of the reduced problem in the original index space: reduced variable k
+    is original variable ``cols[k]``; a removed variable gets the status of its
+    postsolved value (at a bound: its slack; fixed: the free slack)."""
+    if basis is None or pre is None:
+        return basis
+    full = default_basis(z, lb, ub)
+    full[pre.stack.cols] = basis.basic
+    return WarmBasis(full)
+
+
+def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -> Result:
+    basis = _check_basis(basis, problem.n)
     t0 = time.perf_counter()
-    log_major = _setup_logging(opt)
+    log_major, log_minor = _loggers(opt)
     deadline = t0 + opt.time_limit if np.isfinite(opt.time_limit) else None
     passes = {}
-    pre, st = _presolve_pass(problem, opt)
+    # F and J at the start point: one evaluation each (kept from the problem's start check
+    # when it ran), handed down to the preprocessor, the crash and the first iteration.
+    f0, J0 = problem.evaluator.fj(problem.x0)
+    problem.evaluator.pin(problem.x0)
+    if f0 is None:
+        return _result(problem, Status.DOMAIN_ERROR, "F or J failed at the start point: "
+                       f"{problem.evaluator.last_error}", problem.x0,
+                       np.full(problem.n, np.nan), opt, t0, start_z=problem.x0,
+                       passes=passes)
+    pre, st = _presolve_pass(problem, opt, f0, J0)
     passes["presolve"] = st
     work = problem
     if pre is not None:
         st.reason = pre.summary_line()
         if getattr(pre, "infeasible", None):
-            f = problem.F(problem.x0)
             return _result(problem, Status.INFEASIBLE, f"preprocessor: {pre.infeasible}",
-                           problem.x0, f, opt, t0, passes=passes)
+                           problem.x0, f0, opt, t0, passes=passes)
         if pre.reduced is None:
             z = pre.postsolve(np.zeros(0))
             f = problem.F(z)
@@ -193,12 +232,15 @@ def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> 
             pre = None  # nothing removed: no postsolve needed
         else:
             work = pre.reduced
-    evalr = GuardedEvaluator(work)
+            if basis is not None:  # the warm basis, restricted through the index map
+                basis = WarmBasis(basis.basic[pre.stack.cols])
     z0 = work.x0
-    f0 = evalr.f(z0)
-    if f0 is None:
-        return _finish(problem, pre, Status.DOMAIN_ERROR, f"F failed at the start point: "
-                       f"{evalr.last_error}", work.x0, opt, t0, passes, evalr)
+    if work is not problem:
+        f0, J0 = work.evaluator.fj(z0)
+        work.evaluator.pin(z0)
+        if f0 is None:
+            return _finish(problem, pre, Status.DOMAIN_ERROR, "F or J failed at the start "
+                           f"point: {work.evaluator.last_error}", z0, opt, t0, passes)
     phi0 = fb_phi(z0, f0, work.lb, work.ub)
     if np.sqrt(2 * fb_psi(phi0)) <= opt.convergence_tolerance or opt.major_iteration_limit == 0:
         status = (Status.SOLVED if np.sqrt(2 * fb_psi(phi0)) <= opt.convergence_tolerance
@@ -208,47 +250,50 @@ def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> 
         for k in ("crash", "path", "fallback", "homotopy"):
             passes[k] = PassStats(reason="start point already solved"
                                   if status is Status.SOLVED else "major_iteration_limit = 0")
-        return _finish(problem, pre, status, msg, z0, opt, t0, passes, evalr,
-                       start_z=problem.x0, basis=basis)
-    solver = NMSSolver(work, evalr, opt, manager_factory=_manager_factory(opt),
-                       callback=callback, deadline=deadline, log_major=log_major)
+        return _finish(problem, pre, status, msg, z0, opt, t0, passes,
+                       f_reduced=f0, start_z=problem.x0, basis=basis)
+    solver = NMSSolver(work, opt, manager_factory=_manager_factory(opt),
+                       callback=callback, deadline=deadline, log_major=log_major,
+                       log_minor=log_minor)
     solver.basis = basis
     if log_major is not None:
         log_major(f"{'major':>5} {'minor':>7} {'func':>6} {'grad':>5} {'residual':>12} "
                   f"type {'prox':>9} {'inorm':>10} (label)")
+    tn = time.perf_counter()
     with _blas_threads(work.n):
-        out = solver.solve(z0)
+        out = solver.solve(Point(z0, f0, phi0, fb_psi(phi0), J0))
     passes.update(out.passes)
-    passes["nms"] = PassStats(ran=True, iterations=out.nit)
+    passes["nms"] = PassStats(ran=True, iterations=out.nit, time=time.perf_counter() - tn)
     passes.setdefault("homotopy", PassStats(
         reason="homotopy off" if opt.homotopy == "off" else "NMS did not stall"))
-    res = _finish(problem, pre, out.status, out.message, out.best.z, opt, t0, passes, evalr,
+    res = _finish(problem, pre, out.status, out.message, out.best.z, opt, t0, passes,
                   f_reduced=out.best.f, nit=out.nit, minor_iterations=out.minor,
                   crash_iterations=out.crash_iterations, restarts=out.restarts,
                   gradient_steps=out.gradient_steps, lm_steps=out.lm_steps,
                   factorizations=out.factorizations, basis_updates=out.updates,
                   basis=out.basis)
     if opt.verbosity >= 1:
-        logger.warning(res.summary())
+        logger.info(res.summary())
     return res
 
 
-def _finish(problem, pre, status, message, z_red, opt, t0, passes, evalr, *, f_reduced=None,
+def _finish(problem, pre, status, message, z_red, opt, t0, passes, *, f_reduced=None,
             start_z=None, **counts):
     """Postsolve and build the Result on the ORIGINAL problem."""
     if pre is not None:
         z = pre.postsolve(np.asarray(z_red, dtype=float))
-        f = problem.F(z)
+        f = None
     else:
         z = z_red
-        f = f_reduced if f_reduced is not None else problem.F(z)
-    res = _result(problem, status, message, z, f, opt, t0, start_z=start_z,
-                  passes=passes, domain_errors=evalr.domain_errors, **counts)
-    work = evalr.problem
-    if work is not problem:  # the reduced problem counts its own evaluations
-        res.nfev += work.counters.nfev
-        res.njev += work.counters.njev
-    return res
+        f = f_reduced if f_reduced is not None else None
+    if f is None:
+        f = problem.evaluator.f(z)
+        if f is None:  # the point is returned with the failure; F is unknown there
+            f = np.full(problem.n, np.nan)
+    if "basis" in counts:
+        counts["basis"] = _postsolve_basis(pre, counts["basis"], z, problem.lb, problem.ub)
+    return _result(problem, status, message, z, f, opt, t0, start_z=start_z,
+                   passes=passes, **counts)
 
 
 # ---------------------------------------------------------------------------- LCP
@@ -268,8 +313,6 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     q = np.asarray(q, dtype=float)
     n = q.size
     if M.shape != (n, n):
-        from .exceptions import ShapeError
-
         raise ShapeError(f"M has shape {M.shape} but q has {n} entries; M must be {n} x {n}")
     M.sort_indices()
 
@@ -277,12 +320,11 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
         return M @ z + q
 
     problem = MCP(F, lambda z: M, lb, ub, x0, n=n, var_names=var_names, constant_jac=M)
-    log_major = _setup_logging(opt)
-    evalr = GuardedEvaluator(problem)
+    log_major, log_minor = _loggers(opt)
     passes = {"presolve": PassStats(reason="linear problems go straight to the path")}
     lb, ub = problem.lb, problem.ub
     z = problem.x0
-    f = problem.F(z)
+    f = problem.F(z)  # kept from the start check
     if np.linalg.norm(fb_phi(z, f, lb, ub)) <= opt.convergence_tolerance \
             or opt.major_iteration_limit == 0:
         status = (Status.SOLVED if np.linalg.norm(fb_phi(z, f, lb, ub))
@@ -294,7 +336,7 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     st = PassStats()
     if opt.crash_method == "pnewton" and n >= opt.crash_minimum_dimension:
         tc = time.perf_counter()
-        cr = crash(evalr, z, lb, ub, opt, f0=f, J0=M, log=log_major)
+        cr = crash(problem.evaluator, z, lb, ub, opt, f0=f, J0=M, log=log_major)
         st = PassStats(ran=True, time=time.perf_counter() - tc, iterations=cr.iterations,
                        factorizations=cr.factorizations, reason=cr.stop_reason)
         crash_its = cr.iterations
@@ -313,17 +355,12 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     # One path solves a linear problem: give it room (a Lemke path may need ~n pivots).
     limit = opt.minor_iteration_limit or max(10 * n, 1000)
     deadline = t0 + opt.time_limit if np.isfinite(opt.time_limit) else None
-    path = PivotalPath(M, q, lb, ub, bm, opt, minor_limit=limit, deadline=deadline)
-    start_ray = opt.lemke_start in ("always", "first")
     with _blas_threads(n):
-        res = path.run(x, ray_start=start_ray)
-        pivots = res.pivots
-        if res.code is not LinearCode.SOLVED and not start_ray:
-            res2 = PivotalPath(M, q, lb, ub, bm, opt, minor_limit=limit,
-                               deadline=deadline).run(x, ray_start=True)
-            pivots += res2.pivots
-            if res2.code is LinearCode.SOLVED or res2.code is LinearCode.RAY:
-                res = res2
+        res = solve_linear_mcp(M, q, lb, ub, bm, opt, x,
+                               ray_start=opt.lemke_start in ("always", "first"),
+                               keep_ray=True, minor_limit=limit, deadline=deadline,
+                               log=log_minor)
+    pivots = res.pivots
     passes["path"] = PassStats(ran=True, time=time.perf_counter() - tp, iterations=1,
                                pivots=pivots, factorizations=bm.stats.factorizations)
     counts = dict(nit=1, minor_iterations=pivots, crash_iterations=crash_its,
@@ -341,13 +378,14 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     bounded = bool(np.all(np.isfinite(lb)) and np.all(np.isfinite(ub)))
     if (res.code is LinearCode.RAY and res.ray_start and res.unbounded and not bounded
             and _is_monotone(M)):
-        zs = res.z
-        fs = problem.F(zs)
-        if np.linalg.norm(fb_phi(z, f, lb, ub)) < np.linalg.norm(fb_phi(zs, fs, lb, ub)):
-            zs, fs = z, f
-        return _result(problem, Status.INFEASIBLE,
-                       "ray termination from a Lemke start on a positive semidefinite M: "
-                       "the problem has no solution", zs, fs, opt, t0, **counts)
+        # The certificate: x is the ray's base and x + theta * ray (theta >= 0) the ray.
+        zs = res.ray_base
+        out = _result(problem, Status.INFEASIBLE,
+                      "ray termination from a Lemke start on a positive semidefinite M: "
+                      "the problem has no solution", zs, problem.F(zs), opt, t0,
+                      ray=res.ray.copy(), **counts)
+        out.point_status = PointStatus.CERTIFICATE
+        return out
     # The path cycled, hit a limit or lost accuracy: the stabilized Newton method takes over.
     general = _solve_problem(problem.with_start(z), opt.replace(presolve=False))
     general.passes = {**passes, **{k: v for k, v in general.passes.items() if k != "presolve"}}

@@ -4,7 +4,6 @@ import pytest
 import scipy.sparse as sp
 
 import compass_sparse as cs
-from compass_sparse._evaluate import GuardedEvaluator
 from compass_sparse.fallback import cholmod_available, gradient_steps, lm_step, spd_solve
 from compass_sparse.merit import fb_phi, fb_psi
 from compass_sparse.generators import structured_quadratic
@@ -52,7 +51,7 @@ def test_lm_and_gradient_steps_decrease_psi(seed):
     p = g.problem
     rng = np.random.default_rng(seed)
     z = np.clip(g.solution + rng.normal(scale=0.5, size=p.n), p.lb, p.ub)
-    ev = GuardedEvaluator(p)
+    ev = p.evaluator
     f = ev.f(z)
     psi0 = fb_psi(fb_phi(z, f, p.lb, p.ub))
     opt = cs.Options()
@@ -102,13 +101,70 @@ def test_cli_help_and_demo(capsys):
 
 
 def test_progress_line_on_stderr(monkeypatch, capsys):
-    import compass_sparse.nms as nms
+    import compass_sparse.progress as progress
     from compass_sparse.generators import thesis_family
 
-    monkeypatch.setattr(nms, "PROGRESS_AFTER", 0.0)
+    monkeypatch.setattr(progress, "PROGRESS_AFTER", 0.0)
     g = thesis_family(20, family=1, seed=3)
-    r = cs.solve_mcp(g.problem, options={"progress": True, "crash_method": "none"})
+    opts = {"progress": True, "crash_method": "none"}
+    # stderr is not a terminal under pytest: nothing is drawn
+    r = cs.solve_mcp(g.problem, options=opts)
+    assert capsys.readouterr().err == "" and r.nit >= 1
+    monkeypatch.setattr(progress, "stderr_is_terminal", lambda: True)
+    r = cs.solve_mcp(g.problem, options=opts)
     err = capsys.readouterr().err
     assert "[compass_sparse] major" in err and "residual" in err
     assert err.endswith("\n")
     assert r.nit >= 1
+
+
+def test_library_logging_leaves_configuration_to_the_application(caplog, capsys):
+    import logging
+
+    from compass_sparse.generators import thesis_family
+
+    lg = logging.getLogger("compass_sparse")
+    before = (list(lg.handlers), lg.level, lg.propagate)
+    assert any(isinstance(h, logging.NullHandler) for h in lg.handlers)
+    g = thesis_family(30, family=1, seed=1)
+    with caplog.at_level(logging.INFO, logger="compass_sparse"):
+        r = cs.solve_mcp(g.problem, options={"verbosity": 3, "crash_method": "none"})
+    assert (list(lg.handlers), lg.level, lg.propagate) == before
+    out = capsys.readouterr()
+    assert out.out == "" and out.err == ""  # nothing written by the library itself
+    recs = [rec for rec in caplog.records if rec.name.startswith("compass_sparse")]
+    assert r.success and recs and all(rec.levelno == logging.INFO for rec in recs)
+    text = "\n".join(rec.getMessage() for rec in recs)
+    assert "status        SOLVED" in text  # the summary, at INFO
+    assert "\nminor " in text and "major" in text  # verbosity 3 adds the pivots
+    caplog.clear()
+    with caplog.at_level(logging.INFO, logger="compass_sparse"):
+        cs.solve_mcp(g.problem, options={"verbosity": 2, "crash_method": "none"})
+    msgs = [rec.getMessage() for rec in caplog.records]
+    assert any(m.lstrip().startswith("major") for m in msgs)  # the major log header
+    assert not any(m.startswith("minor ") for m in msgs)  # but no pivots at verbosity 2
+
+
+def test_every_option_is_read_somewhere():
+    """An option that no code reads is a promise the solver does not keep."""
+    import dataclasses
+    import pathlib
+    import re
+
+    root = pathlib.Path(cs.__file__).parent
+    src = "\n".join(p.read_text() for p in root.rglob("*.py")
+                    if p.name != "_options_base.py")
+    unread = [f.name for f in dataclasses.fields(cs.Options)
+              if not re.search(r"\.\s*" + f.name + r"\b", src)]
+    assert unread == []
+
+
+def test_cli_progress_flag_and_verbose_levels():
+    from compass_sparse.cli import _opts, main
+
+    class A:
+        verbose, tol, time_limit, progress = 2, 1e-6, None, True
+
+    o = cs.Options.from_dict(_opts(A))
+    assert o.verbosity == 3 and o.progress
+    assert main(["demo", "--problem", "kojshin", "--progress"]) == 0

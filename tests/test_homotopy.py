@@ -7,7 +7,6 @@ import scipy.sparse as sp
 
 import compass_sparse.homotopy as hom
 from compass_sparse import MCP, Options, solve_mcp
-from compass_sparse._evaluate import GuardedEvaluator
 from compass_sparse.generators import thesis_family
 from compass_sparse.homotopy import HomotopyStatus, SmoothedNormalMap, track_paths
 from compass_sparse.merit import fb_gradient, fb_phi, natural_residual
@@ -94,7 +93,7 @@ def _diverging_problem(n=2):
 
 def test_path_divergence_is_reported_with_its_status():
     F, J, lb, ub, x0 = _diverging_problem()
-    ev = GuardedEvaluator(MCP(F, J, lb, ub, x0))
+    ev = MCP(F, J, lb, ub, x0).evaluator
     seen = []
     out = track_paths(ev, lb, ub, x0, Options(homotopy_path_limit=2),
                       on_point=lambda z, f, phi, psi: seen.append(psi),
@@ -214,7 +213,7 @@ def test_corrector_accepts_tiny_steps_from_a_base_point_on_the_curve_to_tracking
     # of that size must not reject a tiny step (it once rejected every step down to 1e-9
     # and ended paths of family 2 at n = 500 as "step too small").
     F, J, lb, ub, x0 = _stationary_problem()
-    ev = GuardedEvaluator(MCP(F, J, lb, ub, x0))
+    ev = MCP(F, J, lb, ub, x0).evaluator
     tr = hom._Tracker(ev, lb, ub, Options(), deadline=None, on_point=None, tol=1e-12, log=None)
     a = x0.copy()
     y = np.append(a, 0.3)

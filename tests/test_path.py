@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 import compass_sparse.generators as gen
 from compass_sparse import Options, Status, solve_lcp
-from compass_sparse._dense_basis import DenseBasis
+from compass_sparse.basis.dense import DenseBasis
 from compass_sparse.basis import BasisManager
 from compass_sparse.path import LinearCode, PivotalPath, WarmBasis, components, default_basis
 

@@ -263,10 +263,14 @@ def test_evaluation_counters():
     assert (c.nfev, c.njev) == (0, 0)
     x = np.ones(6)
     p.F(x)
-    p.F(x)
+    p.F(x)  # the last point is memoized: F and J are asked once per point
     p.J(x)
     p.FJ(x)
-    assert (c.nfev, c.njev, c.nfev_fd) == (3, 2, 0)
+    assert (c.nfev, c.njev, c.nfev_fd) == (1, 1, 0)
+    y = np.full(6, 2.0)
+    p.F(y)
+    p.FJ(x)  # the memo holds one point per function: x was displaced for F, not for J
+    assert (c.nfev, c.njev, c.nfev_fd) == (3, 1, 0)
     p.F_uncounted(x)
     assert c.nfev == 3
     q = MCP(F, J, -np.inf, np.inf, np.zeros(6))  # the start check costs one of each

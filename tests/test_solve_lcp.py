@@ -185,10 +185,18 @@ def test_infeasible_status(n, seed):
     r = solve_lcp(M, q, lb, ub)
     assert r.status is Status.INFEASIBLE
     assert not r.success
-    assert r.point_status is not PointStatus.SOLUTION
+    assert r.point_status is PointStatus.CERTIFICATE
     assert nat_res(M, q, lb, ub, r.x) > 1e-3
     assert r.residual.fb_norm > r.tolerance
     assert np.all(r.x >= lb)
+    # The certificate: a secondary ray x + theta d of Lemke's method, theta >= 0, with
+    # d >= 0, M d >= 0 and d'M d = 0 (copositive-plus theory; Cottle, Pang & Stone 4.4).
+    d = r.ray
+    scale = np.abs(d).max()
+    tol = 1e-9 * scale * (1 + abs(M).max())
+    assert d is not None and scale > 0
+    assert np.all(d >= -tol) and np.all(M @ d >= -tol)
+    assert abs(d @ (M @ d)) <= tol * scale
 
 
 # Two fixed 2x2 box LCPs (all bounds finite: a solution always exists; both have one at a

@@ -6,11 +6,17 @@ replacement with a row-eta file, refactorization triggers (update count, fill, s
 periodic residual check) and rank repair of singular bases. See
 :mod:`compass_sparse.basis.manager` for the mathematics and
 :class:`~compass_sparse.basis.types.BasisOptions` for the tolerances and their defaults.
+
+The interface the pivotal path uses is the :class:`~compass_sparse.basis.protocol.Basis`
+protocol; :class:`~compass_sparse.basis.dense.DenseBasis` implements it on an explicit
+inverse for small problems.
 """
 
+from .dense import DenseBasis
 from .manager import BasisManager
+from .protocol import Basis
 from .types import (KIND_DENSE, KIND_M, KIND_UNIT, BasisOptions, BasisStats, FactorReport,
                     UpdateStatus)
 
-__all__ = ["BasisManager", "BasisOptions", "BasisStats", "UpdateStatus", "FactorReport",
-           "KIND_M", "KIND_UNIT", "KIND_DENSE"]
+__all__ = ["Basis", "BasisManager", "DenseBasis", "BasisOptions", "BasisStats",
+           "UpdateStatus", "FactorReport", "KIND_M", "KIND_UNIT", "KIND_DENSE"]

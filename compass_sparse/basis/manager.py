@@ -707,7 +707,7 @@ class BasisManager:
         self._kinds[slot], self._indices[slot], self._signs[slot] = old
         rep2 = self._factorize()
         if rep2.rank_deficiency:
-            return UpdateStatus.REFACTORED  # see last_report.replaced
+            return UpdateStatus.REPAIRED  # the old basis, repaired: see last_report
         self.stats.refused_updates += 1
         return UpdateStatus.REFUSED
 

@@ -158,6 +158,11 @@ class UpdateStatus(enum.IntEnum):
     REFUSED = 2
     """The new pivot is relatively tiny (the new basis would be singular or nearly so):
     the basis is UNCHANGED and its factors are still valid."""
+    REPAIRED = 3
+    """The new basis was singular and the old one, factorized again, was singular too
+    (it had lost accuracy): the replacement is NOT done and the manager holds the old
+    slot table repaired (``last_report.replaced`` lists the slots that now hold unit
+    columns).  The caller refactorizes its own table (with repair) to go on."""
 
 
 @dataclass

@@ -11,7 +11,7 @@ Reductions use only linear information: Jacobian entries declared constant by th
 """
 from ._onedim import solve_1d
 from ._work import InfeasibilityDiagnostic
-from .core import (PassStats, PostsolvedSolution, PresolveResult, PresolveStats, presolve,
+from .core import (ReductionStats, PostsolvedSolution, PresolveResult, PresolveStats, presolve,
                    solve_with_presolve)
 from .options import PASS_NAMES, PresolveOptions
 from .postsolve import (DiagonalColumnSingletons, EmptyColumns, FixByEquation, FixVariables,
@@ -25,7 +25,7 @@ __all__ = [
     "PresolveOptions",
     "PresolveResult",
     "PresolveStats",
-    "PassStats",
+    "ReductionStats",
     "PostsolvedSolution",
     "PostsolveStack",
     "InfeasibilityDiagnostic",

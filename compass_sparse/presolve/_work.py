@@ -94,7 +94,7 @@ class Workspace:
         self.partner_row = np.arange(n, dtype=np.intp)
         self.base = P.x0.copy()
         self.f_evals = 0
-        self.stack = PostsolveStack(n=n, evaluate_F=P.F_uncounted, base=self.base)
+        self.stack = PostsolveStack(n=n, evaluate_F=P.F, base=self.base)
         self.nnz_total = self.er.size
         self.current_pass = ""
         self.changed = 0
@@ -103,7 +103,7 @@ class Workspace:
     # -- snapshot ----------------------------------------------------------------------
     def evaluate(self, x):
         self.f_evals += 1
-        return np.asarray(self.problem.F_uncounted(x), dtype=float)
+        return self.problem.F(x)
 
     def live_mask(self):
         return self.row_active[self.er] & self.col_active[self.ec]
@@ -213,6 +213,19 @@ class Workspace:
         """Pair the (free) variable ``free_var`` with row ``new_row``."""
         self.partner_var[new_row] = free_var
         self.partner_row[free_var] = new_row
+
+    def remove_and_re_pair(self, j, i, p):
+        """Remove z_j with row i, whose own variable z_p is free, and pair z_p with row r,
+        z_j's old row (which must be an equation: z_j was free or interior).  A free
+        variable with an equation is a valid MCP pair.  Returns r, or None (nothing done)
+        when row r was already used by a reduction of this round."""
+        r = int(self.partner_row[j])
+        if self.touched_row[r]:
+            return None
+        self.remove([j], [i])
+        self.repair(p, r)
+        self.touch(cols=[p], rows=[r])
+        return r
 
     def push(self, record: Record):
         record.pass_name = self.current_pass

@@ -48,12 +48,9 @@ def run(ws) -> None:
             continue
         if not (ws.free(j) and ws.free(p)) or ws.touched_col[p]:
             continue
-        r = ws.partner_row[j]
-        if ws.touched_row[r]:
+        r = ws.remove_and_re_pair(j, i, p)
+        if r is None:
             continue
-        ws.remove([j], [i])
-        ws.repair(p, r)
-        ws.touch(cols=[p], rows=[r])
         for key, val in (("rows", i), ("cols", j), ("coefs", b), ("freed", p),
                          ("repaired", r)):
             free[key].append(val)

@@ -32,7 +32,7 @@ from .structural import StructuralReport, structural_rank_check
 
 logger = logging.getLogger("compass_sparse.presolve")
 
-__all__ = ["presolve", "PresolveResult", "PresolveStats", "PassStats", "solve_with_presolve",
+__all__ = ["presolve", "PresolveResult", "PresolveStats", "ReductionStats", "solve_with_presolve",
            "PostsolvedSolution"]
 
 PHASE_ONE = (fixed, empty_rows, empty_columns, singleton_rows, column_singletons, forcing,
@@ -41,8 +41,9 @@ PHASE_TWO = (range_fixing,)
 
 
 @dataclass
-class PassStats:
-    """Counters of one pass: how often it reduced something, what it removed, its time."""
+class ReductionStats:
+    """Counters of one reduction of the preprocessor: calls, calls that reduced something,
+    what it removed, its time (the solver's passes are :class:`compass_sparse.PassStats`)."""
 
     name: str
     enabled: bool = True
@@ -137,18 +138,21 @@ def _has_structure(problem, J0) -> bool:
     return bool(np.any(counts_r == 0) or np.any(np.diff(J0.indptr) == 0))
 
 
-def presolve(problem, options: PresolveOptions | dict | None = None) -> PresolveResult:
-    """Reduce ``problem`` (an :class:`~compass_sparse.problem.MCP`); see the module docs."""
+def presolve(problem, options: PresolveOptions | dict | None = None, *, f0=None,
+             J0=None) -> PresolveResult:
+    """Reduce ``problem`` (an :class:`~compass_sparse.problem.MCP`); see the module docs.
+    ``f0``, ``J0``: F and J at ``problem.x0`` when the caller has them."""
     opts = PresolveOptions.coerce(options)
     t0 = time.perf_counter()
     warnings: list = []
-    J0 = problem.J(problem.x0)
+    if J0 is None:
+        J0 = problem.J(problem.x0)
     nnz = int(J0.indptr[-1])
     stats = PresolveStats(n_original=problem.n, nnz_original=nnz)
     for mod in PHASE_ONE + PHASE_TWO:
-        stats.passes[mod.NAME] = PassStats(mod.NAME, enabled=getattr(opts, mod.NAME))
+        stats.passes[mod.NAME] = ReductionStats(mod.NAME, enabled=getattr(opts, mod.NAME))
     if not _has_structure(problem, J0):
-        stack = PostsolveStack(n=problem.n, evaluate_F=problem.F_uncounted,
+        stack = PostsolveStack(n=problem.n, evaluate_F=problem.F,
                                base=problem.x0.copy(), cols=np.arange(problem.n),
                                rows=np.arange(problem.n))
         stats.n_reduced, stats.nnz_reduced = problem.n, nnz
@@ -158,7 +162,8 @@ def presolve(problem, options: PresolveOptions | dict | None = None) -> Presolve
         stats.time = time.perf_counter() - t0
         return PresolveResult(problem, problem, stack, stats, opts, warnings=warnings,
                               structural=structural)
-    f0 = np.asarray(problem.F_uncounted(problem.x0), dtype=float)
+    if f0 is None:
+        f0 = problem.F(problem.x0)
     const = declared_constant_mask(problem, J0, f0, opts, warnings)
     ws = Workspace(problem, opts, J0, const, warnings)
     infeasible = None
@@ -254,7 +259,7 @@ def solve_with_presolve(problem, solve: Callable, options=None) -> PostsolvedSol
         inner = solve(pre.reduced)
         xr = np.asarray(inner.x, dtype=float)
     x = pre.postsolve(xr)
-    f = np.asarray(problem.F_uncounted(x), dtype=float)
+    f = problem.F(x)
     return PostsolvedSolution(x=x, F=f, natural_residual=natural_residual(x, f, problem.lb,
                                                                           problem.ub),
                               presolve=pre, inner=inner)

@@ -44,8 +44,8 @@ def declared_constant_mask(problem, J0, f0, options, warnings):
     ec = np.repeat(np.arange(n), np.diff(J0.indptr))
     try:
         for x in _sample_points(problem, rng):
+            f = problem.F(x)
             J = problem.J(x)
-            f = np.asarray(problem.F_uncounted(x), dtype=float)
             moved = mask & (J.data != J0.data)
             if moved.any():
                 k = int(np.flatnonzero(moved)[0])

@@ -8,7 +8,9 @@ remaining parts too.  The reduced Jacobian keeps a fixed pattern: its entries ar
 selection (``take``) of the original pattern entries, in canonical CSC order.  Names are the
 original labels, so messages about the reduced problem name the user's rows and variables;
 declared-constant entries stay declared, so a second presolve sees the same linear
-structure.
+structure.  Its evaluator is a restriction of the original problem's
+(:meth:`~compass_sparse.evaluation.Evaluator.restrict`): every call of the user's F is
+counted once, in the original problem's counters.
 """
 from __future__ import annotations
 
@@ -50,31 +52,10 @@ def build_reduced(ws):
         ccols = np.repeat(np.arange(m), np.diff(indptr))[const]
         constant_jac = sp.csc_matrix((np.ones(int(const.sum())), (indices[const], ccols)),
                                      shape=shape)
-    fill = stack.fill
-    mode = P._jac
-
-    def red_J_from(J):
-        return sp.csc_matrix((J.data[take], indices.copy(), indptr.copy()), shape=shape)
-
-    if mode is True:
-        def F_red(y):
-            f, J = P.FJ_uncounted(fill(y))  # the reduced problem counts its own calls
-            return f[rows], red_J_from(J)
-        jac = True
-    else:
-        def F_red(y):
-            return P.F_uncounted(fill(y))[rows]
-        if mode is None:
-            jac = None
-        else:
-            def jac(y):
-                return red_J_from(P.J_uncounted(fill(y)))
-    return MCP(
-        F_red, jac, lb=P.lb[cols], ub=P.ub[cols], x0=P.x0[cols],
-        jac_sparsity=pattern,
-        var_names=[P.var_label(int(j)) for j in cols],
-        eqn_names=[P.row_label(int(i)) for i in rows],
-        constant_jac=constant_jac,
-        fd_step=P.fd_step,
-        check=False,
-    )
+    var_names = [P.var_label(int(j)) for j in cols]
+    eqn_names = [P.row_label(int(i)) for i in rows]
+    ev = P.evaluator.restrict(
+        stack.fill, rows, cols, take, pattern, constant_jac=constant_jac, ub=P.ub[cols],
+        row_label=eqn_names.__getitem__, var_label=var_names.__getitem__)
+    return MCP.from_evaluator(ev, P.lb[cols], P.ub[cols], P.x0[cols], var_names=var_names,
+                              eqn_names=eqn_names)

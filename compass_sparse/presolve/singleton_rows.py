@@ -83,12 +83,9 @@ def run(ws) -> None:
                 rows=[i], variables=[j, p])
         if not (lb[j] < v < ub[j]):
             continue
-        r = ws.partner_row[j]
-        if ws.touched_row[r]:
+        r = ws.remove_and_re_pair(j, i, p)
+        if r is None:
             continue
-        ws.remove([j], [i])
-        ws.repair(p, r)
-        ws.touch(cols=[p], rows=[r])
         ws.base[j] = v
         for key, val in (("rows", i), ("cols", j), ("values", v), ("freed", p),
                          ("repaired", r)):

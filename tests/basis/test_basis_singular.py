@@ -214,7 +214,8 @@ def test_ill_conditioned_bases():
             kind = int(rng.choice([KIND_M, KIND_UNIT, KIND_DENSE]))
             col = (kind, int(rng.integers(n)), 1.0)
             st = bm.replace(slot, *col)
-            assert st in (UpdateStatus.OK, UpdateStatus.REFACTORED, UpdateStatus.REFUSED)
+            assert st in (UpdateStatus.OK, UpdateStatus.REFACTORED, UpdateStatus.REPAIRED,
+                          UpdateStatus.REFUSED)
 
 
 def rel_err_ok(x, xt, cond):

@@ -50,10 +50,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from compass_sparse.problem import MCP
 
 from ._assembly import CESGroups, PatternAssembler
-from .model import CGEModel
+from .model import CGEModel, assemble_model, fix_numeraire
 
 __all__ = ["ramsey_cge", "ramsey_size", "ramsey_size_for"]
 
@@ -532,14 +531,8 @@ class _RamseyEvaluator:
                 if not ray[num_idx]:
                     raise ValueError(f"{name} is not a price or income")
                 how = kind
-            val = float(x0[num_idx]) if numeraire_value is None else float(numeraire_value)
-            lb[num_idx] = ub[num_idx] = val
-            x0 = x0.copy()
-            x0[num_idx] = val
-            num_text = (f"{names[num_idx]} fixed at {val:.12g} ({how}); its row "
-                        f"{row_names[num_idx]} is implied by Walras' law")
-        problem = MCP(self.eval_F, self.eval_J, lb, ub, x0, var_names=names, eqn_names=row_names,
-                      constant_jac=self.pat.constant_pattern())
+            x0, num_text = fix_numeraire(lb, ub, x0, num_idx, how, numeraire_value, names,
+                                         row_names)
         d = self.d
         info = {
             "family": "ramsey_cge", "periods": self.T, "sectors": self.N,
@@ -552,41 +545,21 @@ class _RamseyEvaluator:
             "benchmark_is_solution": shock_text is None,
             "shock": shock_text,
         }
-        model = CGEModel(problem=problem, benchmark=x0.copy(), names=names, row_names=row_names,
-                         blocks=dict(self.blocks), block_shapes=dict(self.shapes), degree=degree,
-                         ray=ray, info=info, _jac_fn=self.eval_J)
-        spec = dict(numeraire=numeraire, price_lb=price_lb, income_free=income_free)
+        return assemble_model(
+            self, lb=lb, ub=ub, x0=x0, names=names, row_names=row_names, degree=degree,
+            ray=ray, num_idx=num_idx, info=info, shock_text=shock_text,
+            spec=dict(numeraire=numeraire, price_lb=price_lb, income_free=income_free))
 
-        def rebuild(shock=None, start=None, numeraire="keep", value=None, scale=None):
-            pol = dict(self.policy)
-            text = shock_text
-            z0 = model.benchmark.copy()
-            nval = float(lb[num_idx]) if num_idx is not None else None
-            if shock:
-                unknown = set(shock) - {"capital_tax", "labour"}
-                if unknown:
-                    raise ValueError(f"unknown shock(s) {sorted(unknown)}: use capital_tax= "
-                                     "or labour=")
-                if "capital_tax" in shock:
-                    pol["tauK"] = float(shock["capital_tax"])
-                if "labour" in shock:
-                    pol["lscale"] = pol["lscale"] * float(shock["labour"])
-                desc = "shock: " + ", ".join(sorted(shock))
-                text = desc if shock_text is None else f"{shock_text}; {desc}"
-                z0 = np.asarray(start, dtype=float).copy()
-            num = spec["numeraire"] if numeraire == "keep" else numeraire
-            if numeraire != "keep":
-                nval = None
-            if scale is not None:
-                z0 = model.scaled_point(z0, scale)
-                if nval is not None:
-                    nval *= scale
-            if value is not None:
-                nval = float(value)
-            ev = _RamseyEvaluator(self.d, pol)
-            return ev.make_model(numeraire=num, price_lb=spec["price_lb"],
-                                 income_free=spec["income_free"], start=z0,
-                                 numeraire_value=nval, shock_text=text)
-
-        model._rebuild = rebuild
-        return model
+    def after_shock(self, shock):
+        """(evaluator under the shocked policy, description); shock None: same policy."""
+        pol = dict(self.policy)
+        if not shock:
+            return _RamseyEvaluator(self.d, pol), None
+        unknown = set(shock) - {"capital_tax", "labour"}
+        if unknown:
+            raise ValueError(f"unknown shock(s) {sorted(unknown)}: use capital_tax= or labour=")
+        if "capital_tax" in shock:
+            pol["tauK"] = float(shock["capital_tax"])
+        if "labour" in shock:
+            pol["lscale"] = pol["lscale"] * float(shock["labour"])
+        return _RamseyEvaluator(self.d, pol), "shock: " + ", ".join(sorted(shock))

@@ -203,3 +203,55 @@ def benchmark_residuals(model: CGEModel, z=None) -> dict:
         "fb_norm": float(np.linalg.norm(fb_phi(z, f, model.lb, model.ub))),
         "max_abs_F_by_block": by_block,
     }
+
+
+def fix_numeraire(lb, ub, x0, num_idx, how, value, names, row_names):
+    """Fix variable ``num_idx`` (a price or an income) at ``value`` (default: its start
+    value): homogeneity of degree 0 makes the Jacobian singular along the price ray, and
+    fixing one price or income removes that direction; Walras' law makes its row implied.
+    Returns the start point with the fixed value and the description for ``info``."""
+    val = float(x0[num_idx]) if value is None else float(value)
+    lb[num_idx] = ub[num_idx] = val
+    x0 = x0.copy()
+    x0[num_idx] = val
+    return x0, (f"{names[num_idx]} fixed at {val:.12g} ({how}); its row "
+                f"{row_names[num_idx]} is implied by Walras' law")
+
+
+def assemble_model(ev, *, lb, ub, x0, names, row_names, degree, ray, num_idx, info,
+                   spec, shock_text) -> CGEModel:
+    """The CGEModel of evaluator ``ev`` (static or dynamic) with the given bounds, start,
+    numeraire and info, and its ``rebuild`` for shocks, new starts and numeraires.
+
+    ``ev`` provides ``eval_F``, ``eval_J``, ``pat``, ``blocks``, ``shapes``,
+    ``make_model(...)`` and ``after_shock(shock) -> (evaluator, description)``."""
+    problem = MCP(ev.eval_F, ev.eval_J, lb, ub, x0, var_names=names, eqn_names=row_names,
+                  constant_jac=ev.pat.constant_pattern())
+    model = CGEModel(problem=problem, benchmark=x0.copy(), names=names, row_names=row_names,
+                     blocks=dict(ev.blocks), block_shapes=dict(ev.shapes), degree=degree,
+                     ray=ray, info=info, _jac_fn=ev.eval_J)
+
+    def rebuild(shock=None, start=None, numeraire="keep", value=None, scale=None):
+        text = shock_text
+        z0 = model.benchmark.copy()
+        nval = float(lb[num_idx]) if num_idx is not None else None
+        new = ev.after_shock(None)[0]
+        if shock:
+            new, desc = ev.after_shock(shock)
+            text = desc if shock_text is None else f"{shock_text}; {desc}"
+            z0 = np.asarray(start, dtype=float).copy()
+        num = spec["numeraire"] if numeraire == "keep" else numeraire
+        if numeraire != "keep":
+            nval = None
+        if scale is not None:
+            z0 = model.scaled_point(z0, scale)
+            if nval is not None:
+                nval *= scale
+        if value is not None:
+            nval = float(value)
+        return new.make_model(numeraire=num, price_lb=spec["price_lb"],
+                              income_free=spec["income_free"], start=z0,
+                              numeraire_value=nval, shock_text=text)
+
+    model._rebuild = rebuild
+    return model

@@ -44,10 +44,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from compass_sparse.problem import MCP
 
 from ._assembly import CESGroups, PatternAssembler, group_pairs
-from .model import CGEModel
+from .model import CGEModel, assemble_model, fix_numeraire
 from .sam import SAM, random_sam
 
 __all__ = ["static_cge", "static_from_sam", "size_for", "static_size"]
@@ -487,15 +486,9 @@ class _StaticEvaluator:
                 if kind == "income" and blk != "M":
                     raise ValueError(f"{name} is not an income")
                 how = kind
-            val = float(x0[num_idx]) if numeraire_value is None else float(numeraire_value)
-            lb[num_idx] = ub[num_idx] = val
-            x0 = x0.copy()
-            x0[num_idx] = val
-            num_text = (f"{names[num_idx]} fixed at {val:.12g} ({how}); its row "
-                        f"{row_names[num_idx]} is implied by Walras' law")
+            x0, num_text = fix_numeraire(lb, ub, x0, num_idx, how, numeraire_value, names,
+                                         row_names)
 
-        problem = MCP(self.eval_F, self.eval_J, lb, ub, x0, var_names=names, eqn_names=row_names,
-                      constant_jac=self.pat.constant_pattern())
         R, N, F, H = self.R, self.N, self.F, self.H
         info = {
             "family": "static_cge",
@@ -511,36 +504,17 @@ class _StaticEvaluator:
             "shock": shock_text,
             "imbalance": self.sam.B.copy(),
         }
-        model = CGEModel(problem=problem, benchmark=x0.copy(), names=names, row_names=row_names,
-                         blocks=dict(self.blocks), block_shapes=dict(self.shapes),
-                         degree=degree, ray=ray, info=info, _jac_fn=self.eval_J)
-        spec = dict(numeraire=numeraire, price_lb=price_lb, income_free=income_free)
+        return assemble_model(
+            self, lb=lb, ub=ub, x0=x0, names=names, row_names=row_names, degree=degree,
+            ray=ray, num_idx=num_idx, info=info, shock_text=shock_text,
+            spec=dict(numeraire=numeraire, price_lb=price_lb, income_free=income_free))
 
-        def rebuild(shock=None, start=None, numeraire="keep", value=None, scale=None):
-            pol = self.policy
-            text = shock_text
-            z0 = model.benchmark.copy()
-            nval = float(lb[num_idx]) if num_idx is not None else None
-            if shock:
-                pol, desc = self._apply_shock(pol, **shock)
-                text = desc if shock_text is None else f"{shock_text}; {desc}"
-                z0 = np.asarray(start, dtype=float).copy()
-            num = spec["numeraire"] if numeraire == "keep" else numeraire
-            if numeraire != "keep":
-                nval = None
-            if scale is not None:
-                z0 = model.scaled_point(z0, scale)
-                if nval is not None:
-                    nval *= scale
-            if value is not None:
-                nval = float(value)
-            ev = _StaticEvaluator(self.sam, self.s_va, self.s_a, self.s_c, pol)
-            return ev.make_model(numeraire=num, price_lb=spec["price_lb"],
-                                 income_free=spec["income_free"], start=z0,
-                                 numeraire_value=nval, shock_text=text)
-
-        model._rebuild = rebuild
-        return model
+    def after_shock(self, shock):
+        """(evaluator under the shocked policy, description); shock None: same policy."""
+        pol, desc = self.policy, None
+        if shock:
+            pol, desc = self._apply_shock(pol, **shock)
+        return _StaticEvaluator(self.sam, self.s_va, self.s_a, self.s_c, pol), desc
 
     # --- shocks -----------------------------------------------------------------------------
     def _apply_shock(self, pol: Policy, *, output_tax=None, tariff=None, endowment=None,

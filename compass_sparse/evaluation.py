@@ -1,0 +1,483 @@
+"""The evaluation layer: the one owner of the user's F and J.
+
+Every value of F(x) and J(x) the solver uses comes from an :class:`Evaluator`.  It
+
+* passes a *copy* of x to the user's callbacks (they may keep or change their argument);
+* checks shapes and the fixed structural pattern of J (recorded at the first call) and
+  returns J in canonical CSC form whose ``indptr``/``indices`` never change;
+* counts the user's calls in one :class:`EvalCounters` (F, J, the F calls spent on
+  finite differences, and the rejected evaluations);
+* memoizes the last point of F and of J separately, so a value already computed at x
+  (the start point checked when the problem was built, a trial point whose Jacobian the
+  next major iteration needs) is never asked of the user again;
+* offers two flavours of every evaluation: ``F``/``J``/``FJ`` raise (bad input is the
+  caller's error: the start point check, the preprocessor), while the guarded ``f``/
+  ``jac``/``fj`` turn an exception or a NaN/Inf into ``None`` -- a rejected trial point
+  that the caller answers by a shorter step, as PATH does with evaluation errors -- and
+  count it in ``counters.domain_errors``.  Our own diagnostics (a wrong shape, a changed
+  pattern) and KeyboardInterrupt always propagate.
+
+Jacobians come in three ways (see :mod:`compass_sparse.problem`): a callable ``jac(x)``;
+``jac=True``, where ``F(x)`` returns ``(f, J)`` (the J of an F call is kept in the memo and
+counted as a Jacobian evaluation only when it is used); or forward differences on the
+pattern, perturbing groups of structurally orthogonal columns together (Curtis-Powell-Reid
+colouring), with relative step ``fd_step * max(1, |x_j|)`` taken inwards near an upper bound
+so F is never evaluated outside the box.
+
+:meth:`Evaluator.restrict` gives the evaluator of a restriction of the problem,
+``F_R(y) = F(fill(y))[rows]``, ``J_R(y) = J(fill(y))[rows, cols]`` (the reduced problem of
+the preprocessor): its calls go through the parent's counted primitives, so the counters
+are shared and every user call is counted exactly once, whichever problem asked for it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+import scipy.sparse as sp
+
+from .exceptions import (CompassError, EvaluationError, JacobianPatternError, ProblemError,
+                         ShapeError)
+
+__all__ = ["Evaluator", "EvalCounters", "canonical_csc"]
+
+
+@dataclass
+class EvalCounters:
+    """Calls of the user's F and J (shared by every pass of a solve and by the reduced
+    problem of the preprocessor)."""
+
+    nfev: int = 0  #: F evaluations (finite-difference ones included)
+    njev: int = 0  #: Jacobian evaluations
+    nfev_fd: int = 0  #: of nfev: F calls spent on finite differences
+    domain_errors: int = 0  #: guarded evaluations rejected (an exception or NaN/Inf)
+
+
+def canonical_csc(J, n: int) -> sp.csc_matrix:
+    """J as a canonical (sorted, duplicate-free) float CSC copy; a dense array keeps its
+    full pattern (its zeros stay stored)."""
+    if sp.issparse(J):
+        if J.shape != (n, n):
+            raise ShapeError(f"the Jacobian has shape {J.shape}, expected ({n}, {n})")
+        C = sp.csc_matrix(J, dtype=float, copy=True)
+    else:
+        A = np.asarray(J, dtype=float)
+        if A.shape != (n, n):
+            raise ShapeError(f"the Jacobian has shape {A.shape}, expected ({n}, {n})")
+        C = sp.csc_matrix(np.ones((n, n)))
+        C.data = A.T.ravel().copy()
+        return C
+    if not C.has_canonical_format:
+        C.sum_duplicates()  # sorts indices too
+    C.sort_indices()
+    return C
+
+
+def _default_row_label(i):
+    return f"F[{i}]"
+
+
+def _default_var_label(j):
+    return f"x[{j}]"
+
+
+class _Memo:
+    """The last point and its value, plus one pinned point (the start point, asked for
+    again by the preprocessor, its reduced problem and every restart)."""
+
+    __slots__ = ("x", "value", "px", "pvalue")
+
+    def __init__(self):
+        self.clear()
+
+    @staticmethod
+    def _same(a, x):
+        return a is not None and a.shape == x.shape and np.array_equal(a, x)
+
+    def get(self, x):
+        if self._same(self.x, x):
+            return self.value
+        if self._same(self.px, x):
+            return self.pvalue
+        return None
+
+    def put(self, x, value):
+        if self._same(self.px, x):
+            self.pvalue = value
+        self.x = np.array(x, dtype=float, copy=True)
+        self.value = value
+
+    def pin(self, x):
+        """Keep the value at x (the last point) beyond the next evaluations."""
+        if self._same(self.x, x):
+            self.px, self.pvalue = self.x, self.value
+
+    def clear(self):
+        self.x = self.value = self.px = self.pvalue = None
+
+
+class Evaluator:
+    """The user's F and J behind copies, checks, counters and a one-point memo.
+
+    Parameters
+    ----------
+    F : callable ``F(x) -> (n,)`` (``(f, J)`` when ``jac is True``).
+    jac : callable, True or None (finite differences on ``pattern``).
+    n : int
+    pattern : CSC pattern of J when known in advance (required for ``jac=None``).
+    constant_jac : matrix whose structure marks entries of J declared constant.
+    fd_step : relative forward-difference step.
+    ub : upper bounds (finite differences step inwards near them).
+    row_label, var_label : callables naming rows and variables in messages.
+    """
+
+    def __init__(self, F: Callable, jac, n: int, *, pattern=None, constant_jac=None,
+                 fd_step: float = float(np.sqrt(np.finfo(float).eps)), ub=None,
+                 row_label=_default_row_label, var_label=_default_var_label,
+                 counters: EvalCounters | None = None):
+        self._user_F = F
+        self._user_jac = jac
+        self.n = int(n)
+        self.fd_step = float(fd_step)
+        self.ub = np.full(self.n, np.inf) if ub is None else ub
+        self.row_label = row_label
+        self.var_label = var_label
+        self.counters = counters if counters is not None else EvalCounters()
+        self.last_error = ""
+        self._pattern: sp.csc_matrix | None = None
+        self._colors: np.ndarray | None = None
+        self._constant_spec = constant_jac
+        self.constant_mask: np.ndarray | None = None
+        self._mf = _Memo()  # F: value f
+        self._mj = _Memo()  # J: value (J, counted?)
+        if pattern is not None:
+            P = canonical_csc(pattern, self.n)
+            P.data[:] = 1.0
+            self._set_pattern(P)
+
+    # ------------------------------------------------------------------ structure
+    @property
+    def jac_mode(self):
+        """The user's ``jac`` argument kind: a callable, True, or None (differences)."""
+        return self._user_jac
+
+    @property
+    def pattern(self) -> sp.csc_matrix | None:
+        """The structural pattern (CSC, data = 1), None until the first Jacobian."""
+        if self._pattern is None:
+            return None
+        P = self._pattern.copy()
+        P.data = np.ones_like(P.data)
+        return P
+
+    def _set_pattern(self, C):
+        self._pattern = C.copy()
+        self._set_constant_mask()
+
+    def _fix_pattern(self, C: sp.csc_matrix) -> sp.csc_matrix:
+        if self._pattern is None:
+            self._set_pattern(C)
+            return C
+        P = self._pattern
+        if (C.indptr.shape == P.indptr.shape and C.indices.shape == P.indices.shape
+                and np.array_equal(C.indptr, P.indptr) and np.array_equal(C.indices, P.indices)):
+            return C
+        raise JacobianPatternError(self._pattern_change_message(P, C))
+
+    def _pattern_change_message(self, P, C) -> str:
+        Pc, Cc = P.tocoo(), C.tocoo()
+        n = self.n
+        kp = set((Pc.col.astype(np.int64) * n + Pc.row).tolist())
+        kc = set((Cc.col.astype(np.int64) * n + Cc.row).tolist())
+        added = sorted(kc - kp)
+        removed = sorted(kp - kc)
+        first = min(added[:1] + removed[:1])
+        j, i = divmod(first, n)
+        what = "appeared" if added and first == added[0] else "disappeared"
+        return (
+            f"the Jacobian's structural pattern changed: entry (row {self.row_label(i)}, "
+            f"column {self.var_label(j)}) {what} ({len(added)} entries added, {len(removed)} "
+            "removed since the first call). Return J with a fixed index structure: store "
+            "explicit zeros (e.g. build it from fixed (row, col) index arrays with "
+            "scipy.sparse.csc_matrix((data, (rows, cols)), shape) rather than from a dense "
+            "array, which drops zeros)"
+        )
+
+    def _set_constant_mask(self):
+        spec = self._constant_spec
+        if spec is None or self._pattern is None:
+            return
+        S = sp.csc_matrix(spec, copy=True)
+        if S.shape != (self.n, self.n):
+            raise ShapeError(f"constant_jac has shape {S.shape}, expected ({self.n}, {self.n})")
+        S.sum_duplicates()  # canonical: column-major keys, sorted and unique
+        S.sort_indices()
+        P = self._pattern  # canonical CSC, so its keys are sorted and unique too
+        n = self.n
+        keys_p = np.repeat(np.arange(n, dtype=np.int64), np.diff(P.indptr)) * n + P.indices
+        keys_s = np.repeat(np.arange(n, dtype=np.int64), np.diff(S.indptr)) * n + S.indices
+        pos = np.searchsorted(keys_p, keys_s)
+        inside = pos < keys_p.size
+        inside[inside] = keys_p[pos[inside]] == keys_s[inside]
+        if not inside.all():
+            k = keys_s[~inside][0]
+            j, i = divmod(int(k), n)
+            raise ProblemError(
+                f"constant_jac declares entry (row {self.row_label(i)}, column "
+                f"{self.var_label(j)}) that is not in the Jacobian's pattern"
+            )
+        mask = np.zeros(P.nnz, dtype=bool)
+        mask[pos] = True
+        self.constant_mask = mask
+
+    # ------------------------------------------------------------------ primitives
+    # The only places where the user's functions are called; each call is counted here.
+    def _call_F(self, x):
+        """(f, J or None) from one call of the user's F (J when ``jac is True``)."""
+        self.counters.nfev += 1
+        out = self._user_F(np.array(x, dtype=float, copy=True))
+        if self._user_jac is True:
+            if not (isinstance(out, tuple) and len(out) == 2):
+                raise ShapeError("with jac=True, F(x) must return the pair (f, J)")
+            f, J = out
+        else:
+            f, J = out, None
+        f = np.asarray(f, dtype=float)
+        if f.shape != (self.n,):
+            if f.size == self.n:
+                f = f.reshape(self.n)
+            else:
+                raise ShapeError(f"F(x) returned shape {f.shape}, expected ({self.n},)")
+        if J is not None:
+            J = self._fix_pattern(canonical_csc(J, self.n))
+        return f, J
+
+    def _call_J(self, x):
+        """J from one call of the user's jac callable."""
+        self.counters.njev += 1
+        J = self._user_jac(np.array(x, dtype=float, copy=True))
+        return self._fix_pattern(canonical_csc(J, self.n))
+
+    def _fd_jacobian(self, x, f):
+        """Forward differences on the pattern, one F call per colour of columns."""
+        from ._coloring import color_columns
+
+        self.counters.njev += 1
+        P = self._pattern
+        if self._colors is None:
+            self._colors = color_columns(P.indptr, P.indices, self.n)
+        colors = self._colors
+        ncol = int(colors.max()) + 1 if colors.size else 0
+        h = self.fd_step * np.maximum(1.0, np.abs(x))
+        # Step inward when an upper bound is near, so F is never evaluated outside the box.
+        h = np.where(x + h > self.ub, -h, h)
+        h = (x + h) - x  # the step actually taken in floating point
+        data = np.empty(P.nnz)
+        col_of_entry = np.repeat(np.arange(self.n), np.diff(P.indptr))
+        for c in range(ncol):
+            cols = colors == c
+            xp = x.copy()
+            xp[cols] += h[cols]
+            self.counters.nfev_fd += 1
+            fp = self._call_F(xp)[0]
+            sel = cols[col_of_entry]
+            data[sel] = (fp - f)[P.indices[sel]] / h[col_of_entry[sel]]
+        return sp.csc_matrix((data, P.indices.copy(), P.indptr.copy()), shape=(self.n, self.n))
+
+    # ------------------------------------------------------------------ raising calls
+    def F(self, x) -> np.ndarray:
+        """F(x); raises what the user's F raises."""
+        x = np.asarray(x, dtype=float)
+        f = self._mf.get(x)
+        if f is None:
+            f, J = self._call_F(x)
+            self._mf.put(x, f)
+            if J is not None:
+                self._mj.put(x, (J, False))  # counted when used
+        return f.copy()  # callers may write into their F values; the memo stays intact
+
+    def J(self, x, f=None) -> sp.csc_matrix:
+        """J(x) on the fixed pattern.  ``f`` = F(x) when the caller has it (differences
+        reuse it)."""
+        x = np.asarray(x, dtype=float)
+        hit = self._mj.get(x)
+        if hit is not None:
+            J, counted = hit
+            if not counted:
+                self.counters.njev += 1
+                self._mj.put(x, (J, True))
+            return J
+        if self._user_jac is True:
+            self._mf.clear()  # the F memo is refreshed by the call below
+            self.F(x)
+            return self.J(x)
+        if self._user_jac is None:
+            if f is None:
+                f = self.F(x)
+            J = self._fd_jacobian(x, np.asarray(f, dtype=float))
+        else:
+            J = self._call_J(x)
+        self._mj.put(x, (J, True))
+        return J
+
+    def FJ(self, x):
+        """(F(x), J(x))."""
+        f = self.F(x)
+        return f, self.J(x, f)
+
+    def F_uncounted(self, x) -> np.ndarray:
+        """F(x) straight from the user's function, outside the counters and the memo: the
+        independent residual check of a returned point, not work of the solver."""
+        saved = self.counters.nfev
+        try:
+            return self._call_F(x)[0]
+        finally:
+            self.counters.nfev = saved
+
+    # ------------------------------------------------------------------ guarded calls
+    def _reject(self, why: str):
+        self.counters.domain_errors += 1
+        self.last_error = why
+        return None
+
+    def f(self, x):
+        """F(x), or None when F raised or returned NaN/Inf there (counted)."""
+        try:
+            f = self.F(x)
+        except (CompassError, KeyboardInterrupt):
+            raise
+        except Exception as exc:  # the user's F failed here: reject the point
+            return self._reject(repr(exc))
+        if not np.all(np.isfinite(f)):
+            return self._reject("F returned NaN/Inf")
+        return f
+
+    def jac(self, x, f=None):
+        """J(x), or None when J raised or returned NaN/Inf there (counted)."""
+        try:
+            J = self.J(x, f)
+        except (CompassError, KeyboardInterrupt):
+            raise
+        except Exception as exc:
+            return self._reject(repr(exc))
+        if not np.all(np.isfinite(J.data)):
+            return self._reject("J returned NaN/Inf")
+        return J
+
+    def fj(self, x):
+        """(f, J), or (None, None) when either is rejected."""
+        f = self.f(x)
+        if f is None:
+            return None, None
+        J = self.jac(x, f)
+        if J is None:
+            return None, None
+        return f, J
+
+    # ------------------------------------------------------------------ start point
+    def pin(self, x):
+        """Keep F(x) and J(x), evaluated last, in the memo until :meth:`forget`: the start
+        point's values are asked for by several passes."""
+        x = np.asarray(x, dtype=float)
+        self._mf.pin(x)
+        self._mj.pin(x)
+
+    def check_at(self, x):
+        """(F(x), J(x)) at the start point, raising :class:`EvaluationError` that names the
+        row (and column) of the first non-finite value or the user's exception."""
+        try:
+            f, J = self.FJ(x)
+        except CompassError:  # our own diagnostics (shapes, pattern, ...) pass through
+            raise
+        except Exception as exc:  # the user's code failed at the start point
+            raise EvaluationError(f"F or J raised at the start point: {exc!r}") from exc
+        bad = np.flatnonzero(~np.isfinite(f))
+        if bad.size:
+            i = bad[0]
+            raise EvaluationError(
+                f"F is {f[i]} in row {self.row_label(i)} at the start point "
+                f"({bad.size} non-finite rows)")
+        if not np.all(np.isfinite(J.data)):
+            k = int(np.flatnonzero(~np.isfinite(J.data))[0])
+            j = int(np.searchsorted(J.indptr, k, side="right") - 1)
+            i = int(J.indices[k])
+            raise EvaluationError(
+                f"J is {J.data[k]} at (row {self.row_label(i)}, column {self.var_label(j)}) "
+                "at the start point")
+        self.pin(x)
+        return f, J
+
+    # ------------------------------------------------------------------ lifetime
+    def forget(self):
+        """Drop the memo (the user's functions may read data that changes between solves)."""
+        self._mf.clear()
+        self._mj.clear()
+
+    def fresh(self) -> "Evaluator":
+        """An evaluator of the same functions and pattern with new counters and no memo."""
+        import copy
+
+        other = copy.copy(self)
+        other.counters = EvalCounters()
+        other.last_error = ""
+        other._mf = _Memo()
+        other._mj = _Memo()
+        return other
+
+    def restrict(self, fill, rows, cols, take, pattern, *, constant_jac=None, ub=None,
+                 row_label=_default_row_label, var_label=_default_var_label) -> "Evaluator":
+        """The evaluator of ``F_R(y) = F(fill(y))[rows]`` on the variables ``cols``, whose
+        Jacobian entries are the parent's entries ``take`` (in the canonical order of
+        ``pattern``).  Calls go through this evaluator's counted primitives."""
+        return _RestrictedEvaluator(self, fill, rows, cols, take, pattern,
+                                    constant_jac=constant_jac, ub=ub, row_label=row_label,
+                                    var_label=var_label)
+
+
+class _RestrictedEvaluator(Evaluator):
+    """See :meth:`Evaluator.restrict`."""
+
+    def __init__(self, parent: Evaluator, fill, rows, cols, take, pattern, *, constant_jac,
+                 ub, row_label, var_label):
+        m = int(np.size(cols))
+        super().__init__(None, parent.jac_mode, m, pattern=pattern, constant_jac=constant_jac,
+                         fd_step=parent.fd_step, ub=ub, row_label=row_label,
+                         var_label=var_label, counters=parent.counters)
+        self.parent = parent
+        self._fill = fill
+        self._rows = np.asarray(rows)
+        self._take = np.asarray(take)
+        P = self._pattern
+        self._indices, self._indptr = P.indices, P.indptr
+
+    def _restrict_J(self, J):
+        return sp.csc_matrix((J.data[self._take], self._indices.copy(), self._indptr.copy()),
+                             shape=(self.n, self.n))
+
+    # F and a given J go through the parent's memo and counters; differences are taken on
+    # the restriction itself (fewer colours) through the parent's counted primitive.
+    def _call_F(self, y):
+        return self.parent._call_F(self._fill(y))[0][self._rows], None
+
+    def F(self, y) -> np.ndarray:
+        return self.parent.F(self._fill(y))[self._rows]
+
+    def J(self, y, f=None) -> sp.csc_matrix:
+        if self.jac_mode is None:
+            return super().J(y, f)
+        return self._restrict_J(self.parent.J(self._fill(y)))
+
+    def pin(self, y):
+        self.parent.pin(self._fill(y))
+        super().pin(y)
+
+    def forget(self):
+        self.parent.forget()
+        super().forget()
+
+    def fresh(self) -> "Evaluator":
+        other = super().fresh()
+        other.parent = self.parent.fresh()
+        other.counters = other.parent.counters
+        return other

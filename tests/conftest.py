@@ -1,0 +1,20 @@
+"""Test-session settings.
+
+The dense reference computations of the tests are small; a multithreaded BLAS on a
+machine whose cores are busy spends its time spinning threads (measured here: an LU of
+order 150 took 0.47 s with two BLAS threads and 0.4 ms with one; a 200-step random basis
+sequence at n = 150 took 280 s), so the tests run BLAS single-threaded.  threadpoolctl
+only reaches libraries already loaded, hence the imports first (numpy and scipy each
+bring their own OpenBLAS).
+"""
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("OMP_NUM_THREADS", "1")
+
+import numpy  # noqa: E402,F401
+import scipy.linalg  # noqa: E402,F401
+import scipy.sparse.linalg  # noqa: E402,F401
+from threadpoolctl import threadpool_limits  # noqa: E402
+
+_blas_limit = threadpool_limits(limits=1, user_api="blas")

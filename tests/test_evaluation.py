@@ -1,0 +1,123 @@
+"""The evaluation layer: one owner of the user's F and J (copies, memo, counters, guards)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import compass_sparse as cs
+from compass_sparse.evaluation import Evaluator
+from compass_sparse.exceptions import JacobianPatternError, ShapeError
+
+
+def _counting_ncp(n, seed=0, cubic=0.1):
+    """F(x) = A x + cubic x^3 + b (A tridiagonal, diagonally dominant) with call logs of
+    F and J; also returns A."""
+    rng = np.random.default_rng(seed)
+    A = sp.diags([np.full(n - 1, -1.0), np.full(n, 4.0), np.full(n - 1, -1.0)], [-1, 0, 1],
+                 format="csc")
+    b = rng.normal(size=n)
+    calls = {"F": [], "J": []}
+
+    def F(x):
+        calls["F"].append(x.copy())
+        return A @ x + cubic * x ** 3 + b
+
+    def J(x):
+        calls["J"].append(x.copy())
+        return (A + sp.diags(3 * cubic * x ** 2)).tocsc()
+
+    return F, J, calls, A
+
+
+def _at(points, x0):
+    return sum(1 for p in points if np.array_equal(p, x0))
+
+
+@pytest.mark.parametrize("crash", ["pnewton", "none"])
+def test_start_point_is_evaluated_once_before_the_first_iteration(crash):
+    n = 50
+    F, J, calls, _ = _counting_ncp(n)
+    x0 = np.full(n, 0.5)
+    seen = {}
+
+    def cb(info):
+        if not seen:
+            seen["F"], seen["J"] = len(calls["F"]), len(calls["J"])
+            seen["F0"], seen["J0"] = _at(calls["F"], x0), _at(calls["J"], x0)
+
+    r = cs.solve_mcp(F, J, 0.0, np.inf, x0, callback=cb,
+                     options={"crash_method": crash, "crash_minimum_dimension": 1})
+    assert r.success
+    # One call of F and one of J at x0 over the whole solve (the problem's start check),
+    # none repeated before the first major iteration.
+    assert _at(calls["F"], x0) == 1 and _at(calls["J"], x0) == 1
+    assert seen["F0"] == 1 and seen["J0"] == 1
+    if crash == "none":
+        assert (seen["F"], seen["J"]) == (1, 1)
+    # The counters count exactly the user's calls.
+    assert (r.nfev, r.njev) == (len(calls["F"]), len(calls["J"]))
+
+
+def test_start_point_is_evaluated_once_with_presolve():
+    n = 40
+    F, J, calls, A = _counting_ncp(n, seed=3, cubic=0.0)  # linear: presolve applies
+    x0 = np.full(n, 0.25)
+    lb = np.zeros(n)
+    ub = np.full(n, np.inf)
+    lb[:5] = ub[:5] = 1.0  # fixed variables: presolve removes them
+    x0[:5] = 1.0
+    r = cs.solve_mcp(F, J, lb, ub, x0, constant_jac=A)
+    assert r.success and r.passes["presolve"].ran
+    assert _at(calls["F"], x0) == 1 and _at(calls["J"], x0) == 1
+    assert (r.nfev, r.njev) == (len(calls["F"]), len(calls["J"]))
+
+
+def test_evaluator_copies_memoizes_and_counts():
+    seen = []
+
+    def F(x):
+        seen.append(x)
+        x[0] = 99.0  # a callback that writes into its argument does not hurt the caller
+        return np.ones(3)
+
+    ev = Evaluator(F, lambda x: sp.identity(3, format="csc"), 3)
+    x = np.zeros(3)
+    f = ev.F(x)
+    f[:] = -1.0  # nor does a caller that writes into its F values
+    assert np.all(x == 0.0) and np.all(ev.F(x) == 1.0)
+    assert ev.counters.nfev == 1 and len(seen) == 1
+    ev.forget()
+    ev.F(x)
+    assert ev.counters.nfev == 2
+
+
+def test_evaluator_rejects_nan_and_exceptions_without_raising():
+    def F(x):
+        if x[0] < 0:
+            raise ValueError("log of a negative number")
+        return np.array([np.nan if x[0] > 1 else 1.0, 0.0])
+
+    ev = Evaluator(F, lambda x: sp.identity(2, format="csc"), 2)
+    assert ev.f(np.array([-1.0, 0.0])) is None and "log of a negative" in ev.last_error
+    assert ev.f(np.array([2.0, 0.0])) is None and "NaN" in ev.last_error
+    assert ev.f(np.array([0.5, 0.0])) is not None
+    assert ev.counters.domain_errors == 2
+    with pytest.raises(ValueError):
+        ev.F(np.array([-1.0, 0.0]))
+
+
+def test_evaluator_shape_and_pattern_errors_propagate_from_guarded_calls():
+    ev = Evaluator(lambda x: np.ones(4), lambda x: sp.identity(3, format="csc"), 3)
+    with pytest.raises(ShapeError):
+        ev.f(np.zeros(3))
+    k = {"i": 0}
+
+    def J(x):
+        k["i"] += 1
+        return sp.csc_matrix(np.eye(3) if k["i"] == 1 else np.diag([1.0, 0.0, 1.0]))
+
+    ev = Evaluator(lambda x: np.ones(3), J, 3)
+    ev.jac(np.zeros(3))
+    with pytest.raises(JacobianPatternError):
+        ev.jac(np.ones(3))  # the dense-to-sparse conversion dropped an entry
