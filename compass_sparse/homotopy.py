@@ -72,6 +72,7 @@ by a new one from a random point of the box, up to ``homotopy_path_limit`` paths
 """
 from __future__ import annotations
 
+import contextlib
 import enum
 import logging
 import time
@@ -151,16 +152,14 @@ class HomotopyOutcome:
 
 # ------------------------------------------------------------------ the smoothed equation
 def _splus(r, mu):
-    """s_mu(r) and its derivatives d/dr, d/dmu, without cancellation for r << 0."""
+    """s_mu(r) and its derivatives d/dr, d/dmu.  Written as max(r, 0) + 2 mu^2 / (q + |r|),
+    q = sqrt(r^2 + 4 mu^2) (the same value on both signs of r), so it has no cancellation
+    for r << 0 and no branch."""
+    if mu <= 0.0:
+        return np.maximum(r, 0.0), (r > 0).astype(float), np.zeros_like(r)
     q = np.sqrt(r * r + 4.0 * mu * mu)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        neg = 2.0 * mu * mu / (q - r)
-    val = np.where(r >= 0, 0.5 * (r + q), neg)
-    val = np.where(q > 0, val, 0.0)
-    qs = np.where(q > 0, q, 1.0)
-    dr = np.where(q > 0, 0.5 * (1.0 + r / qs), (r > 0).astype(float))
-    dmu = np.where(q > 0, 2.0 * mu / qs, 0.0)
-    return val, dr, dmu
+    val = np.maximum(r, 0.0) + 2.0 * mu * mu / (q + np.abs(r))
+    return val, 0.5 * (1.0 + r / q), 2.0 * mu / q
 
 
 class SmoothedNormalMap:
@@ -171,32 +170,23 @@ class SmoothedNormalMap:
         self.ub = np.asarray(ub, dtype=float)
         self.has_l = np.isfinite(self.lb)
         self.has_u = np.isfinite(self.ub)
+        # One formula for every kind of row: p = base + c_l s_mu(x - l) - c_u s_mu(x - u),
+        # base = l on rows with a lower bound and x elsewhere (then s_mu(-r) = s_mu(r) - r
+        # gives the upper-bound-only row u - s_mu(u - x) = x - s_mu(x - u)).
+        self.cl = self.has_l.astype(float)
+        self.cu = self.has_u.astype(float)
+        self.l0 = np.where(self.has_l, self.lb, 0.0)
+        self.u0 = np.where(self.has_u, self.ub, 0.0)
 
     def project(self, x, mu):
         """(p, dp/dx, dp/dmu) at x."""
-        lb, ub = self.lb, self.ub
-        p = x.copy()
-        dx = np.ones_like(x)
-        dmu = np.zeros_like(x)
-        lo = np.where(self.has_l, x - lb, 0.0)
-        hi = np.where(self.has_u, x - ub, 0.0)
-        sl, dl, ml = _splus(lo, mu)
-        su, du, mu_u = _splus(hi, mu)
-        both = self.has_l & self.has_u
-        lonly = self.has_l & ~self.has_u
-        uonly = ~self.has_l & self.has_u
-        p[both] = lb[both] + sl[both] - su[both]
-        dx[both] = dl[both] - du[both]
-        dmu[both] = ml[both] - mu_u[both]
-        p[lonly] = lb[lonly] + sl[lonly]
-        dx[lonly] = dl[lonly]
-        dmu[lonly] = ml[lonly]
-        # u - s_mu(u - x): s_mu(-r) = s_mu(r) - r, so u - s_mu(u - x) = x - s_mu(x - u)
-        p[uonly] = x[uonly] - su[uonly]
-        dx[uonly] = 1.0 - du[uonly]
-        dmu[uonly] = -mu_u[uonly]
+        sl, dl, ml = _splus(x - self.l0, mu)
+        su, du, mu_u = _splus(x - self.u0, mu)
+        p = np.where(self.has_l, self.l0, x) + self.cl * sl - self.cu * su
+        dx = (1.0 - self.cl) + self.cl * dl - self.cu * du
+        dmu = self.cl * ml - self.cu * mu_u
         # The smoothed projection may leave the box by rounding only; clip it.
-        return np.clip(p, lb, ub), dx, dmu
+        return np.clip(p, self.lb, self.ub), dx, dmu
 
 
 # ------------------------------------------------------------------ bordered linear algebra
@@ -489,8 +479,6 @@ def _one_blas_thread():
     """The dense factorizations of the bordered system (n + 1 <= a few thousand) ran 10x
     slower with a multithreaded BLAS on a loaded machine (150 ms against ~15 ms for
     n = 500, measured); one thread is the robust choice for this size."""
-    import contextlib
-
     try:
         from threadpoolctl import threadpool_limits
     except ImportError:  # pragma: no cover - a declared dependency
@@ -555,7 +543,9 @@ def homotopy_pass(solver, z_start, *, polish=None) -> HomotopyOutcome:
             solver.log_major(line)
 
     try:
-        with _one_blas_thread():
+        # the solve limits BLAS to one thread for n <= DENSE_MAX_N already (and setting
+        # the limit costs ~10 ms)
+        with _one_blas_thread() if solver.n > DENSE_MAX_N else contextlib.nullcontext():
             out = track_paths(solver.ev, solver.lb, solver.ub, z_start, solver.opt0,
                               on_point=solver._consider, rng=solver.rng,
                               deadline=solver.deadline, tol=solver.tol, polish=polish, log=log,
