@@ -26,8 +26,9 @@ so F is never evaluated outside the box.
 
 :meth:`Evaluator.restrict` gives the evaluator of a restriction of the problem,
 ``F_R(y) = F(fill(y))[rows]``, ``J_R(y) = J(fill(y))[rows, cols]`` (the reduced problem of
-the preprocessor): its calls go through the parent's counted primitives, so the counters
-are shared and every user call is counted exactly once, whichever problem asked for it.
+the preprocessor): F and a given J are taken from the parent (through its memo, so the
+start point evaluated once serves both problems) and the counters are shared, so every
+user call is counted exactly once, whichever problem asked for it.
 """
 from __future__ import annotations
 
@@ -308,11 +309,11 @@ class Evaluator:
                 self.counters.njev += 1
                 self._mj.put(x, (J, True))
             return J
-        if self._user_jac is True:
-            self._mf.clear()  # the F memo is refreshed by the call below
-            self.F(x)
-            return self.J(x)
-        if self._user_jac is None:
+        if self._user_jac is True:  # one call gives both; F's memo takes the new f too
+            f, J = self._call_F(x)
+            self._mf.put(x, f)
+            self.counters.njev += 1
+        elif self._user_jac is None:
             if f is None:
                 f = self.F(x)
             J = self._fd_jacobian(x, np.asarray(f, dtype=float))
@@ -429,7 +430,7 @@ class Evaluator:
                  row_label=_default_row_label, var_label=_default_var_label) -> "Evaluator":
         """The evaluator of ``F_R(y) = F(fill(y))[rows]`` on the variables ``cols``, whose
         Jacobian entries are the parent's entries ``take`` (in the canonical order of
-        ``pattern``).  Calls go through this evaluator's counted primitives."""
+        ``pattern``).  Its F and J come from this evaluator (memo and counters shared)."""
         return _RestrictedEvaluator(self, fill, rows, cols, take, pattern,
                                     constant_jac=constant_jac, ub=ub, row_label=row_label,
                                     var_label=var_label)

@@ -302,29 +302,28 @@ class NMSSolver:
 
     # ------------------------------------------------------------------ fallbacks
     def _fallback(self, opt):
-        """LM step and projected-gradient steps from the best point."""
+        """LM step and projected-gradient steps from the best point: (the new point or
+        None, its log letter 'L' or 'G')."""
         t0 = time.perf_counter()
         b = self.best
-        out = None
+        out, letter = None, "G"
         if opt.lm_fallback:
             lm = lm_step(self.ev, b.z, b.f, None, self.lb, self.ub, opt,
                          on_point=self._consider)
             if lm is not None:
                 self.lm_steps += 1
-                out = Point(lm[0], lm[1], lm[2], lm[3])
-                self._last_fallback = "L"
+                out, letter = Point(lm[0], lm[1], lm[2], lm[3]), "L"
         if out is None:
             g = gradient_steps(self.ev, b.z, b.f, None, self.lb, self.ub, opt,
                                on_point=self._consider)
             if g is not None:
                 self.grad_steps += g[4]
                 out = Point(g[0], g[1], g[2], g[3])
-                self._last_fallback = "G"
         st = self.passes["fallback"]
         st.ran = True
         st.time += time.perf_counter() - t0
         st.iterations += 1
-        return out
+        return out, letter
 
     # ------------------------------------------------------------------ one run
     def _run(self, start, opt):
@@ -377,11 +376,11 @@ class NMSSolver:
             res, J, code = self._newton_point(st.cur, st.x, st.eps, opt)
             self.nit += 1
             if res is None:  # J could not be evaluated at z_k
-                fb = self._fallback(opt)
+                fb, letter = self._fallback(opt)
                 if fb is None:
                     return "evaluation failure and no fallback progress"
                 st.fresh_checkpoint(fb, normal_map_at(fb.z, fb.f, lb, ub)[0])
-                self._log(code, self._last_fallback, st.cur, st.eps, res)
+                self._log(code, letter, st.cur, st.eps, res)
                 continue
             cur = st.cur
             if cur is st.ckpt[0]:
@@ -432,14 +431,14 @@ class NMSSolver:
                     st.n_d = 0
                     self._log(res.code, "W", st.cur, st.eps, res)
                 else:
-                    fb = self._fallback(opt)
+                    fb, letter = self._fallback(opt)
                     if fb is None:
                         self._log(res.code, "G", self.best, st.eps, res)
                         return "no descent from the best point"
                     st.fresh_checkpoint(fb, normal_map_at(fb.z, fb.f, lb, ub)[0])
                     st.n_d = 0
                     st.watchdogs = 0
-                    self._log(res.code, self._last_fallback, st.cur, st.eps, res)
+                    self._log(res.code, letter, st.cur, st.eps, res)
             # Stationarity: restart when the best merit has not improved for a while.
             if self.best.psi < st.best_seen * (1.0 - 1e-3):
                 st.best_seen = self.best.psi
@@ -493,10 +492,10 @@ class NMSSolver:
             return
         idx = int(np.argmax(np.abs(cur.phi))) if cur.phi.size else 0
         pivots = res.pivots if res is not None else 0
-        c = code.value if hasattr(code, "value") else str(code)
+        inorm = np.abs(cur.phi[idx]) if cur.phi.size else 0.0
         self.log_major(
             f"{self.nit:5d} {pivots:7d} {self.p.counters.nfev:6d} {self.p.counters.njev:5d} "
-            f"{cur.fbn:12.4e} {c}{step} {eps:9.2e} {np.abs(cur.phi[idx]) if cur.phi.size else 0:10.3e}"
+            f"{cur.fbn:12.4e} {code.value}{step} {eps:9.2e} {inorm:10.3e}"
             f" ({self.p.row_label(idx)})")
 
     # ------------------------------------------------------------------ driver

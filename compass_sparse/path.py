@@ -267,11 +267,11 @@ class PivotalPath:
             return res
         self._reset_slots(basic, z, w, v)
         self.bm.set_dense_column(r)
-        code, msg = self._factor(initial=True)
+        code, msg = self._factor()
         if slack_basis is not None and (
                 code is not None or np.any(self.st.sk == VAR_A)):
             self._reset_slots(slack_basis, z, w, v)
-            code, msg = self._factor(initial=True)
+            code, msg = self._factor()
         if code is not None:
             return self._finish(code, 0.0, t0, st0, ray_start, msg)
         self.st.t = 0.0
@@ -339,7 +339,7 @@ class PivotalPath:
         return z, w, v, r, basic
 
     # ------------------------------------------------------------------ factorization
-    def _factor(self, initial=False):
+    def _factor(self):
         """Factor the current slot table; the basis repairs singularity with artificials
         (one factorization repairs every dependent column)."""
         ck, ci, cs = self._columns_for(self.st.sk, self.st.si)

@@ -243,7 +243,8 @@ class MCP:
     # -- evaluation (delegated to the evaluation layer) ------------------------------
     @property
     def counters(self) -> EvalCounters:
-        """Calls of the user's F and J so far (see :class:`~compass_sparse.evaluation.EvalCounters`)."""
+        """Calls of the user's F and J so far (an
+        :class:`~compass_sparse.evaluation.EvalCounters`)."""
         return self.evaluator.counters
 
     @property

@@ -124,8 +124,8 @@ class Result:
     domain_errors: int = 0  #: rejected trial points where F/J failed
     time: float = 0.0
     passes: dict = field(default_factory=dict)
-    basis: object | None = None  #: final basis, for warm starts
-    ray: np.ndarray | None = None
+    basis: object | None = None  #: final basis (user's index space), for warm starts
+    ray: np.ndarray | None = None  #: INFEASIBLE by a Lemke ray: its direction; x its base
     lb: np.ndarray | None = None
     ub: np.ndarray | None = None
     tolerance: float = 1e-6

@@ -220,7 +220,7 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
     work = problem
     if pre is not None:
         st.reason = pre.summary_line()
-        if getattr(pre, "infeasible", None):
+        if pre.infeasible is not None:
             return _result(problem, Status.INFEASIBLE, f"preprocessor: {pre.infeasible}",
                            problem.x0, f0, opt, t0, passes=passes)
         if pre.reduced is None:

@@ -121,3 +121,29 @@ def test_evaluator_shape_and_pattern_errors_propagate_from_guarded_calls():
     ev.jac(np.zeros(3))
     with pytest.raises(JacobianPatternError):
         ev.jac(np.ones(3))  # the dense-to-sparse conversion dropped an entry
+
+
+def test_jac_true_one_call_serves_f_and_j_and_the_pinned_start_survives():
+    n = 4
+    calls = []
+
+    def FJ(x):
+        calls.append(x.copy())
+        return 2.0 * x + 1.0, sp.diags(np.full(n, 2.0), format="csc")
+
+    ev = Evaluator(FJ, True, n)
+    x0, y = np.zeros(n), np.ones(n)
+    ev.check_at(x0)  # pins the start point
+    assert (ev.counters.nfev, ev.counters.njev, len(calls)) == (1, 1, 1)
+    ev.F(y)  # an F-only call: its J is kept, counted only when used
+    assert (ev.counters.nfev, ev.counters.njev) == (2, 1)
+    ev.J(y)
+    assert (ev.counters.nfev, ev.counters.njev, len(calls)) == (2, 2, 2)
+    ev.J(2 * y)
+    ev.F(2 * y)
+    assert (ev.counters.nfev, ev.counters.njev, len(calls)) == (3, 3, 3)
+    ev.FJ(x0)  # still in the memo
+    assert len(calls) == 3 and ev.counters.nfev == len(calls)
+    ev.forget()
+    ev.F(x0)
+    assert len(calls) == 4

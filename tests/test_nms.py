@@ -61,3 +61,11 @@ def test_restart_schedule():
     assert plans[1][0].nms_memory_size == 2 and plans[2][0].crash_nbchange_limit == 10
     # the residual of the first restart fixes the perturbation of the later ones
     assert sch.plan(3, 1e-9)[0].proximal_perturbation == 0.005
+
+
+def test_nms_pass_records_its_time():
+    g = thesis_family(20, family=1, seed=5)
+    r = cs.solve_mcp(g.problem)
+    st = r.passes["nms"]
+    assert st.ran and st.iterations == r.nit and 0.0 < st.time <= r.time
+    assert f"nms {st.time:.3f}s" in r.summary()
