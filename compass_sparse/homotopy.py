@@ -491,8 +491,8 @@ def track_paths(evalr, lb, ub, z_start, opt, *, on_point=None, rng, deadline=Non
     """Follow up to ``opt.homotopy_path_limit`` homotopy paths, the first from ``z_start``,
     the others from random points of the box.
 
-    ``on_point(z, f, phi, psi)`` receives every evaluated point and may raise to stop the
-    pass (the stabilized Newton method raises when a point is a solution); ``polish(z)``
+    ``on_point(z, f, phi, psi)`` receives every accepted path point and every end-game
+    point and may raise to stop the pass (the stabilized Newton method raises when a point is a solution); ``polish(z)``
     (optional) is called with the end point of a path (lam = 1) whose Newton end game
     missed the tolerance."""
     tr = _Tracker(evalr, lb, ub, opt, deadline=deadline, on_point=on_point, tol=tol, log=log)
@@ -536,6 +536,7 @@ def homotopy_pass(solver, z_start, *, polish=None) -> HomotopyOutcome:
     nf0, nj0 = counters.nfev, counters.njev
     t0 = time.perf_counter()
     out = None
+    stopped = ""
     tracker_box = {}
 
     def log(line):
@@ -551,6 +552,9 @@ def homotopy_pass(solver, z_start, *, polish=None) -> HomotopyOutcome:
                               deadline=solver.deadline, tol=solver.tol, polish=polish, log=log,
                               _tracker_out=tracker_box)
         return out
+    except BaseException as exc:  # a solution or a limit of the solve, raised through us
+        stopped = getattr(exc, "message", type(exc).__name__)
+        raise
     finally:
         tr = tracker_box.get("tracker")
         st.ran = True
@@ -562,4 +566,4 @@ def homotopy_pass(solver, z_start, *, polish=None) -> HomotopyOutcome:
             st.factorizations += tr.factorizations
         st.reason = (f"{out.status.value}: {out.message} ({out.paths} paths, {out.steps} steps, "
                      f"{out.turning_points} turning points)" if out is not None
-                     else "a solution was reached on the path")
+                     else f"stopped on the path: {stopped}")

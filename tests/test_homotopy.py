@@ -232,3 +232,9 @@ def test_corrector_accepts_tiny_steps_from_a_base_point_on_the_curve_to_tracking
     assert ok
     yc = out[0]
     assert np.linalg.norm(tr.residual(yc, a, False)[0]) <= 1e-6
+
+
+def test_pass_table_names_the_stop_that_ended_the_homotopy():
+    F, J, lb, ub, x0 = _stationary_problem()
+    res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"})
+    assert res.passes["homotopy"].reason == "stopped on the path: solution found"
