@@ -32,8 +32,9 @@ rank for lam < 1, the parametrized Sard theorem says that for almost every a the
 of H_a in [0, 1) x R^n contains a smooth curve gamma_a starting at (a, 0) with no
 bifurcations (this is the "probability one").  When the box is bounded, x - p_mu(x) points
 outwards and F(p_mu(x)) stays bounded, so H_a has no zeros with large ||x||: gamma_a is
-bounded and reaches lam = 1, where its limit points x* solve F_B(x*) = 0.  On rows with an
-infinite bound the curve can diverge; that is reported (``HomotopyStatus.DIVERGED``).
+bounded and reaches lam = 1, where its limit points x* solve F_B(x*) = 0.  With infinite
+bounds the curve stays bounded when the MCP has no "solution at infinity" (Zhou & Yu's
+condition); otherwise it can diverge, and that is reported (``HomotopyStatus.DIVERGED``).
 
 Path tracking
 -------------
