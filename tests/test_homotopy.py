@@ -238,3 +238,32 @@ def test_pass_table_names_the_stop_that_ended_the_homotopy():
     F, J, lb, ub, x0 = _stationary_problem()
     res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"})
     assert res.passes["homotopy"].reason == "stopped on the path: solution found"
+
+
+def test_step_limit_ends_every_path_with_its_status():
+    g = thesis_family(20, 2, seed=1)
+    res = solve_mcp(g.problem, options={"homotopy": "only", "homotopy_step_limit": 2,
+                                        "homotopy_path_limit": 2})
+    assert not res.success and res.status is Status.NO_PROGRESS
+    h = res.passes["homotopy"]
+    assert h.reason.startswith("step limit") and "(2 paths, 4 steps" in h.reason
+
+
+def test_a_smaller_divergence_bound_stops_the_path_earlier():
+    F, J, lb, ub, x0 = _diverging_problem()
+    ev = MCP(F, J, lb, ub, x0).evaluator
+    lams = []
+    for bound in (1e2, 1e4):
+        out = track_paths(ev, lb, ub, x0, Options(homotopy_path_limit=1,
+                                                  homotopy_divergence_bound=bound),
+                          rng=np.random.default_rng(0))
+        assert out.status is HomotopyStatus.DIVERGED
+        lams.append(out.lam)
+    # x = (1 - lam) a / (1 - 2 lam) passes 1e2 (1 + |a|) before 1e4 (1 + |a|)
+    assert lams[0] < lams[1] < 0.5
+
+
+def test_end_game_from_the_end_of_the_path_only_still_solves():
+    F, J, lb, ub, x0 = _stationary_problem()
+    res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only", "homotopy_end_lambda": 1.0})
+    assert res.success
