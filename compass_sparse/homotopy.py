@@ -408,7 +408,10 @@ class _Tracker:
             if r is None:
                 return None, False
             rhs = np.append(-r[0], -(v @ (y - yp)))
-            d = Bf.solve(rhs)
+            try:
+                d = Bf.solve(rhs)
+            except np.linalg.LinAlgError:  # a non-finite correction: a shorter step
+                return None, False
             dn = float(np.linalg.norm(d))
             if prev is not None:
                 kappa = max(kappa, dn / max(prev, 1e-300))

@@ -269,3 +269,26 @@ def test_end_game_from_the_end_of_the_path_only_still_solves():
     F, J, lb, ub, x0 = _stationary_problem()
     res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only", "homotopy_end_lambda": 1.0})
     assert res.success
+
+
+def test_a_non_finite_correction_shortens_the_step_instead_of_failing_the_solve(monkeypatch):
+    # _Bordered.solve raises on a non-finite solution; in the corrector that once escaped
+    # the pass.  Every third corrector solve fails here (the tangent's right-hand side is
+    # e_{n+1}): the pass must carry on with shorter steps.
+    calls = {"n": 0}
+    solve = hom._Bordered.solve
+
+    def flaky(self, b):
+        if b[-1] == 1.0 and not np.any(b[:-1]):
+            return solve(self, b)
+        calls["n"] += 1
+        if calls["n"] % 3 == 0:
+            raise np.linalg.LinAlgError("non-finite solution of the bordered system")
+        return solve(self, b)
+
+    monkeypatch.setattr(hom._Bordered, "solve", flaky)
+    F, J, lb, ub, x0 = _stationary_problem()
+    res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"})
+    assert calls["n"] >= 3
+    assert res.x.shape == (1,) and res.passes["homotopy"].ran
+    assert res.success or res.status is Status.NO_PROGRESS
