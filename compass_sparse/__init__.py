@@ -11,7 +11,8 @@ Public names::
     solve_mcp, solve_lcp, MCPSolver      entry points
     MCP                                  problem definition (sparse Jacobian API)
     Options                              solver options (frozen dataclass)
-    Result, Status, PointStatus          outcome
+    Result, Status, PointStatus          outcome (Iteration: one entry of Result.history)
+    plot                                 convergence plots (needs matplotlib)
     exceptions                           CompassError and subclasses
 """
 import logging as _logging
@@ -20,7 +21,7 @@ from .exceptions import (BoundsError, CompassError, EvaluationError, JacobianPat
                          OptionError, ProblemError, ShapeError, StartPointError)
 from .options import Options
 from .problem import MCP
-from .result import IntermediateResult, PassStats, PointStatus, Result, Status
+from .result import IntermediateResult, Iteration, PassStats, PointStatus, Result, Status
 from .solve import MCPSolver, solve_lcp, solve_mcp
 
 __version__ = "0.1.0"
@@ -30,7 +31,7 @@ _logging.getLogger("compass_sparse").addHandler(_logging.NullHandler())
 
 __all__ = [
     "solve_mcp", "solve_lcp", "MCPSolver", "MCP", "Options", "Result", "Status",
-    "PointStatus", "PassStats", "IntermediateResult", "CompassError", "ProblemError",
+    "PointStatus", "PassStats", "IntermediateResult", "Iteration", "CompassError", "ProblemError",
     "ShapeError", "BoundsError", "StartPointError", "EvaluationError",
     "JacobianPatternError", "OptionError", "__version__",
 ]

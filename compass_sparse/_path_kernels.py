@@ -3,7 +3,7 @@ of basic values onto their bounds, with each slot's bounds derived from its vari
 (z: [l, u]; w, v: [0, inf); fixed-variable slack: free; t: [0, 1]; artificial: towards 0
 from the side it is on)."""
 import numpy as np
-from numba import njit
+from ._jit import njit
 
 VAR_Z, VAR_W, VAR_V, VAR_A, VAR_T, VAR_S = 0, 1, 2, 3, 4, 5
 

@@ -1,7 +1,9 @@
 """The ``compass-sparse`` command.
 
     compass-sparse demo [--problem obstacle|structured|thesis|kojshin|cge] [--n N] [-v]
-    compass-sparse cge  [--regions R --sectors N --households H --shock ...]
+    compass-sparse cge  [--regions R --sectors N --households H --shock ...] [--csv FILE]
+    compass-sparse cge  ... --scenarios tariff=0:0.5:51 [sigma_armington=1,2,4]
+                        [--scenarios-file FILE] [--output DIR] [--workers W]
     compass-sparse options          list every solver option with its default
 """
 from __future__ import annotations
@@ -63,10 +65,10 @@ def _demo(args) -> int:
     elif kind == "cge":
         from .generators.cge import static_cge
 
-        model = static_cge(seed=args.seed)
-        g = model
+        # the shocked model is the one solved, so it is the one the result is checked on
+        g = static_cge(seed=args.seed).with_shock(output_tax=0.0)
         build = time.perf_counter() - t0
-        res = solve_mcp(model.with_shock(output_tax=0.0).problem, options=_opts(args))
+        res = solve_mcp(g.problem, options=_opts(args))
     else:  # kojshin
         def F(x):
             x1, x2, x3, x4 = x
@@ -111,6 +113,8 @@ def _cge(args) -> int:
     rep = solve_mcp(p, options={**_opts(args), "major_iteration_limit": 0})
     print(f"benchmark replication (0 iterations): ||Phi||_2 = {rep.residual.fb_norm:.3e}, "
           f"natural residual = {rep.residual.natural:.3e}")
+    if args.scenarios or args.scenarios_file:
+        return _cge_scenarios(args, model)
     shock = {}
     if args.output_tax is not None:
         shock["output_tax"] = args.output_tax
@@ -126,7 +130,55 @@ def _cge(args) -> int:
     print(f"shock: {shock}")
     res = solve_mcp(shocked.problem, options=_opts(args))
     _print_result("counterfactual", shocked.problem.n, res, shocked.problem)
+    from .generators.cge import economics_report
+
+    econ = economics_report(shocked, shocked.benchmark, res.x)
+    print()
+    print("economics of the counterfactual" + ("" if res.success else
+                                               " (NOT an equilibrium: the best point found)"))
+    print(econ.table(top=args.top))
+    if args.csv:
+        econ.to_csv(args.csv)
+        print(f"\nwrote every variable and household to {args.csv}")
     return 0 if res.success else 1
+
+
+def _cge_scenarios(args, model) -> int:
+    """A scenario batch of the CGE model: results to Parquet, a table of headlines."""
+    from .batch import grid, parse_axis, read_scenarios, solve_batch
+
+    scenarios = grid(**dict(parse_axis(a) for a in args.scenarios)) if args.scenarios else []
+    if args.scenarios_file:
+        scenarios += read_scenarios(args.scenarios_file)
+    names = sorted({k for s in scenarios for k in s})
+    if "tariff" in names and model.info["regions"] < 2:
+        print("tariff scenarios need trade between regions: give --regions 2 or more",
+              file=sys.stderr)
+        return 2
+    print(f"{len(scenarios)} scenarios over {', '.join(names)}; results in {args.output}/")
+    out = solve_batch(model, scenarios, options=_opts(args), workers=args.workers,
+                      output=args.output)
+    print(out.summary())
+    # Headlines of region r1: mean welfare index of its households, mean Armington price,
+    # mean activity level, total household income (numeraire: see above).
+    heads = {"welfare": ("U", np.mean), "price PA": ("PA", np.mean),
+             "output Y": ("Y", np.mean), "income M": ("M", np.sum)}
+    print("region r1: welfare = mean utility index U, price PA = mean Armington price, "
+          "output Y = mean activity level, income M = household income")
+    print("  ".join([f"{k:>15}" for k in names] + [f"{'status':>12}", f"{'its':>4}"]
+                    + [f"{h:>10}" for h in heads]))
+    rows = np.unique(np.linspace(0, len(out.rows) - 1, min(len(out.rows), 11)).astype(int))
+    for i in rows:
+        r, s = out.rows[i], out.scenarios[i]
+        vals = [f"{float(s[k]):>15.6g}" if np.ndim(s.get(k, np.nan)) == 0 else f"{'array':>15}"
+                for k in names]
+        vals += [f"{r['status']:>12}", f"{r['nit']:>4d}"]
+        x = r.get("x")
+        for blk, agg in heads.values():
+            v = agg(model.block(np.asarray(x), blk)[0]) if x is not None else np.nan
+            vals.append(f"{v:>10.5g}")
+        print("  ".join(vals))
+    return 0 if out.failed == 0 else 1
 
 
 def main(argv=None) -> int:
@@ -161,6 +213,22 @@ def main(argv=None) -> int:
     c.add_argument("--tariff", type=float, default=None, help="import tariff of region 0")
     c.add_argument("--productivity", type=float, default=None, help="productivity factor")
     c.add_argument("--endowment", type=float, default=None, help="endowment factor")
+    c.add_argument("--top", type=int, default=10,
+                   help="largest price, quantity and income changes to print (default 10)")
+    c.add_argument("--csv", default=None, metavar="FILE",
+                   help="write the whole economics report (every variable, every household) "
+                   "as CSV")
+    c.add_argument("--scenarios", nargs="+", metavar="NAME=A:B:COUNT", default=None,
+                   help="a scenario grid instead of one shock: axes name=start:stop:count or "
+                   "name=v1,v2,...; names: tariff (on every import link), output_tax, "
+                   "endowment, productivity, sigma_va, sigma_armington, sigma_consumer")
+    c.add_argument("--scenarios-file", default=None,
+                   help="scenarios from a CSV (header of names) or JSON (list of objects) file")
+    c.add_argument("--output", default="cge-scenarios",
+                   help="directory of the Parquet results (a rerun resumes; default "
+                   "cge-scenarios)")
+    c.add_argument("--workers", type=int, default=None,
+                   help="worker processes (default: every core; 0: in this process)")
     common(c)
     sub.add_parser("options", help="list every solver option with its default")
     args = ap.parse_args(argv)

@@ -29,7 +29,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from .merit import fb_phi, normal_map_at, project
 
@@ -55,6 +54,8 @@ class CrashResult:
 def _solve_reduced(Jii, rhs, perturb, eps0):
     """Solve (J_II + eps I) d = rhs with eps = 0 first, then growing when singular."""
     eps = 0.0
+    import scipy.sparse.linalg as spla  # here, not at import: it costs ~0.3 s
+
     nf = 0
     for attempt in range(6):
         A = Jii if eps == 0.0 else (Jii + eps * sp.identity(Jii.shape[0], format="csc"))
@@ -73,9 +74,11 @@ def _solve_reduced(Jii, rhs, perturb, eps0):
 
 
 def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=None,
-          log=None) -> CrashResult:
+          log=None, on_point=None) -> CrashResult:
     """Projected-Newton crash from z0, a point of the box.  ``evalr`` is the problem's
-    :class:`~compass_sparse.evaluation.Evaluator`; ``f0``, ``J0``: F and J at z0 when known."""
+    :class:`~compass_sparse.evaluation.Evaluator`; ``f0``, ``J0``: F and J at z0 when known.
+    ``on_point(z, f)`` sees every trial point where F was evaluated (the caller's best point
+    may be among them, and it may stop the crash by raising)."""
     t0 = time.perf_counter()
     opt = options
     tol = opt.convergence_tolerance if tol is None else tol
@@ -159,9 +162,13 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
         accepted = False
         seg = project(z - d, lb, ub) - z if opt.crash_searchtype == "line" else None
         while alpha >= opt.crash_stepsize_minimum:
+            if deadline is not None and time.perf_counter() > deadline:
+                break
             zt = project(z - alpha * d if seg is None else z + alpha * seg, lb, ub)
             ft = evalr.f(zt)
             if ft is not None:
+                if on_point is not None:
+                    on_point(zt, ft)
                 xt, nmt = normal_map_at(zt, ft, lb, ub)
                 nmt_norm = float(np.linalg.norm(nmt))
                 if nmt_norm <= (1.0 - opt.crash_sigma * alpha) * max(recent):

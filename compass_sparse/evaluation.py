@@ -3,8 +3,11 @@
 Every value of F(x) and J(x) the solver uses comes from an :class:`Evaluator`.  It
 
 * passes a *copy* of x to the user's callbacks (they may keep or change their argument);
-* checks shapes and the fixed structural pattern of J (recorded at the first call) and
-  returns J in canonical CSC form whose ``indptr``/``indices`` never change;
+* checks shapes and puts J on its structural pattern, returned in canonical CSC form.  A
+  declared pattern (``jac_sparsity``) is a contract: entries a returned J lacks are zeros,
+  an entry outside it is the error.  An undeclared pattern is the union of the entries
+  seen so far and grows when a later J has more (a J assembled from arrays drops the zeros
+  of the point where it was built);
 * counts the user's calls in one :class:`EvalCounters` (F, J, the F calls spent on
   finite differences, and the rejected evaluations);
 * memoizes the last point of F and of J separately, so a value already computed at x
@@ -32,6 +35,8 @@ user call is counted exactly once, whichever problem asked for it.
 """
 from __future__ import annotations
 
+import functools
+import logging
 from dataclasses import dataclass
 from typing import Callable
 
@@ -42,6 +47,8 @@ from .exceptions import (CompassError, EvaluationError, JacobianPatternError, Pr
                          ShapeError)
 
 __all__ = ["Evaluator", "EvalCounters", "canonical_csc"]
+
+logger = logging.getLogger("compass_sparse")
 
 
 @dataclass
@@ -55,9 +62,24 @@ class EvalCounters:
     domain_errors: int = 0  #: guarded evaluations rejected (an exception or NaN/Inf)
 
 
+@functools.lru_cache(maxsize=16)
+def _full_pattern(n: int):
+    """(indptr, indices) of the full n x n CSC pattern (never handed out: copied)."""
+    return (np.arange(0, n * n + 1, n, dtype=np.int32),
+            np.tile(np.arange(n, dtype=np.int32), n))
+
+
+def _keys(A: sp.csc_matrix) -> np.ndarray:
+    """Sorted keys col * n + row of the stored entries of a canonical CSC matrix."""
+    n = A.shape[0]
+    return np.repeat(np.arange(A.shape[1], dtype=np.int64), np.diff(A.indptr)) * n + A.indices
+
+
 def canonical_csc(J, n: int) -> sp.csc_matrix:
     """J as a canonical (sorted, duplicate-free) float CSC copy; a dense array keeps its
     full pattern (its zeros stay stored)."""
+    if np.iscomplexobj(J.data if sp.issparse(J) else J):
+        raise EvaluationError("the Jacobian has complex entries; J must be real")
     if sp.issparse(J):
         if J.shape != (n, n):
             raise ShapeError(f"the Jacobian has shape {J.shape}, expected ({n}, {n})")
@@ -66,9 +88,12 @@ def canonical_csc(J, n: int) -> sp.csc_matrix:
         A = np.asarray(J, dtype=float)
         if A.shape != (n, n):
             raise ShapeError(f"the Jacobian has shape {A.shape}, expected ({n}, {n})")
-        C = sp.csc_matrix(np.ones((n, n)))
-        C.data = A.T.ravel().copy()
-        return C
+        # The full pattern, built once per n (a small problem with a dense Jacobian
+        # evaluates it every major iteration); copies of the index arrays, since scipy
+        # may sort or prune them in place.
+        indptr, indices = _full_pattern(n)
+        return sp.csc_matrix((A.T.ravel().copy(), indices.copy(), indptr.copy()),
+                             shape=(n, n))
     if not C.has_canonical_format:
         C.sum_duplicates()  # sorts indices too
     C.sort_indices()
@@ -152,6 +177,8 @@ class Evaluator:
         self.constant_mask: np.ndarray | None = None
         self._mf = _Memo()  # F: value f
         self._mj = _Memo()  # J: value (J, counted?)
+        self.pattern_declared = pattern is not None
+        self.pattern_growths = 0
         if pattern is not None:
             P = canonical_csc(pattern, self.n)
             P.data[:] = 1.0
@@ -177,6 +204,8 @@ class Evaluator:
         self._set_constant_mask()
 
     def _fix_pattern(self, C: sp.csc_matrix) -> sp.csc_matrix:
+        """C on the pattern: entries of the pattern that C lacks are zeros; an entry outside
+        a declared pattern is an error; an undeclared pattern grows to hold it."""
         if self._pattern is None:
             self._set_pattern(C)
             return C
@@ -184,26 +213,37 @@ class Evaluator:
         if (C.indptr.shape == P.indptr.shape and C.indices.shape == P.indices.shape
                 and np.array_equal(C.indptr, P.indptr) and np.array_equal(C.indices, P.indices)):
             return C
-        raise JacobianPatternError(self._pattern_change_message(P, C))
+        kp, kc = _keys(P), _keys(C)
+        pos = np.searchsorted(kp, kc)
+        inside = pos < kp.size
+        inside[inside] = kp[pos[inside]] == kc[inside]
+        if not inside.all():
+            out = kc[~inside]
+            j, i = divmod(int(out[0]), self.n)
+            if self.pattern_declared:
+                raise JacobianPatternError(
+                    f"the Jacobian has an entry at (row {self.row_label(i)}, column "
+                    f"{self.var_label(j)}) outside the declared pattern jac_sparsity "
+                    f"({out.size} such entries): jac_sparsity must contain every entry J can "
+                    "ever hold")
+            keys = np.union1d(kp, kc)
+            U = sp.csc_matrix((np.ones(keys.size), (keys % self.n, keys // self.n)),
+                              shape=P.shape)
+            U.sort_indices()
+            logger.info("the Jacobian has %d entries outside the pattern seen so far (first "
+                        "at row %s, column %s): the pattern grows", out.size,
+                        self.row_label(i), self.var_label(j))
+            self._set_pattern(U)
+            self.pattern_growths += 1
+            P = self._pattern
+            pos = np.searchsorted(_keys(P), kc)
+        data = np.zeros(P.nnz)
+        data[pos] = C.data
+        return sp.csc_matrix((data, P.indices.copy(), P.indptr.copy()), shape=P.shape)
 
-    def _pattern_change_message(self, P, C) -> str:
-        Pc, Cc = P.tocoo(), C.tocoo()
-        n = self.n
-        kp = set((Pc.col.astype(np.int64) * n + Pc.row).tolist())
-        kc = set((Cc.col.astype(np.int64) * n + Cc.row).tolist())
-        added = sorted(kc - kp)
-        removed = sorted(kp - kc)
-        first = min(added[:1] + removed[:1])
-        j, i = divmod(first, n)
-        what = "appeared" if added and first == added[0] else "disappeared"
-        return (
-            f"the Jacobian's structural pattern changed: entry (row {self.row_label(i)}, "
-            f"column {self.var_label(j)}) {what} ({len(added)} entries added, {len(removed)} "
-            "removed since the first call). Return J with a fixed index structure: store "
-            "explicit zeros (e.g. build it from fixed (row, col) index arrays with "
-            "scipy.sparse.csc_matrix((data, (rows, cols)), shape) rather than from a dense "
-            "array, which drops zeros)"
-        )
+    def on_pattern(self, J) -> sp.csc_matrix:
+        """A Jacobian returned earlier, on the current pattern (which may have grown)."""
+        return self._fix_pattern(canonical_csc(J, self.n))
 
     def _set_constant_mask(self):
         spec = self._constant_spec
@@ -216,8 +256,7 @@ class Evaluator:
         S.sort_indices()
         P = self._pattern  # canonical CSC, so its keys are sorted and unique too
         n = self.n
-        keys_p = np.repeat(np.arange(n, dtype=np.int64), np.diff(P.indptr)) * n + P.indices
-        keys_s = np.repeat(np.arange(n, dtype=np.int64), np.diff(S.indptr)) * n + S.indices
+        keys_p, keys_s = _keys(P), _keys(S)
         pos = np.searchsorted(keys_p, keys_s)
         inside = pos < keys_p.size
         inside[inside] = keys_p[pos[inside]] == keys_s[inside]
@@ -244,6 +283,8 @@ class Evaluator:
             f, J = out
         else:
             f, J = out, None
+        if np.iscomplexobj(f):
+            raise EvaluationError("F(x) returned complex values; F must be real")
         f = np.asarray(f, dtype=float)
         if f.shape != (self.n,):
             if f.size == self.n:
@@ -305,6 +346,8 @@ class Evaluator:
         hit = self._mj.get(x)
         if hit is not None:
             J, counted = hit
+            if J.nnz != self._pattern.nnz:  # kept from before an undeclared pattern grew
+                J = self._fix_pattern(J)
             if not counted:
                 self.counters.njev += 1
                 self._mj.put(x, (J, True))
@@ -448,11 +491,16 @@ class _RestrictedEvaluator(Evaluator):
         self.parent = parent
         self._fill = fill
         self._rows = np.asarray(rows)
+        self._cols = np.asarray(cols)
         self._take = np.asarray(take)
+        self._parent_nnz = parent._pattern.nnz if parent._pattern is not None else -1
+        self.pattern_declared = parent.pattern_declared  # as certain as the parent's
         P = self._pattern
         self._indices, self._indptr = P.indices, P.indptr
 
     def _restrict_J(self, J):
+        if J.nnz != self._parent_nnz:  # the parent's undeclared pattern grew: by index
+            return self._fix_pattern(canonical_csc(J[self._rows][:, self._cols], self.n))
         return sp.csc_matrix((J.data[self._take], self._indices.copy(), self._indptr.copy()),
                              shape=(self.n, self.n))
 

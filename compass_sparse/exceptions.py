@@ -18,6 +18,12 @@ class ShapeError(ProblemError):
     """An array, F(x) or J(x) has the wrong shape, or the system is not square."""
 
 
+class ModelError(ProblemError):
+    """A model written in a modelling language (Pyomo, GAMSPy) cannot be turned into an MCP:
+    a complementarity without a variable on either side, unmatched equations, a missing
+    bound, an unsupported expression.  The message names the model component."""
+
+
 class BoundsError(ProblemError):
     """Bounds are inconsistent (lb > ub, lb = +inf, ub = -inf) or contain NaN."""
 

@@ -17,9 +17,10 @@
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from .merit import fb_jacobian_diagonals, fb_phi, fb_psi, project
 
@@ -46,13 +47,17 @@ def spd_solve(A, b):
             pass
     except ImportError:
         pass
+    import scipy.sparse.linalg as spla  # here: its import costs ~0.3 s
+
     return spla.splu(A, permc_spec="MMD_AT_PLUS_A").solve(b)
 
 
 def _armijo(evalr, z, psi, g, trial, lb, ub, sigma, shrink, alpha_min, alpha0=1.0,
-            on_point=None):
+            on_point=None, deadline=None):
     alpha = alpha0
     while alpha >= alpha_min:
+        if deadline is not None and time.perf_counter() > deadline:
+            return None  # the caller's limit check reports the time limit
         zt = trial(alpha)
         ft = evalr.f(zt)
         if ft is not None:
@@ -67,7 +72,7 @@ def _armijo(evalr, z, psi, g, trial, lb, ub, sigma, shrink, alpha_min, alpha0=1.
     return None
 
 
-def gradient_steps(evalr, z, f, J, lb, ub, opt, *, on_point=None):
+def gradient_steps(evalr, z, f, J, lb, ub, opt, *, on_point=None, deadline=None):
     """Up to ``gradient_step_limit`` projected-gradient steps from z.  Returns the last
     accepted (z, f, phi, psi, steps) or None when no step decreased Psi."""
     phi = fb_phi(z, f, lb, ub)
@@ -94,7 +99,7 @@ def gradient_steps(evalr, z, f, J, lb, ub, opt, *, on_point=None):
             a0 = 1.0
         acc = _armijo(evalr, z, psi, g, trial, lb, ub, opt.gradient_sigma,
                       opt.gradient_shrink_factor, max(opt.gradient_stepsize_minimum, 1e-20),
-                      alpha0=a0, on_point=on_point)
+                      alpha0=a0, on_point=on_point, deadline=deadline)
         if acc is None:
             break
         z, f, phi, psi, _ = acc
@@ -104,7 +109,7 @@ def gradient_steps(evalr, z, f, J, lb, ub, opt, *, on_point=None):
     return out
 
 
-def lm_step(evalr, z, f, J, lb, ub, opt, *, mu=None, on_point=None):
+def lm_step(evalr, z, f, J, lb, ub, opt, *, mu=None, on_point=None, deadline=None):
     """One projected Levenberg–Marquardt step.  Returns (z, f, phi, psi, mu) or None."""
     if J is None:
         J = evalr.jac(z, f)
@@ -134,7 +139,7 @@ def lm_step(evalr, z, f, J, lb, ub, opt, *, mu=None, on_point=None):
             mu *= 10.0
             continue
         acc = _armijo(evalr, z, psi, g, lambda a: project(z + a * d, lb, ub), lb, ub,
-                      opt.nms_sigma, 0.5, 1e-6, on_point=on_point)
+                      opt.nms_sigma, 0.5, 1e-6, on_point=on_point, deadline=deadline)
         if acc is not None:
             zt, ft, phit, psit, alpha = acc
             return zt, ft, phit, psit, (mu * 0.3 if alpha == 1.0 else mu)

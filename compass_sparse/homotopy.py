@@ -73,7 +73,6 @@ by a new one from a random point of the box, up to ``homotopy_path_limit`` paths
 """
 from __future__ import annotations
 
-import contextlib
 import enum
 import logging
 import time
@@ -84,6 +83,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from ._blas import single_threaded_blas
 from .merit import fb_phi, fb_psi, project
 from .restarts import random_point
 from .result import PassStats
@@ -269,8 +269,9 @@ class _Tracker:
         if self.best is None or psi < self.best[1]:
             self.best = (z.copy(), psi)
         if self.on_point is not None:
+            # the caller's acceptance test decides what a solution is (it raises then)
             self.on_point(z, f, phi, psi)
-        if np.sqrt(2.0 * psi) <= self.tol:
+        elif np.sqrt(2.0 * psi) <= self.tol:
             raise _Stop(HomotopyStatus.SOLVED, "solution found on the homotopy pass")
 
     def residual(self, y, a, want_jac):
@@ -479,17 +480,6 @@ class _Tracker:
         return z
 
 
-def _one_blas_thread():
-    """The dense factorizations of the bordered system (n + 1 <= a few thousand) ran 10x
-    slower with a multithreaded BLAS on a loaded machine (150 ms against ~15 ms for
-    n = 500, measured); one thread is the robust choice for this size."""
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - a declared dependency
-        return contextlib.nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
-
-
 def track_paths(evalr, lb, ub, z_start, opt, *, on_point=None, rng, deadline=None, tol=1e-6,
                 polish=None, log=None, _tracker_out=None) -> HomotopyOutcome:
     """Follow up to ``opt.homotopy_path_limit`` homotopy paths, the first from ``z_start``,
@@ -548,9 +538,9 @@ def homotopy_pass(solver, z_start, *, polish=None) -> HomotopyOutcome:
             solver.log_major(line)
 
     try:
-        # the solve limits BLAS to one thread for n <= DENSE_MAX_N already (and setting
-        # the limit costs ~10 ms)
-        with _one_blas_thread() if solver.n > DENSE_MAX_N else contextlib.nullcontext():
+        # dense LU of the bordered system: one BLAS thread (a multithreaded BLAS ran these
+        # factorizations 10x slower on a loaded machine: 150 ms against 15 ms at n = 500)
+        with single_threaded_blas():
             out = track_paths(solver.ev, solver.lb, solver.ub, z_start, solver.opt0,
                               on_point=solver._consider, rng=solver.rng,
                               deadline=solver.deadline, tol=solver.tol, polish=polish, log=log,

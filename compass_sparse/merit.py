@@ -30,6 +30,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.sparse as sp
 
 __all__ = [
     "fischer",
@@ -79,6 +80,9 @@ def _fischer_grad(a, b):
 def _broadcast_box(lb, ub, z):
     """Broadcast scalar (or array) bounds to the shape of z (no validation: that is
     :func:`compass_sparse.problem.as_bounds`, for user input)."""
+    if (isinstance(lb, np.ndarray) and isinstance(ub, np.ndarray) and lb.shape == z.shape
+            and ub.shape == z.shape and lb.dtype == float and ub.dtype == float):
+        return lb, ub  # the solver's own bound arrays: nothing to broadcast
     return (np.broadcast_to(np.asarray(lb, dtype=float), z.shape),
             np.broadcast_to(np.asarray(ub, dtype=float), z.shape))
 
@@ -91,6 +95,21 @@ def _kinds(lb, ub):
 
 def fb_phi(z, f, lb, ub):
     """The Fischer–Burmeister vector Phi(z) for given F values f = F(z)."""
+    z = np.asarray(z, dtype=float)
+    f = np.asarray(f, dtype=float)
+    lb, ub = _broadcast_box(lb, ub, z)
+    if z.ndim == 1 and f.shape == z.shape:
+        from ._merit_kernels import fb_phi_kernel
+
+        phi = np.empty_like(z)
+        fb_phi_kernel(np.ascontiguousarray(z), np.ascontiguousarray(f),
+                      np.ascontiguousarray(lb), np.ascontiguousarray(ub), phi)
+        return phi
+    return fb_phi_arrays(z, f, lb, ub)
+
+
+def fb_phi_arrays(z, f, lb, ub):
+    """fb_phi with array operations (the reference of the compiled kernel)."""
     z = np.asarray(z, dtype=float)
     f = np.asarray(f, dtype=float)
     lb, ub = _broadcast_box(lb, ub, z)
@@ -141,7 +160,14 @@ def fb_gradient(z, f, J, lb, ub, phi=None):
     if phi is None:
         phi = fb_phi(z, f, lb, ub)
     da, db = fb_jacobian_diagonals(z, f, lb, ub)
-    return da * phi + J.T @ (db * phi)
+    u = db * phi
+    if sp.issparse(J) and J.format == "csc":
+        from ._merit_kernels import csc_rmatvec
+
+        jtu = np.empty(J.shape[1])
+        csc_rmatvec(J.indptr, J.indices, J.data, u, jtu)  # J^T u without building J^T
+        return da * phi + jtu
+    return da * phi + J.T @ u
 
 
 def project(x, lb, ub):

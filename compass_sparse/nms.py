@@ -34,7 +34,8 @@ Major-iteration log (verbosity >= 2), fixed-width columns as in PATH:
 path, func/grad = cumulative F/J evaluations, residual = ||Phi_FB||_2, type = two
 letters: the path's code (S solved, R ray, C cycle, I pivot limit, N singular basis,
 T tolerance lost, E error) and the step (D d-step, M m-step, O both tests passed,
-W watchdog, G projected gradient, L Levenberg–Marquardt), prox = eps, inorm = ||Phi||_inf
+W watchdog, G projected gradient, L Levenberg–Marquardt; ``-H``: a homotopy pass, counted
+as one major iteration), prox = eps, inorm = ||Phi||_inf
 with the worst row's name.  Crash lines: ``crash iter changes size residual step``.
 """
 from __future__ import annotations
@@ -46,13 +47,15 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from .acceptance import Acceptance
 from .crash import crash
 from .fallback import gradient_steps, lm_step
 from .merit import fb_gradient, fb_phi, fb_psi, normal_map_at, project
 from .path import LinearCode, WarmBasis, solve_linear_mcp
 from .progress import ProgressLine
 from .restarts import FROM_RANDOM, FROM_START, RestartSchedule, near_point, random_point
-from .result import PassStats, Status
+from .result import Iteration, PassStats, Status
+from .stationary import stationarity
 
 logger = logging.getLogger("compass_sparse")
 
@@ -62,6 +65,12 @@ LOCAL_FACTOR = 1e-3
 """Below this fraction of a run's starting residual the NMS accepts only steps that do not
 raise the merit (d-steps included); larger steps go to the watchdog's backtracking."""
 
+FLAT_REJECTION_LIMIT = 10
+"""Points with a residual below the tolerance that the scale test (see
+:mod:`compass_sparse.acceptance`) rejected before the solve stops with FLAT_RESIDUAL."""
+
+_DIAGNOSED = (Status.NO_PROGRESS, Status.MAJOR_ITERATION_LIMIT, Status.MINOR_ITERATION_LIMIT,
+              Status.TIME_LIMIT)
 
 
 class _Stop(Exception):
@@ -118,6 +127,7 @@ class Linearizer:
         self.pos_J = self._positions(P, J.indices, col)
         self.pos_D = self._positions(P, np.arange(n), np.arange(n))
         self.n = n
+        self.nnz_J = J.nnz
 
     @staticmethod
     def _positions(P, rows, cols):
@@ -198,8 +208,10 @@ class NMSSolver:
     """The stabilized Newton method on one MCP (after presolve)."""
 
     def __init__(self, problem, options, *, manager_factory, callback=None,
-                 deadline=None, log_major=None, log_minor=None):
+                 deadline=None, log_major=None, log_minor=None, acceptance=None):
         self.p = problem
+        self.acceptance = acceptance or Acceptance(problem.lb, problem.ub,
+                                                   options.convergence_tolerance)
         self.ev = problem.evaluator
         self.opt0 = options
         self.lb, self.ub = problem.lb, problem.ub
@@ -208,6 +220,7 @@ class NMSSolver:
         self.callback = callback
         self.deadline = deadline
         self.log_major = log_major
+        self.history = []  # Iteration records, read by solve.py into Result.history
         self.log_minor = log_minor
         self.tol = options.convergence_tolerance
         self.best: Point | None = None
@@ -222,14 +235,36 @@ class NMSSolver:
         self.bm = None
         self.basis: WarmBasis | None = None
         self.rng = np.random.default_rng(options.seed)
+        self.flat_rejections = 0
 
     # ------------------------------------------------------------------ bookkeeping
+    def _past_deadline(self) -> bool:
+        return self.deadline is not None and time.perf_counter() > self.deadline
+
     def _consider(self, z, f, phi, psi):
-        """Every evaluated trial point may be the best (and a solution)."""
+        """Every evaluated trial point may be the best (and a solution).  Every loop that
+        evaluates points passes through here, so the time limit is checked here too: it
+        holds to within one evaluation."""
         if self.best is None or psi < self.best.psi:
             self.best = Point(z.copy(), f.copy(), phi.copy(), psi)
-        if np.sqrt(2.0 * psi) <= self.tol:
-            raise _Stop(Status.SOLVED, "solution found")
+        if self.acceptance.small(z, f):
+            v = self.acceptance.judge(z, f, jac=lambda y: self.ev.jac(y, f))
+            if v.solved:
+                self.best = Point(z.copy(), f.copy(), phi.copy(), psi)
+                raise _Stop(Status.SOLVED, "solution found")
+            if v.small_residual and v.flat_row >= 0:
+                # A flat tail: keep going (a genuine solution may still be reached), but
+                # not for ever along a tail that leads nowhere.
+                self.flat_rejections += 1
+                if self.flat_rejections >= FLAT_REJECTION_LIMIT:
+                    raise _Stop(Status.FLAT_RESIDUAL, v.flat_message(self.p.row_label))
+        if self._past_deadline():
+            raise _Stop(Status.TIME_LIMIT, "time limit reached")
+
+    def _consider_trial(self, z, f):
+        """A crash trial point (F evaluated there) may be the best point too."""
+        phi = fb_phi(z, f, self.lb, self.ub)
+        self._consider(z, f, phi, fb_psi(phi))
 
     def _point(self, z, f=None, J=None):
         if f is None:
@@ -258,12 +293,17 @@ class NMSSolver:
             return
         from .result import IntermediateResult
 
-        info = IntermediateResult(x=cur.z.copy(), fun=cur.f.copy(), residual=cur.fbn,
+        z, f = self.acceptance.user_point(cur.z, cur.f)  # the user's units
+        a = self.acceptance
+        info = IntermediateResult(x=np.array(z, copy=True), fun=np.array(f, copy=True),
+                                  residual=float(np.linalg.norm(fb_phi(z, f, a.lb, a.ub))),
                                   nit=self.nit, minor_iterations=self.minor)
         try:
             stop = self.callback(info)
         except StopIteration:
             stop = True
+        except Exception as exc:  # the user's callback failed: stop, keep the best point
+            raise _Stop(Status.CALLBACK_STOP, f"the callback raised {exc!r}") from exc
         if stop:
             raise _Stop(Status.CALLBACK_STOP, "stopped by the callback")
 
@@ -273,8 +313,8 @@ class NMSSolver:
         self._last_J = J
         if J is None:
             return None, None, LinearCode.ERROR
-        if self.linearizer is None:
-            self.linearizer = Linearizer(J)
+        if self.linearizer is None or self.linearizer.nnz_J != J.nnz:
+            self.linearizer = Linearizer(J)  # first J, or an undeclared pattern grew
         M = self.linearizer(J, eps)
         q = cur.f - M @ cur.z
         if self.bm is None:
@@ -308,13 +348,14 @@ class NMSSolver:
         b = self.best
         out, letter = None, "G"
         if opt.lm_fallback:
-            lm = lm_step(self.ev, b.z, b.f, None, self.lb, self.ub, opt,
+            lm = lm_step(self.ev, b.z, b.f, None, self.lb, self.ub, opt, deadline=self.deadline,
                          on_point=self._consider)
             if lm is not None:
                 self.lm_steps += 1
                 out, letter = Point(lm[0], lm[1], lm[2], lm[3]), "L"
         if out is None:
             g = gradient_steps(self.ev, b.z, b.f, None, self.lb, self.ub, opt,
+                               deadline=self.deadline,
                                on_point=self._consider)
             if g is not None:
                 self.grad_steps += g[4]
@@ -341,7 +382,8 @@ class NMSSolver:
             t0 = time.perf_counter()
             nf0, nj0 = self.p.counters.nfev, self.p.counters.njev
             cr = crash(self.ev, cur.z, lb, ub, opt, f0=cur.f, J0=cur.J, tol=self.tol,
-                       deadline=self.deadline, log=self._crash_log)
+                       deadline=self.deadline, log=self._crash_log,
+                       on_point=self._consider_trial)
             st = self.passes["crash"]
             st.ran = True
             st.time += time.perf_counter() - t0
@@ -465,6 +507,8 @@ class NMSSolver:
         xN = newton.x
         alpha = 1.0
         while alpha >= opt.nms_stepsize_minimum:
+            if self._past_deadline():
+                raise _Stop(Status.TIME_LIMIT, "time limit reached")
             if opt.nms_searchtype == "line":
                 zt = (1.0 - alpha) * c.z + alpha * zN
             else:
@@ -488,14 +532,17 @@ class NMSSolver:
             self.log_major("crash " + line)
 
     def _log(self, code, step, cur, eps, res):
+        pivots = res.pivots if res is not None else 0
+        c = code.value if hasattr(code, "value") else str(code)
+        self.history.append(Iteration(self.nit, cur.fbn, f"{c}{step}", pivots, eps,
+                                      time.perf_counter() - self._t_start))
         if self.log_major is None:
             return
         idx = int(np.argmax(np.abs(cur.phi))) if cur.phi.size else 0
-        pivots = res.pivots if res is not None else 0
         inorm = np.abs(cur.phi[idx]) if cur.phi.size else 0.0
         self.log_major(
             f"{self.nit:5d} {pivots:7d} {self.p.counters.nfev:6d} {self.p.counters.njev:5d} "
-            f"{cur.fbn:12.4e} {code.value}{step} {eps:9.2e} {inorm:10.3e}"
+            f"{cur.fbn:12.4e} {c}{step} {eps:9.2e} {inorm:10.3e}"
             f" ({self.p.row_label(idx)})")
 
     # ------------------------------------------------------------------ driver
@@ -503,6 +550,7 @@ class NMSSolver:
         """Run from ``start``, the evaluated start point (in the box, with F and J)."""
         opt = self.opt0
         self.progress = ProgressLine(opt.progress)
+        self._t_start = time.perf_counter()
         start0, z0 = start, start.z
         status, message = Status.NO_PROGRESS, ""
         schedule = RestartSchedule(self.opt0)
@@ -535,6 +583,7 @@ class NMSSolver:
             status, message = stop.status, stop.message
         except KeyboardInterrupt:
             status, message = Status.USER_INTERRUPT, "interrupted by the user (Ctrl-C)"
+        status, message = self._diagnose(status, message)
         if self.best is not None:
             self._progress(self.best, final=True)
         bm = self.bm
@@ -554,7 +603,28 @@ class NMSSolver:
         from .homotopy import HomotopyStatus, homotopy_pass
 
         polish = None if self.opt0.homotopy == "only" else (lambda z: self._run(z, self.opt0))
-        out = homotopy_pass(self, start, polish=polish)
+        self.nit += 1  # the pass is one major iteration of the log and the history
+        try:
+            out = homotopy_pass(self, start, polish=polish)
+        finally:
+            self.history.append(Iteration(self.nit, self.best.fbn, "-H", 0, 0.0,
+                                          time.perf_counter() - self._t_start))
         if out.status is HomotopyStatus.TIME_LIMIT:
             raise _Stop(Status.TIME_LIMIT, "time limit reached on the homotopy path")
         return f"homotopy {out.status.value} ({out.message})"
+
+    def _diagnose(self, status, message):
+        """A failed solve names the rows that keep the merit up; one that converged to a
+        stationary point of the merit function says so (see
+        :mod:`compass_sparse.stationary`)."""
+        if status not in _DIAGNOSED or self.best is None:
+            return status, message
+        try:
+            J = self.ev.jac(self.best.z, self.best.f)
+        except KeyboardInterrupt:
+            return status, message
+        st = stationarity(self.best.z, self.best.f, J, self.lb, self.ub)
+        text = st.message(self.p.row_label)
+        if status is Status.NO_PROGRESS and st.stationary:
+            return Status.STATIONARY_POINT, text
+        return status, f"{message}; {text}"

@@ -12,20 +12,47 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 
-from ._options_base import OptionsMixin
+from ._options_base import OptionsMixin, keyword_checked, normalized
 from .exceptions import OptionError
 
-__all__ = ["Options"]
+__all__ = ["Options", "PATH_NAMES"]
+
+# PATH 5.2's name of every option whose name is not PATH's own (None: PATH has no such
+# option).  Every other field carries PATH's name; the option table in the docs and
+# ``Options.path_name`` read this one map.
+PATH_NAMES: dict[str, str | None] = {
+    "pivot_tolerance": "expand_pivot_tolerance",  # the same role in PATH's EXPAND ratio test
+    "ratio_tolerance": "expand_delta",  # PATH's working feasibility tolerance of EXPAND
+    "presolve": "preprocess",
+    "verbosity": "output",  # PATH: on/off; our levels select the summary and the logs
+    "lm_fallback": None,
+    "homotopy": None,  # PATH has no homotopy fallback
+    "homotopy_after_restarts": None,
+    "homotopy_path_limit": None,
+    "homotopy_step_limit": None,
+    "homotopy_smoothing": None,
+    "homotopy_initial_step": None,
+    "homotopy_maximum_step": None,
+    "homotopy_step_minimum": None,
+    "homotopy_end_lambda": None,
+    "homotopy_divergence_bound": None,
+    "lm_initial_mu": None,
+    "seed": None,
+    "progress": None,
+    "scaling": None,  # PATH's hidden model-scaling switches are defined otherwise
+}
 
 
-def _opt(default, doc: str, *, lo=None, hi=None, choices=None, lo_open=False, nullable=False):
+def _opt(default, doc: str, *, lo=None, hi=None, choices=None, lo_open=False, nullable=False,
+         inf_ok=False):
     return field(
         default=default,
         metadata={"doc": doc, "lo": lo, "hi": hi, "choices": choices, "lo_open": lo_open,
-                  "nullable": nullable},
+                  "nullable": nullable, "inf_ok": inf_ok},
     )
 
 
+@keyword_checked
 @dataclass(frozen=True)
 class Options(OptionsMixin):
     """Options of :func:`compass_sparse.solve_mcp` and :func:`compass_sparse.solve_lcp`.
@@ -44,7 +71,8 @@ class Options(OptionsMixin):
     cumulative_iteration_limit: int | None = _opt(
         None, "maximum pivots over the whole solve; None = max(100000, 100n)", lo=1,
         nullable=True)
-    time_limit: float = _opt(math.inf, "wall-clock seconds for the solve", lo=0.0, lo_open=True)
+    time_limit: float = _opt(math.inf, "wall-clock seconds for the solve (inf: none)", lo=0.0,
+                             lo_open=True, inf_ok=True)
 
     # --- crash (projected Newton, thesis §2.5) -----------------------------------------
     crash_method: str = _opt("pnewton", "crash pass: 'pnewton' or 'none'",
@@ -169,6 +197,9 @@ class Options(OptionsMixin):
 
     # --- passes -------------------------------------------------------------------------
     presolve: bool = _opt(True, "run the preprocessor when the problem has linear structure")
+    scaling: bool = _opt(
+        True, "row and column equilibration of J(x0) when its row or column norms spread "
+        "over more than 1e2 (the tolerance still applies to the user's F)")
 
     # --- output ---------------------------------------------------------------------
     verbosity: int = _opt(0, "0 silent, 1 summary, 2 major-iteration log, 3 minor log",
@@ -181,7 +212,8 @@ class Options(OptionsMixin):
 
     # ---------------------------------------------------------------------------------
     def validate(self):
-        """Check every field against its documented range; raise OptionError."""
+        """Check every field against its documented range and store it as a plain bool,
+        int or float (NumPy scalars, integral floats for integers); raise OptionError."""
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
             m = f.metadata
@@ -190,19 +222,15 @@ class Options(OptionsMixin):
                     continue
                 raise OptionError(f"option {f.name} may not be None")
             if m.get("choices") is not None:
-                if v not in m["choices"]:
+                if not isinstance(v, str) or v not in m["choices"]:
                     raise OptionError(f"option {f.name}={v!r}: expected one of {m['choices']}")
                 continue
-            if isinstance(f.default, bool) or f.type in ("bool",):
-                if not isinstance(v, (bool,)):
-                    raise OptionError(f"option {f.name}={v!r}: expected True or False")
+            kind = ("bool" if isinstance(f.default, bool) or f.type in ("bool",)
+                    else "int" if "int" in str(f.type) else "float")
+            v = normalized(f.name, v, kind, allow_inf=m.get("inf_ok", False))
+            object.__setattr__(self, f.name, v)
+            if kind == "bool":
                 continue
-            if not isinstance(v, (int, float)) or isinstance(v, bool):
-                raise OptionError(f"option {f.name}={v!r}: expected a number")
-            if "int" in str(f.type) and not float(v).is_integer():
-                raise OptionError(f"option {f.name}={v!r}: expected an integer")
-            if isinstance(v, float) and math.isnan(v):
-                raise OptionError(f"option {f.name} is NaN")
             lo, hi = m.get("lo"), m.get("hi")
             if lo is not None and (v < lo or (m.get("lo_open") and v == lo)):
                 op = ">" if m.get("lo_open") else ">="
@@ -215,6 +243,12 @@ class Options(OptionsMixin):
 
     def cumulative_limit(self, n: int) -> int:
         return self.cumulative_iteration_limit or max(100000, 100 * n)
+
+    @classmethod
+    def path_name(cls, name: str) -> str | None:
+        """PATH 5.2's name of option ``name`` (None when PATH has no such option)."""
+        cls._check_names([name])
+        return PATH_NAMES.get(name, name)
 
     @classmethod
     def describe(cls) -> str:

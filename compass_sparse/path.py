@@ -146,8 +146,9 @@ def solve_linear_mcp(M, q, lb, ub, basis, options, x, *, warm: WarmBasis | None 
     res = PivotalPath(M, q, lb, ub, basis, options, **kw).run(x, warm=warm,
                                                               ray_start=ray_start, r=r)
     if (res.code is LinearCode.SOLVED or ray_start or options.lemke_start != "automatic"
-            or res.t >= retry_below):
-        return res
+            or res.t >= retry_below
+            or (deadline is not None and time.perf_counter() > deadline)):
+        return res  # (no retry after the time limit: its factorization alone may take long)
     res2 = PivotalPath(M, q, lb, ub, basis, options, **kw).run(x, ray_start=True)
     pivots = res.pivots + res2.pivots
     factorizations = res.factorizations + res2.factorizations
@@ -192,7 +193,8 @@ class PivotalPath:
 
     def __init__(self, M, q, lb, ub, manager, options, *, minor_limit=None, deadline=None,
                  log=None):
-        self.M = sp.csc_matrix(M)
+        # No copy when M is already CSC (every major iteration builds a new path).
+        self.M = M if (sp.issparse(M) and M.format == "csc") else sp.csc_matrix(M)
         self.n = self.M.shape[0]
         self.q = np.asarray(q, dtype=float)
         self.lb = lb
@@ -267,6 +269,11 @@ class PivotalPath:
             return res
         self._reset_slots(basic, z, w, v)
         self.bm.set_dense_column(r)
+        if getattr(self.bm, "runs_paths", False):
+            # The small-problem engine (dense_path.py): factorization, pivots and the
+            # solution check in compiled code, on this slot table.
+            code, msg = self.bm.run_path(self, z, w, v, slack_basis)
+            return self._finish(code, self.st.t, t0, st0, ray_start, msg)
         code, msg = self._factor()
         if slack_basis is not None and (
                 code is not None or np.any(self.st.sk == VAR_A)):

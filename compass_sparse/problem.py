@@ -10,9 +10,13 @@ Row i of F is paired with (complementary to) variable z_i, so the system is squa
 Bounds may be infinite; an entry with |bound| >= ``INFINITY`` (1e20, PATH's convention) is
 treated as infinite.
 
-The Jacobian J(z) = dF/dz is sparse with a *fixed structural pattern*: every call must
-return the same set of stored entries (explicit zeros count as stored).  Three ways to
-give it:
+The Jacobian J(z) = dF/dz is sparse with a *structural pattern*, the set of entries J
+can ever hold.  ``jac_sparsity=`` declares it (with any form of ``jac``): every returned J
+must fit inside it, entries it lacks are zeros, and a row without entries is constant
+(the preprocessor relies on that).  Without a declaration the pattern is the union of the
+entries seen so far: a J built from arrays that drop zeros at one point may add entries
+later, and the pattern grows (so nothing is concluded from an entry's absence).  Three
+ways to give J:
 
 * ``jac=callable``: ``jac(x)`` returns any scipy.sparse matrix (or a dense array, which is
   only sensible for small problems since its pattern is the full matrix);
@@ -24,7 +28,7 @@ give it:
 Evaluations go through the problem's :class:`~compass_sparse.evaluation.Evaluator`
 (``MCP.evaluator``), the only code that calls the user's functions: it passes *copies* of
 x, counts evaluations, memoizes the last point, checks shapes and returns J in canonical
-CSC form whose ``indptr``/``indices`` are those of the pattern recorded at the first call.
+CSC form on the pattern.
 """
 from __future__ import annotations
 
@@ -34,7 +38,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from .evaluation import EvalCounters, Evaluator
-from .exceptions import BoundsError, ProblemError, ShapeError, StartPointError
+from .exceptions import BoundsError, EvaluationError, ProblemError, ShapeError, StartPointError
+
+_SIZE_WORDS = ("shape", "dimension", "size", "broadcast", "index", "mismatch", "aligned")
+"""Words of a user's exception at the start point that suggest a wrong-length x0."""
 
 INFINITY = 1e20
 """Bounds at or beyond this magnitude are infinite (PATH uses the same value)."""
@@ -76,8 +83,30 @@ def as_bounds(lb, ub, n: int, names: Sequence[str] | None = None):
     return lo, hi
 
 
+def as_real(value, what: str) -> np.ndarray:
+    """``value`` as a float array; complex input is an error, never truncated silently."""
+    arr = np.asarray(value)
+    if np.iscomplexobj(arr):
+        raise ProblemError(f"{what} is complex; compass_sparse solves real problems "
+                           "(pass the real part explicitly if that is what you mean)")
+    try:
+        return np.asarray(arr, dtype=float)
+    except (TypeError, ValueError):
+        raise ProblemError(f"{what} must be numeric, got {type(value).__name__}") from None
+
+
+def _as_start(x0, n) -> np.ndarray:
+    """x0 real of shape (n,) (a column (n, 1) is accepted, as for the bounds)."""
+    x0 = as_real(x0, "x0")
+    if x0.ndim > 1 and x0.size == n:
+        x0 = x0.reshape(n)
+    if x0.shape != (n,):
+        raise ShapeError(f"x0 has shape {x0.shape}, expected ({n},)")
+    return x0
+
+
 def _broadcast_bound(b, n, what):
-    arr = np.asarray(b, dtype=float)
+    arr = as_real(b, what)
     if arr.ndim > 1 and arr.size == n:
         arr = arr.reshape(n)
     try:
@@ -101,7 +130,7 @@ class MCP:
     jac : callable, True, or None
         See the module docstring.  None requires ``jac_sparsity``.
     lb, ub : scalar or array (n,)
-        Bounds; +-inf (or |b| >= 1e20) for none.  Defaults: NCP bounds [0, inf).
+        Bounds; +-inf (or ``|b| >= 1e20``) for none.  Defaults: NCP bounds [0, inf).
     x0 : array (n,), optional
         Start point; projected onto [lb, ub].  Default: the projection of 0.
     n : int, optional
@@ -152,9 +181,7 @@ class MCP:
         self.lb, self.ub = as_bounds(lb, ub, n, self.var_names)
         if x0 is None:
             x0 = np.zeros(n)
-        x0 = np.asarray(x0, dtype=float)
-        if x0.shape != (n,):
-            raise ShapeError(f"x0 has shape {x0.shape}, expected ({n},)")
+        x0 = _as_start(x0, n)
         bad = np.flatnonzero(~np.isfinite(x0))
         if bad.size:
             raise StartPointError(
@@ -163,9 +190,9 @@ class MCP:
             )
         self.x0 = np.clip(x0, self.lb, self.ub)
         pattern = None
-        if jac_sparsity is not None and jac is None:
-            # Differences: the stored entries of jac_sparsity (or the nonzeros of an array)
-            # are the pattern, known now.
+        if jac_sparsity is not None:
+            # The stored entries of jac_sparsity (or the nonzeros of an array) are the
+            # declared pattern, known now (with any form of jac).
             pattern = (jac_sparsity if sp.issparse(jac_sparsity)
                        else sp.csc_matrix(np.asarray(jac_sparsity) != 0))
         self.evaluator = Evaluator(F, jac, n, pattern=pattern, constant_jac=constant_jac,
@@ -189,8 +216,7 @@ class MCP:
         return self
 
     # -- construction helpers -------------------------------------------------------
-    @staticmethod
-    def _infer_n(n, x0, lb, ub, pattern) -> int:
+    def _infer_n(self, n, x0, lb, ub, pattern) -> int:
         cands = []
         if n is not None:
             cands.append(("n", int(n)))
@@ -210,6 +236,7 @@ class MCP:
         if not cands:
             raise ShapeError("cannot infer the dimension: give x0, array bounds or n")
         first = cands[0]
+        self._n_source = first[0]
         for c in cands[1:]:
             if c[1] != first[1]:
                 raise ShapeError(
@@ -253,6 +280,12 @@ class MCP:
         return self.evaluator.constant_mask
 
     @property
+    def pattern_declared(self) -> bool:
+        """True when the pattern was declared (``jac_sparsity``): a row without entries is
+        then constant; a pattern only observed in returned Jacobians may still grow."""
+        return self.evaluator.pattern_declared
+
+    @property
     def fd_step(self) -> float:
         return self.evaluator.fd_step
 
@@ -285,16 +318,24 @@ class MCP:
     def check_start(self):
         """Evaluate F and J at x0 and raise on wrong shapes or non-finite values.  The
         values stay in the evaluator's memo, so the solve does not ask for them again."""
-        return self.evaluator.check_at(self.x0)
+        try:
+            return self.evaluator.check_at(self.x0)
+        except EvaluationError as exc:
+            source = getattr(self, "_n_source", "n")
+            cause = str(exc.__cause__).lower()
+            if source == "n" or not any(w in cause for w in _SIZE_WORDS):
+                raise
+            # a wrong-length x0 with scalar bounds surfaces as the user's own shape error
+            raise EvaluationError(
+                f"{exc} (the dimension n = {self.n} was taken from {source}; check that x0 "
+                "and the bounds have one entry per variable)") from exc.__cause__
 
     def with_start(self, x0) -> "MCP":
         """A shallow copy of this problem with another start point (pattern kept)."""
         import copy
 
         other = copy.copy(self)
-        x0 = np.asarray(x0, dtype=float)
-        if x0.shape != (self.n,):
-            raise ShapeError(f"x0 has shape {x0.shape}, expected ({self.n},)")
+        x0 = _as_start(x0, self.n)
         if not np.all(np.isfinite(x0)):
             raise StartPointError("the start point must be finite")
         other.x0 = np.clip(x0, self.lb, self.ub)

@@ -23,13 +23,13 @@ import numpy as np
 
 from .merit import ResidualReport, natural_residual, residual_report
 
-__all__ = ["Status", "PointStatus", "PassStats", "Result", "IntermediateResult"]
+__all__ = ["Status", "PointStatus", "PassStats", "Result", "IntermediateResult", "Iteration"]
 
 
 class Status(enum.IntEnum):
     """Why the solve stopped.  Append-only: codes never change meaning."""
 
-    SOLVED = 1  #: ||Phi||_2 <= convergence_tolerance
+    SOLVED = 1  #: both residuals <= convergence_tolerance (see compass_sparse.acceptance)
     NO_PROGRESS = 2  #: restarts exhausted without reaching the tolerance
     MAJOR_ITERATION_LIMIT = 3  #: major_iteration_limit reached (0: start point evaluated)
     MINOR_ITERATION_LIMIT = 4  #: cumulative pivot limit reached
@@ -40,10 +40,15 @@ class Status(enum.IntEnum):
     INFEASIBLE = 9  #: a linear problem proved to have no solution (ray termination)
     ERROR = 10  #: internal failure (singular basis that could not be repaired, ...)
     CALLBACK_STOP = 100  #: the user's callback asked to stop (PATH code 6)
+    #: the residual is below the tolerance only because F is flat there (PATH code 2)
+    FLAT_RESIDUAL = 101
+    #: the iterates converged to a stationary point of the merit function that is not a
+    #: solution; the message names the rows that keep the merit up (PATH code 2)
+    STATIONARY_POINT = 102
 
     def path_code(self) -> int:
         """The PATH ``MCP_Termination`` code with the same meaning."""
-        return 6 if self is Status.CALLBACK_STOP else int(self)
+        return _PATH_CODE.get(self, int(self))
 
     @property
     def description(self) -> str:
@@ -62,7 +67,11 @@ _STATUS_TEXT = {
     Status.INFEASIBLE: "the linear problem has no solution (ray termination)",
     Status.ERROR: "internal error",
     Status.CALLBACK_STOP: "stopped by the callback",
+    Status.FLAT_RESIDUAL: "residual small only because F is flat (not a solution)",
+    Status.STATIONARY_POINT: "stationary point of the merit function (not a solution)",
 }
+
+_PATH_CODE = {Status.CALLBACK_STOP: 6, Status.FLAT_RESIDUAL: 2, Status.STATIONARY_POINT: 2}
 
 
 class PointStatus(enum.IntEnum):
@@ -84,6 +93,28 @@ class IntermediateResult:
     residual: float
     nit: int
     minor_iterations: int
+
+
+@dataclass(frozen=True)
+class Iteration:
+    """One major iteration as the log prints it (``Result.history`` keeps them all).
+
+    ``residual`` is ||Phi_FB||_2 of the iterate accepted in this major iteration, measured
+    on the problem the Newton method works on (after the preprocessor); ``step`` is the
+    log's two-letter type (the path's code and the step: e.g. ``SD``, ``SM``, ``RW``).
+    Iteration 0 is the start point (after the preprocessor, before the crash); a last
+    record with an empty type is the returned point when the solve stopped inside a major
+    iteration (a solution found during a search).  ``pivots`` are this iteration's,
+    ``prox`` the proximal perturbation for the next path, and ``time`` counts seconds from
+    the start of the stabilized Newton method (after the preprocessor).
+    """
+
+    nit: int
+    residual: float
+    step: str
+    pivots: int
+    prox: float
+    time: float
 
 
 @dataclass
@@ -129,6 +160,9 @@ class Result:
     lb: np.ndarray | None = None
     ub: np.ndarray | None = None
     tolerance: float = 1e-6
+    #: every major iteration (:class:`Iteration`), when the stabilized Newton method ran;
+    #: ``compass_sparse.plot.convergence`` draws it
+    history: list | None = None
 
     @property
     def worst_rows(self):
@@ -145,7 +179,15 @@ class Result:
             ub = F.ub if ub is None else ub
             names = names or F.row_label
         else:
-            f = np.asarray(F(np.array(self.x, copy=True)), dtype=float)
+            from .problem import as_real
+
+            f = as_real(F(np.array(self.x, copy=True)), "F(x)")
+            if f.size != self.x.size:
+                from .exceptions import ShapeError
+
+                raise ShapeError(f"F(x) returned {f.size} values at the result's point, "
+                                 f"which has {self.x.size} variables")
+            f = f.reshape(self.x.shape)
         lb = self.lb if lb is None else np.broadcast_to(np.asarray(lb, float), self.x.shape)
         ub = self.ub if ub is None else np.broadcast_to(np.asarray(ub, float), self.x.shape)
         return residual_report(self.x, f, lb, ub, names=names)
@@ -153,6 +195,13 @@ class Result:
     def natural_residual(self, F, lb=None, ub=None) -> float:
         rep = self.check(F, lb, ub)
         return rep.natural
+
+    def sensitivity(self, problem, dF_dp, **kwargs):
+        """dx/dp at this solution of ``problem`` (an MCP) for the parameter derivative
+        ``dF_dp`` (n,) or (n, k): see :func:`compass_sparse.sensitivity.sensitivity`."""
+        from .sensitivity import sensitivity
+
+        return sensitivity(problem, self.x, dF_dp, **kwargs)
 
     def summary(self) -> str:
         lines = [

@@ -16,14 +16,18 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
+from .acceptance import Acceptance, judge
 from .crash import crash
+from .exceptions import CompassError
 from .merit import fb_phi, fb_psi, normal_map_at, residual_report
 from .nms import NMSSolver, Point
 from .options import Options
 from .exceptions import ShapeError
 from .path import LinearCode, WarmBasis, default_basis, solve_linear_mcp
 from .problem import MCP
-from .result import PassStats, PointStatus, Result, Status
+from .result import Iteration, PassStats, PointStatus, Result, Status
+from ._blas import single_threaded_blas
+from .scaling import SPREAD_TRIGGER, equilibrate, scale_problem, spread
 
 logger = logging.getLogger("compass_sparse")
 
@@ -36,6 +40,11 @@ DENSE_BASIS_MAX_N = 300
 def _manager_factory(opt: Options):
     def make(M):
         n = M.shape[0]
+        from . import dense_path
+
+        # The compiled engine writes no per-pivot log: verbosity >= 3 keeps the Python loop.
+        if n <= dense_path.DENSE_ENGINE_MAX_N and opt.verbosity < 3:
+            return dense_path.DensePathEngine(M, opt)
         if n <= DENSE_BASIS_MAX_N:
             from .basis.dense import DenseBasis
 
@@ -48,18 +57,13 @@ def _manager_factory(opt: Options):
 
 
 def _blas_threads(n: int):
-    """Single-threaded BLAS for small problems: their dense kernels (the dense basis below
-    DENSE_BASIS_MAX_N) are tiny, and a multithreaded BLAS on a loaded machine made a
-    200 x 200 inverse 100 times slower (0.2 s against 2 ms, measured)."""
+    """Single-threaded BLAS for small problems (their dense kernels are tiny; see
+    :mod:`compass_sparse._blas`)."""
     import contextlib
 
     if n > DENSE_BASIS_MAX_N:
         return contextlib.nullcontext()
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:  # pragma: no cover - a declared dependency
-        return contextlib.nullcontext()
-    return threadpool_limits(limits=1, user_api="blas")
+    return single_threaded_blas()
 
 
 def _loggers(opt: Options):
@@ -73,7 +77,34 @@ def _loggers(opt: Options):
     return major, minor
 
 
+_PROBLEM_KEYWORDS = ("n", "jac_sparsity", "var_names", "eqn_names", "constant_jac", "fd_step",
+                     "check")
+
+
+def _check_keywords(kwargs):
+    """Unknown keywords of solve_mcp: a ProblemError with a hint (an option given as a
+    keyword belongs in ``options=``)."""
+    import dataclasses
+    import difflib
+
+    from .exceptions import ProblemError
+
+    unknown = sorted(set(kwargs) - set(_PROBLEM_KEYWORDS))
+    if not unknown:
+        return
+    option_names = {f.name for f in dataclasses.fields(Options)}
+    hints = []
+    for u in unknown:
+        if u in option_names:
+            hints.append(f"{u!r} (an option: pass options={{{u!r}: ...}})")
+            continue
+        close = difflib.get_close_matches(u, list(_PROBLEM_KEYWORDS) + sorted(option_names), 1)
+        hints.append(f"{u!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+    raise ProblemError("solve_mcp got unknown keyword(s): " + ", ".join(hints))
+
+
 def _as_problem(F, jac, lb, ub, x0, kwargs) -> MCP:
+    _check_keywords(kwargs)
     if isinstance(F, MCP):
         if x0 is not None:
             return F.with_start(x0)
@@ -81,13 +112,31 @@ def _as_problem(F, jac, lb, ub, x0, kwargs) -> MCP:
     return MCP(F, jac, lb, ub, x0, **kwargs)
 
 
+def _judge_on(problem: MCP, z, f, opt: Options):
+    """The acceptance verdict of z on ``problem`` (J evaluated only when the residuals are
+    small; a J that cannot be evaluated there leaves the residual test alone)."""
+    def jac(y):
+        try:
+            return problem.evaluator.jac(y)
+        except CompassError:
+            return None
+    return judge(z, f, problem.lb, problem.ub, opt.convergence_tolerance, jac=jac)
+
+
+_FLAT_OVERRIDES = (Status.SOLVED, Status.NO_PROGRESS, Status.MAJOR_ITERATION_LIMIT,
+                   Status.MINOR_ITERATION_LIMIT, Status.TIME_LIMIT, Status.STATIONARY_POINT)
+
+
 def _result(problem: MCP, status: Status, message: str, z, f, opt: Options, t0, *,
             start_z=None, **counts) -> Result:
     rep = residual_report(z, f, problem.lb, problem.ub, names=problem.row_label)
-    solved = rep.fb_norm <= opt.convergence_tolerance
+    verdict = _judge_on(problem, z, f, opt)
+    solved = verdict.solved
     if solved and status not in (Status.SOLVED,):
         # A limit fired after the solution was reached: report the solution.
         status, message = Status.SOLVED, "solution found"
+    if not solved and verdict.small_residual and status in _FLAT_OVERRIDES:
+        status, message = Status.FLAT_RESIDUAL, verdict.flat_message(problem.row_label)
     if status is Status.SOLVED and not solved:
         status, message = Status.ERROR, "internal error: a non-solution was marked solved"
     if solved:
@@ -138,6 +187,10 @@ def solve_mcp(F, jac=None, lb=0.0, ub=np.inf, x0=None, *, options=None, callback
         Always holds a point: the solution, or the best point found with the reason.
     """
     opt = Options.coerce(options)
+    if isinstance(F, MCP):
+        # Built earlier: the data its functions read may have changed since the start
+        # point was checked, so the values remembered then are not trusted.
+        F.evaluator.forget()
     problem = _as_problem(F, jac, lb, ub, x0, problem_kwargs)
     return _solve_problem(problem, opt, callback=callback, basis=basis)
 
@@ -171,8 +224,14 @@ def _presolve_pass(problem, opt, f0, J0):
 
 
 def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> Result:
+    t0 = time.perf_counter()
     try:
         return _solve_evaluated(problem, opt, callback=callback, basis=basis)
+    except KeyboardInterrupt:
+        # Ctrl-C outside the major iterations (the start point, the preprocessor): the
+        # start point is the best point known.
+        return _result(problem, Status.USER_INTERRUPT, "interrupted by the user (Ctrl-C)",
+                       problem.x0, np.full(problem.n, np.nan), opt, t0, start_z=problem.x0)
     finally:
         # The user's functions may read data that changes before the next solve.
         problem.evaluator.forget()
@@ -241,10 +300,9 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
         if f0 is None:
             return _finish(problem, pre, Status.DOMAIN_ERROR, "F or J failed at the start "
                            f"point: {work.evaluator.last_error}", z0, opt, t0, passes)
-    phi0 = fb_phi(z0, f0, work.lb, work.ub)
-    if np.sqrt(2 * fb_psi(phi0)) <= opt.convergence_tolerance or opt.major_iteration_limit == 0:
-        status = (Status.SOLVED if np.sqrt(2 * fb_psi(phi0)) <= opt.convergence_tolerance
-                  else Status.MAJOR_ITERATION_LIMIT)
+    at_solution = _judge_on(work, z0, f0, opt).solved
+    if at_solution or opt.major_iteration_limit == 0:
+        status = Status.SOLVED if at_solution else Status.MAJOR_ITERATION_LIMIT
         msg = ("the start point is a solution" if status is Status.SOLVED
                else "major_iteration_limit = 0: start point evaluated")
         for k in ("crash", "path", "fallback", "homotopy"):
@@ -252,9 +310,17 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
                                   if status is Status.SOLVED else "major_iteration_limit = 0")
         return _finish(problem, pre, status, msg, z0, opt, t0, passes,
                        f_reduced=f0, start_z=problem.x0, basis=basis)
-    solver = NMSSolver(work, opt, manager_factory=_manager_factory(opt),
+    sc, passes["scaling"] = _scaling_pass(J0, opt)
+    acceptance = Acceptance(work.lb, work.ub, opt.convergence_tolerance,
+                            *((sc.row, sc.col) if sc is not None else ()))
+    inner = work
+    if sc is not None:  # the solver works in the scaled units
+        inner = scale_problem(work, sc)
+        z0, f0, J0 = z0 / sc.col, sc.row * f0, sc.scale_jacobian(J0)
+    phi0 = fb_phi(z0, f0, inner.lb, inner.ub)
+    solver = NMSSolver(inner, opt, manager_factory=_manager_factory(opt),
                        callback=callback, deadline=deadline, log_major=log_major,
-                       log_minor=log_minor)
+                       log_minor=log_minor, acceptance=acceptance)
     solver.basis = basis
     if log_major is not None:
         log_major(f"{'major':>5} {'minor':>7} {'func':>6} {'grad':>5} {'residual':>12} "
@@ -265,16 +331,48 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
     passes.update(out.passes)
     passes["nms"] = PassStats(ran=True, iterations=out.nit, time=time.perf_counter() - tn)
     passes.setdefault("homotopy", PassStats(
-        reason="homotopy off" if opt.homotopy == "off" else "NMS did not stall"))
-    res = _finish(problem, pre, out.status, out.message, out.best.z, opt, t0, passes,
-                  f_reduced=out.best.f, nit=out.nit, minor_iterations=out.minor,
+        reason="homotopy off" if opt.homotopy == "off" else "NMS did not stall"
+        if out.status is Status.SOLVED else f"not reached ({out.status.name.lower()})"))
+    zb, fb = out.best.z, out.best.f
+    if sc is not None:  # back to the user's units
+        zb, fb = sc.col * zb, fb / sc.row
+    res = _finish(problem, pre, out.status, out.message, zb, opt, t0, passes,
+                  start_z=problem.x0,
+                  f_reduced=fb, nit=out.nit, minor_iterations=out.minor,
                   crash_iterations=out.crash_iterations, restarts=out.restarts,
                   gradient_steps=out.gradient_steps, lm_steps=out.lm_steps,
                   factorizations=out.factorizations, basis_updates=out.updates,
-                  basis=out.basis)
+                  basis=out.basis, history=_history(solver, out, phi0))
     if opt.verbosity >= 1:
         logger.info(res.summary())
     return res
+
+
+def _history(solver, out, phi0):
+    """The start point, every logged major iteration, and the final point when the solve
+    stopped inside a major iteration (a solution found during a search: empty type)."""
+    hist = [Iteration(0, float(np.linalg.norm(phi0)), "", 0, 0.0, 0.0)] + solver.history
+    if out.best is not None and hist[-1].nit < out.nit:
+        hist.append(Iteration(out.nit, out.best.fbn, "", 0, 0.0,
+                              time.perf_counter() - solver._t_start))
+    return hist
+
+
+def _scaling_pass(J0, opt):
+    """(Scaling or None, PassStats): equilibrate J(z0) when it is badly scaled."""
+    st = PassStats()
+    if not opt.scaling:
+        st.reason = "scaling off"
+        return None, st
+    t = time.perf_counter()
+    s = spread(J0)
+    if s <= SPREAD_TRIGGER:
+        st.reason = f"row/column max-norm spread {s:.1e} <= {SPREAD_TRIGGER:.0e}"
+        st.time = time.perf_counter() - t
+        return None, st
+    sc = equilibrate(J0)
+    st.ran, st.reason, st.time = True, sc.summary(), time.perf_counter() - t
+    return sc, st
 
 
 def _finish(problem, pre, status, message, z_red, opt, t0, passes, *, f_reduced=None,
@@ -309,12 +407,8 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     """
     t0 = time.perf_counter()
     opt = Options.coerce(options)
-    M = sp.csc_matrix(M, dtype=float)
-    q = np.asarray(q, dtype=float)
+    M, q = _lcp_data(M, q)
     n = q.size
-    if M.shape != (n, n):
-        raise ShapeError(f"M has shape {M.shape} but q has {n} entries; M must be {n} x {n}")
-    M.sort_indices()
 
     def F(z):
         return M @ z + q
@@ -323,29 +417,52 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     log_major, log_minor = _loggers(opt)
     passes = {"presolve": PassStats(reason="linear problems go straight to the path")}
     lb, ub = problem.lb, problem.ub
+    if np.all(np.isneginf(lb)) and np.all(np.isposinf(ub)):
+        # Every variable free: the LCP is the linear system M z + q = 0.
+        from .linear_system import solve_free_lcp
+
+        out = solve_free_lcp(M, q, opt.convergence_tolerance)
+        if out is not None:
+            passes["path"] = PassStats(reason="all variables free: a linear system")
+            zs = out.z if out.z is not None else problem.x0
+            return _result(problem, out.status, out.message, zs, problem.F(zs), opt, t0,
+                           passes=passes)
     z = problem.x0
     f = problem.F(z)  # kept from the start check
-    if np.linalg.norm(fb_phi(z, f, lb, ub)) <= opt.convergence_tolerance \
-            or opt.major_iteration_limit == 0:
-        status = (Status.SOLVED if np.linalg.norm(fb_phi(z, f, lb, ub))
-                  <= opt.convergence_tolerance else Status.MAJOR_ITERATION_LIMIT)
+    at_solution = _judge_on(problem, z, f, opt).solved
+    if at_solution or opt.major_iteration_limit == 0:
+        status = Status.SOLVED if at_solution else Status.MAJOR_ITERATION_LIMIT
         return _result(problem, status, "start point evaluated", z, f, opt, t0,
                        start_z=problem.x0, passes=passes)
     crash_its = 0
     x = normal_map_at(z, f, lb, ub)[0]
     st = PassStats()
-    if opt.crash_method == "pnewton" and n >= opt.crash_minimum_dimension:
-        tc = time.perf_counter()
-        cr = crash(problem.evaluator, z, lb, ub, opt, f0=f, J0=M, log=log_major)
-        st = PassStats(ran=True, time=time.perf_counter() - tc, iterations=cr.iterations,
-                       factorizations=cr.factorizations, reason=cr.stop_reason)
-        crash_its = cr.iterations
-        if np.all(np.isfinite(cr.f)):
-            z, f, x = cr.z, cr.f, cr.x
-    else:
-        st.reason = f"n < crash_minimum_dimension ({opt.crash_minimum_dimension})"
-    passes["crash"] = st
-    if np.linalg.norm(fb_phi(z, f, lb, ub)) <= opt.convergence_tolerance:
+    deadline = t0 + opt.time_limit if np.isfinite(opt.time_limit) else None
+    try:
+        if opt.crash_method == "pnewton" and n >= opt.crash_minimum_dimension:
+            tc = time.perf_counter()
+            cr = crash(problem.evaluator, z, lb, ub, opt, f0=f, J0=M, log=log_major,
+                       deadline=deadline)
+            st = PassStats(ran=True, time=time.perf_counter() - tc, iterations=cr.iterations,
+                           factorizations=cr.factorizations, reason=cr.stop_reason)
+            crash_its = cr.iterations
+            if np.all(np.isfinite(cr.f)):
+                z, f, x = cr.z, cr.f, cr.x
+        else:
+            st.reason = f"n < crash_minimum_dimension ({opt.crash_minimum_dimension})"
+        passes["crash"] = st
+        return _lcp_path(problem, M, q, z, f, x, opt, t0, deadline, passes, st, crash_its,
+                         log_minor)
+    except KeyboardInterrupt:
+        return _result(problem, Status.USER_INTERRUPT, "interrupted by the user (Ctrl-C)", z, f,
+                       opt, t0, start_z=problem.x0, passes=passes, crash_iterations=crash_its)
+
+
+def _lcp_path(problem, M, q, z, f, x, opt, t0, deadline, passes, st, crash_its, log_minor):
+    """The pivotal path(s) of :func:`solve_lcp` from the (crashed) point z, x = pi^-1(z)."""
+    n = q.size
+    lb, ub = problem.lb, problem.ub
+    if _judge_on(problem, z, f, opt).solved:
         passes["path"] = PassStats(reason="crash solved the problem")
         return _result(problem, Status.SOLVED, "solved by the crash", z, f, opt, t0,
                        passes=passes, crash_iterations=crash_its,
@@ -354,7 +471,6 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     tp = time.perf_counter()
     # One path solves a linear problem: give it room (a Lemke path may need ~n pivots).
     limit = opt.minor_iteration_limit or max(10 * n, 1000)
-    deadline = t0 + opt.time_limit if np.isfinite(opt.time_limit) else None
     with _blas_threads(n):
         res = solve_linear_mcp(M, q, lb, ub, bm, opt, x,
                                ray_start=opt.lemke_start in ("always", "first"),
@@ -386,13 +502,50 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
                       ray=res.ray.copy(), **counts)
         out.point_status = PointStatus.CERTIFICATE
         return out
-    # The path cycled, hit a limit or lost accuracy: the stabilized Newton method takes over.
-    general = _solve_problem(problem.with_start(z), opt.replace(presolve=False))
+    # The path cycled, hit a limit or lost accuracy: the stabilized Newton method takes over,
+    # within what is left of the time limit (the clock does not restart).
+    left = opt.time_limit - (time.perf_counter() - t0)
+    if left <= 0:
+        return _result(problem, Status.TIME_LIMIT, "time limit reached in the pivotal path",
+                       z, f, opt, t0, start_z=problem.x0, **counts)
+    general = _solve_problem(problem.with_start(z), opt.replace(presolve=False, time_limit=left))
     general.passes = {**passes, **{k: v for k, v in general.passes.items() if k != "presolve"}}
     general.minor_iterations += pivots
     general.crash_iterations += crash_its
     general.time = time.perf_counter() - t0
     return general
+
+
+def _lcp_data(M, q):
+    """Validated copies of the LCP data (the user's M is never modified): q real of shape
+    (n,) (a column (n, 1) is accepted), M real n x n, both finite, named in errors."""
+    from .exceptions import ProblemError, ShapeError
+    from .problem import as_real
+
+    q = as_real(q, "q")
+    if q.ndim > 1 and q.size == max(q.shape):
+        q = q.reshape(-1)
+    if q.ndim != 1:
+        raise ShapeError(f"q has shape {q.shape}, expected (n,) or (n, 1)")
+    n = q.size
+    if sp.issparse(M):
+        if np.iscomplexobj(M.data):
+            raise ProblemError("M is complex; compass_sparse solves real problems")
+        M = sp.csc_matrix(M, dtype=float, copy=True)
+    else:
+        M = sp.csc_matrix(as_real(M, "M"))
+    if M.shape != (n, n):
+        raise ShapeError(f"M has shape {M.shape} but q has {n} entries; M must be {n} x {n}")
+    M.sum_duplicates()
+    M.sort_indices()
+    if not np.all(np.isfinite(M.data)):
+        k = int(np.flatnonzero(~np.isfinite(M.data))[0])
+        j = int(np.searchsorted(M.indptr, k, side="right") - 1)
+        raise ProblemError(f"M[{int(M.indices[k])}, {j}] is {M.data[k]}: M must be finite")
+    bad = np.flatnonzero(~np.isfinite(q))
+    if bad.size:
+        raise ProblemError(f"q[{bad[0]}] is {q[bad[0]]}: q must be finite")
+    return M, q
 
 
 def _is_monotone(M, tol=1e-10) -> bool:
@@ -426,7 +579,11 @@ class MCPSolver:
 
     def __init__(self, problem: MCP, options=None, callback=None):
         if not isinstance(problem, MCP):
-            raise TypeError("MCPSolver takes an MCP; build one with compass_sparse.MCP(...)")
+            from .exceptions import ProblemError
+
+            raise ProblemError("MCPSolver takes an MCP, not "
+                               f"{type(problem).__name__}; build one with "
+                               "compass_sparse.MCP(F, jac, lb, ub, x0)")
         self.problem = problem
         self.options = Options.coerce(options)
         self.callback = callback
@@ -441,6 +598,7 @@ class MCPSolver:
             x0 = self.last.x
         prob = self.problem.with_start(x0) if x0 is not None else self.problem
         basis = self.last.basis if (warm_start and self.last is not None) else None
+        prob.evaluator.forget()  # the data F reads may have changed since the last call
         res = _solve_problem(prob, self.options, callback=self.callback, basis=basis)
         self.last = res
         return res

@@ -20,11 +20,27 @@ if ! have_suitesparse_headers; then
 fi
 
 $PY -m pip install -q --upgrade pip >/dev/null 2>&1 || true
-if have_suitesparse_headers && $PY -m pip install -q -e ".[dev,suitesparse]"; then
-  log "installed compass-sparse with the dev and suitesparse extras"
+# dev: the test tools; docs + plot: Sphinx and matplotlib, so the docs build and the
+# plot tests run inside the test suite.
+if have_suitesparse_headers && $PY -m pip install -q -e ".[dev,docs,plot,suitesparse]"; then
+  log "installed compass-sparse with the dev, docs, plot and suitesparse extras"
 else
   log "installing without the suitesparse extra (its tests will skip with a reason)"
-  $PY -m pip install -q -e ".[dev]" || { log "pip install failed"; exit 1; }
+  $PY -m pip install -q -e ".[dev,docs,plot]" || { log "pip install failed"; exit 1; }
+fi
+# The modelling-language links (Pyomo + CasADi, GAMSPy) are optional extras; CI installs
+# them so their tests run.
+if $PY -m pip install -q -e ".[pyomo,gams]"; then
+  log "installed the pyomo and gams extras"
+else
+  log "could not install the pyomo/gams extras (their tests will skip with a reason)"
+fi
+# Scenario batches on Dask with Parquet results (the batch extra); CI installs it so the
+# batch tests run.
+if $PY -m pip install -q -e ".[batch]"; then
+  log "installed the batch extra (dask[distributed], pyarrow)"
+else
+  log "could not install the batch extra (the Dask and Parquet tests will skip with a reason)"
 fi
 # Compile the numba kernels once so the first solve is not slowed by compilation.
 $PY -c "import compass_sparse, compass_sparse.basis, compass_sparse._path_kernels" || exit 1

@@ -411,3 +411,16 @@ def test_large_dynamic_instance():
     m.J(z)
     assert time.perf_counter() - t0 < 1.0
     assert m.natural_residual() <= TOL and m.fb_norm() <= TOL
+
+
+def test_small_tariff_counterfactual_reaches_1e_10_on_the_dense_engine():
+    # Pinned failure: at n = 92 (the dense basis range) the explicitly updated inverse
+    # made this counterfactual end NO_PROGRESS after 158 major iterations and 50 restarts
+    # at convergence_tolerance 1e-10; the sparse basis solved it in 3.
+    import compass_sparse as cs
+
+    m = static_cge(regions=2, sectors=10, households=1, seed=1).with_shock(tariff=0.1)
+    assert m.problem.n <= 300
+    r = cs.solve_mcp(m.problem, options={"convergence_tolerance": 1e-10})
+    assert r.success and r.restarts == 0 and r.nit <= 6
+    assert m.natural_residual(r.x) <= 1e-10

@@ -115,12 +115,12 @@ def test_evaluator_shape_and_pattern_errors_propagate_from_guarded_calls():
 
     def J(x):
         k["i"] += 1
-        return sp.csc_matrix(np.eye(3) if k["i"] == 1 else np.diag([1.0, 0.0, 1.0]))
+        return sp.csc_matrix(np.eye(3) if k["i"] == 1 else np.eye(3) + np.eye(3, k=1))
 
-    ev = Evaluator(lambda x: np.ones(3), J, 3)
+    ev = Evaluator(lambda x: np.ones(3), J, 3, pattern=sp.identity(3, format="csc"))
     ev.jac(np.zeros(3))
     with pytest.raises(JacobianPatternError):
-        ev.jac(np.ones(3))  # the dense-to-sparse conversion dropped an entry
+        ev.jac(np.ones(3))  # an entry outside the declared pattern
 
 
 def test_jac_true_one_call_serves_f_and_j_and_the_pinned_start_survives():
@@ -147,3 +147,25 @@ def test_jac_true_one_call_serves_f_and_j_and_the_pinned_start_survives():
     ev.forget()
     ev.F(x0)
     assert len(calls) == 4
+
+
+def test_repeated_solves_do_not_reuse_start_values_from_before_the_data_changed():
+    # A scenario loop changes the data F reads after the problem was built: the values of
+    # F at x0 remembered by the start-point check are stale and must not be trusted (they
+    # made the first solve report "the start point is a solution" with residual 0.5).
+    n = 20
+    data = {"b": np.zeros(n)}
+
+    def F(x):
+        return 2.0 * x - data["b"]
+
+    def J(x):
+        return 2.0 * sp.identity(n, format="csc")
+
+    problem = cs.MCP(F, J, -np.inf, np.inf, np.zeros(n))
+    data["b"] = np.linspace(1.0, 2.0, n)
+    r = cs.MCPSolver(problem).solve()
+    assert r.success and np.allclose(r.x, data["b"] / 2)
+    data["b"] = np.linspace(3.0, 4.0, n)
+    r = cs.solve_mcp(problem)
+    assert r.success and np.allclose(r.x, data["b"] / 2)

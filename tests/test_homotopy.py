@@ -66,7 +66,8 @@ def test_homotopy_alone_reaches_the_solution_of_the_stationary_problem():
     res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"})
     assert res.success
     assert natural_residual(res.x, F(res.x), lb, ub) <= 1e-6
-    assert res.nit == 0  # no major iteration of the stabilized Newton method ran
+    assert res.nit == 1  # the homotopy pass alone: no Newton iteration of NMS ran
+    assert [h.step for h in res.history] == ["", "-H"]
 
 
 @pytest.mark.parametrize("family,n,seed", [(1, 30, 0), (2, 20, 1)])
@@ -114,14 +115,32 @@ def test_solve_reports_a_diverged_homotopy_as_no_progress_with_the_best_point():
     assert res.residual.fb_norm <= np.linalg.norm(F(x0))  # never worse than the start
 
 
-def test_homotopy_time_limit_status_keeps_the_best_point():
+def test_homotopy_time_limit_status_keeps_the_best_point(monkeypatch):
+    # The deadline passes after 5 path steps (a clock that cannot depend on the machine's
+    # speed: 0.05 s was enough to solve this instance on a quiet machine).
+    calls = {"n": 0}
+
+    def check_time(self):
+        calls["n"] += 1
+        if calls["n"] > 5:
+            raise hom._Stop(HomotopyStatus.TIME_LIMIT, "time limit reached on the path")
+
+    monkeypatch.setattr(hom._Tracker, "_check_time", check_time)
     g = thesis_family(60, 1, seed=3)
-    # a limit that has passed before the first step: the status cannot depend on the speed
-    # of the machine (0.05 s was enough to solve this instance on a quiet one)
-    res = solve_mcp(g.problem, options={"homotopy": "only", "time_limit": 1e-9})
-    assert res.status is Status.TIME_LIMIT
+    start = solve_mcp(g.problem, options={"major_iteration_limit": 0})
+    res = solve_mcp(g.problem, options={"homotopy": "only"})
+    assert res.status is Status.TIME_LIMIT and not res.success
     assert res.x.shape == (60,) and np.all(np.isfinite(res.x))
-    assert res.passes["homotopy"].ran
+    assert res.residual.fb_norm <= start.residual.fb_norm  # the best point, kept
+    h = res.passes["homotopy"]
+    assert h.ran and h.reason.startswith("time limit") and h.iterations >= 1
+
+
+def test_a_solve_stopped_before_the_homotopy_says_so():
+    g = thesis_family(60, 1, seed=3)
+    res = solve_mcp(g.problem, options={"time_limit": 1e-9})
+    assert res.status is Status.TIME_LIMIT
+    assert res.passes["homotopy"].reason == "not reached (time_limit)"
 
 
 def test_pass_table_says_why_the_homotopy_did_not_run():

@@ -18,9 +18,10 @@ import compass_sparse.generators as gen
 from compass_sparse import Options, Status, solve_lcp
 from compass_sparse.basis.dense import DenseBasis
 from compass_sparse.basis import BasisManager
+from compass_sparse.dense_path import DensePathEngine
 from compass_sparse.path import LinearCode, PivotalPath, WarmBasis, components, default_basis
 
-MANAGERS = {"sparse": BasisManager, "dense": DenseBasis}
+MANAGERS = {"sparse": BasisManager, "dense": DenseBasis, "compiled": DensePathEngine}
 HYP = settings(derandomize=True, max_examples=30, deadline=None,
                suppress_health_check=[HealthCheck.too_slow])
 

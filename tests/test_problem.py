@@ -152,7 +152,7 @@ def test_F_raising_at_start_is_an_evaluation_error():
         MCP(F, lin_J, 0.0, np.inf, np.zeros(N))
 
 
-def test_pattern_change_names_first_changed_entry():
+def test_jacobian_entry_that_becomes_zero_mid_solve_is_a_zero_not_a_pattern_error():
     A = np.array([[2.0, 1, 0, 0, 0], [1, 2, 1, 0, 0], [0, 1, 2, 1, 0], [0, 0, 1, 2, 1],
                   [0, 0, 0, 1, 2]])
 
@@ -162,17 +162,33 @@ def test_pattern_change_names_first_changed_entry():
         return sp.csc_matrix(M)
 
     p = MCP(lambda z: A @ z, J, -np.inf, np.inf, np.ones(N), var_names=NAMES)
-    p.J(np.full(N, 2.0))  # same pattern: fine
-    with pytest.raises(JacobianPatternError) as ei:
-        p.J(np.zeros(N))
-    msg = str(ei.value)
-    assert "F(rent)" in msg and "wage" in msg and "disappeared" in msg
-    assert "explicit zeros" in msg
-    # an added entry
+    nnz = p.pattern.nnz
+    Jz = p.J(np.zeros(N))
+    assert Jz.nnz == nnz and Jz[2, 1] == 0.0 and abs(Jz - sp.csc_matrix(J(np.zeros(N)))).max() == 0
+
+
+def test_undeclared_pattern_grows_when_a_later_jacobian_adds_entries():
+    A = np.array([[2.0, 1, 0, 0, 0], [1, 2, 1, 0, 0], [0, 1, 2, 1, 0], [0, 0, 1, 2, 1],
+                  [0, 0, 0, 1, 2]])
     q = MCP(lambda z: A @ z, lambda z: sp.csc_matrix(A + (z[0] > 1) * np.eye(N, k=4)),
             -np.inf, np.inf, np.zeros(N), var_names=NAMES)
-    with pytest.raises(JacobianPatternError, match=r"F\(price\).*demand.*appeared"):
-        q.J(np.full(N, 2.0))
+    nnz = q.pattern.nnz
+    J2 = q.J(np.full(N, 2.0))
+    assert J2.nnz == nnz + 1 and J2[0, 4] == 1.0 and q.evaluator.pattern_growths == 1
+    assert q.J(np.zeros(N)).nnz == nnz + 1  # the grown pattern stays
+
+
+def test_jac_sparsity_with_callable_jac_is_the_declared_pattern():
+    A = np.array([[2.0, 1, 0, 0, 0], [1, 2, 1, 0, 0], [0, 1, 2, 1, 0], [0, 0, 1, 2, 1],
+                  [0, 0, 0, 1, 2]])
+    pat = sp.csc_matrix(A != 0)
+    q = MCP(lambda z: A @ z, lambda z: sp.csc_matrix(A * (z[0] > 1)), -np.inf, np.inf,
+            np.zeros(N), var_names=NAMES, jac_sparsity=pat)
+    assert q.J(np.zeros(N)).nnz == pat.nnz  # J = 0 there: all zeros, pattern kept
+    bad = MCP(lambda z: A @ z, lambda z: sp.csc_matrix(A + (z[0] > 1) * np.eye(N, k=4)),
+              -np.inf, np.inf, np.zeros(N), var_names=NAMES, jac_sparsity=pat)
+    with pytest.raises(JacobianPatternError, match=r"F\(price\).*demand.*outside the declared"):
+        bad.J(np.full(N, 2.0))
 
 
 def test_non_square_jac_sparsity():

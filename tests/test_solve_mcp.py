@@ -16,6 +16,7 @@ import scipy.sparse as sp
 import compass_sparse.generators as gen
 from compass_sparse import (MCP, EvaluationError, IntermediateResult, MCPSolver, OptionError,
                             Options, PointStatus, StartPointError, Status, solve_mcp)
+from compass_sparse.exceptions import ProblemError
 from compass_sparse.generators.sparse import draw_bounds
 
 sys.path.insert(0, os.path.dirname(__file__))
@@ -416,7 +417,7 @@ def test_mcpsolver_object_api_warm_start():
     r3 = solver.solve(x0=p.x0, warm_start=False)  # cold again
     check_success(r3, p.F, p.lb, p.ub)
     assert r3.nit > 0
-    with pytest.raises(TypeError):
+    with pytest.raises(ProblemError, match="MCPSolver takes an MCP"):
         MCPSolver(p.F)
 
 

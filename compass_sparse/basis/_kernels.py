@@ -25,7 +25,7 @@ index checks plus the flops on its actual fill (not O(nnz(L + U))).
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from .._jit import njit
 
 
 @njit(cache=True)

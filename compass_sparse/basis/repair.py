@@ -29,9 +29,7 @@ Steps, repeated until the LU of the kept block has no tiny pivot:
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg as sla
 import scipy.sparse as sp
-from scipy.sparse.csgraph import maximum_bipartite_matching
 
 from ..exceptions import SingularBasisError
 from .backends import SingularFactorError
@@ -54,6 +52,8 @@ def _structural(K):
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
     Kp = sp.csr_matrix(K, copy=True)
     Kp.eliminate_zeros()
+    from scipy.sparse.csgraph import maximum_bipartite_matching  # lazy: import cost
+
     match = maximum_bipartite_matching(Kp, perm_type="row")  # column -> row
     cols = np.flatnonzero(match >= 0)
     return match[cols].astype(np.int64), cols.astype(np.int64)
@@ -76,6 +76,17 @@ def _dense_select(K, rank_tol):
     m, c = A.shape
     if m == 0 or c == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    # Single-threaded BLAS (see compass_sparse._blas); this factorization is also atomic
+    # for the solve's time limit.
+    from .._blas import single_threaded_blas
+
+    with single_threaded_blas():
+        return _dense_select_qr(A, rank_tol)
+
+
+def _dense_select_qr(A, rank_tol):
+    import scipy.linalg as sla  # lazy: import cost
+
     cn = np.abs(A).max(axis=0)
     cn[cn == 0.0] = 1.0
     R, piv = sla.qr(A / cn, mode="r", pivoting=True)

@@ -71,8 +71,14 @@ def ranges(ptr: np.ndarray, ids: np.ndarray) -> np.ndarray:
 
 
 class Workspace:
-    def __init__(self, problem, options, J0, const_mask, warnings):
+    def __init__(self, problem, options, J0, const_mask, warnings, certain_rows=None,
+                 nonlinear_rows=None):
         P = problem
+        none = np.zeros(P.n, dtype=bool)
+        # rows without entries: constant by declaration (an infeasibility verdict may rest
+        # on them) / not known to be constant (never linear); see presolve.linear
+        self.certain_rows = none if certain_rows is None else certain_rows
+        self.nonlinear_rows = none if nonlinear_rows is None else nonlinear_rows
         n = P.n
         self.problem = P
         self.opts = options
@@ -143,7 +149,7 @@ class Workspace:
         mag = np.where(np.isfinite(tmin), np.abs(tmin), 0.0) + \
             np.where(np.isfinite(tmax), np.abs(tmax), 0.0)
         self.scale = 1.0 + np.abs(self.c) + np.bincount(rows, weights=mag, minlength=n)
-        self.linear = self.row_active & (self.row_nl == 0)
+        self.linear = self.row_active & (self.row_nl == 0) & ~self.nonlinear_rows
         self.touched_row = np.zeros(n, dtype=bool)
         self.touched_col = np.zeros(n, dtype=bool)
 
@@ -232,7 +238,15 @@ class Workspace:
         self.stack.push(record)
 
     def infeasible(self, message, rows=(), variables=()):
+        """Raise the verdict, saying what it rests on: the rows' entries declared constant
+        (``constant_jac``, checked at more points when ``verify_linear``) and, for entries
+        absent from the pattern, the declared pattern (``jac_sparsity``)."""
         P = self.problem
+        if "because" not in message:
+            basis = ["Jacobian entries declared constant (constant_jac)"]
+            basis.append("the declared pattern (jac_sparsity)" if P.pattern_declared else
+                         "the entries J returned at the start point")
+            message += f" [this rests on {' and '.join(basis)}]"
         diag = InfeasibilityDiagnostic(
             message=message,
             pass_name=self.current_pass,

@@ -24,7 +24,7 @@ from ..merit import natural_residual
 from . import (column_singletons, duplicate_rows, empty_columns, empty_rows, fixed, forcing,
                range_fixing, singleton_rows)
 from ._work import InfeasibilityDiagnostic, PresolveInfeasible, Workspace
-from .linear import declared_constant_mask
+from .linear import declared_constant_mask, empty_row_status, sample_evaluations
 from .options import PresolveOptions
 from .postsolve import PostsolveStack
 from .reduced import build_reduced
@@ -162,10 +162,17 @@ def presolve(problem, options: PresolveOptions | dict | None = None, *, f0=None,
         stats.time = time.perf_counter() - t0
         return PresolveResult(problem, problem, stack, stats, opts, warnings=warnings,
                               structural=structural)
+    declared = problem.constant_mask is not None and problem.constant_mask.any()
+    samples = sample_evaluations(problem, opts) if declared else []
+    if J0.nnz != problem.pattern.nnz:  # an undeclared pattern grew at the sample points
+        J0 = problem.evaluator.on_pattern(J0)
+        stats.nnz_original = nnz = int(J0.indptr[-1])
     if f0 is None:
         f0 = problem.F(problem.x0)
-    const = declared_constant_mask(problem, J0, f0, opts, warnings)
-    ws = Workspace(problem, opts, J0, const, warnings)
+    const = declared_constant_mask(problem, J0, f0, opts, warnings, samples)
+    certain, nonlinear = empty_row_status(problem, J0)
+    ws = Workspace(problem, opts, J0, const, warnings, certain_rows=certain,
+                   nonlinear_rows=nonlinear)
     infeasible = None
     try:
         for rnd in range(opts.max_rounds):

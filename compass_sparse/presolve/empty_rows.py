@@ -1,6 +1,7 @@
 """Pass: empty rows.
 
-A linear row i with no remaining entry is a constant: F_i(z) = c_i for every z.  With p
+A linear row i with no remaining entry is a constant (a row without pattern entries is
+linear only when the pattern is declared; see :mod:`.linear`): F_i(z) = c_i for every z.  With p
 its paired variable, the complementarity condition l_p <= z_p <= u_p _|_ c_i means
 
 * c_i > 0: z_p = l_p in every solution (no solution when l_p = -inf);
@@ -31,10 +32,12 @@ def run(ws) -> None:
         k = int(np.flatnonzero(bad)[0])
         i, j = rows[k], p[k]
         side = "positive" if pos[k] else "negative"
+        why = ("the declared pattern (jac_sparsity) has no entry in it" if ws.certain_rows[i]
+               else "its Jacobian entries are declared constant (constant_jac)")
         ws.infeasible(
-            f"row {ws.rl(i)} is the constant {c[k]:.6g} ({side}), so its variable "
-            f"{ws.vl(j)} would have to sit at its {'lower' if pos[k] else 'upper'} bound, "
-            "which is infinite: the MCP has no solution", rows=[i], variables=[j])
+            f"row {ws.rl(i)} is the constant {c[k]:.6g} ({side}), because {why}; so its "
+            f"variable {ws.vl(j)} would have to sit at its {'lower' if pos[k] else 'upper'} "
+            "bound, which is infinite: the MCP has no solution", rows=[i], variables=[j])
     zero = ~pos & ~neg & (ws.col_nnz[p] == 0) & (ws.col_nl[p] == 0)
     take = (pos | neg | zero) & ~ws.touched_col[p]
     if not take.any():
@@ -42,3 +45,4 @@ def run(ws) -> None:
     vals = np.where(pos, ws.lb[p], np.where(neg, ws.ub[p], np.clip(ws.base[p], ws.lb[p],
                                                                         ws.ub[p])))
     ws.fix(p[take], vals[take], reason="empty row")
+

@@ -10,12 +10,13 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
-from .._options_base import OptionsMixin
+from .._options_base import OptionsMixin, keyword_checked, normalized
 from ..exceptions import OptionError
 
 __all__ = ["PresolveOptions"]
 
 
+@keyword_checked
 @dataclass(frozen=True)
 class PresolveOptions(OptionsMixin):
     """Switches and tolerances of :func:`compass_sparse.presolve.presolve`.
@@ -67,10 +68,10 @@ class PresolveOptions(OptionsMixin):
 
     def __post_init__(self):
         for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            if f.type in ("bool", bool):
-                if not isinstance(v, bool):
-                    raise OptionError(f"presolve option {f.name}={v!r}: expected True or False")
+            kind = "bool" if f.type in ("bool", bool) else "int" if f.type in ("int", int) \
+                else "float"
+            object.__setattr__(self, f.name, normalized(f.name, getattr(self, f.name), kind,
+                                                        what="presolve option"))
         if not isinstance(self.max_rounds, int) or isinstance(self.max_rounds, bool) \
                 or self.max_rounds < 1:
             raise OptionError(f"presolve option max_rounds={self.max_rounds!r}: expected an "

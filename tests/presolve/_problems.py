@@ -43,7 +43,8 @@ def linear_mcp(M, q, lb, ub, x0=None, cubic=None, names=None, declare=True):
         return _on_pattern(Mp + sp.diags(3 * cub * z ** 2), pat)
 
     return MCP(F, J, lb, ub, np.zeros(n) if x0 is None else x0,
-               constant_jac=const if declare else None, var_names=names)
+               constant_jac=const if declare else None, var_names=names,
+               jac_sparsity=pat if declare else None)
 
 
 def _on_pattern(A, pat):

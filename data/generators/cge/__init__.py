@@ -10,15 +10,21 @@ Every generator returns a :class:`CGEModel` whose ``problem`` is a
 :class:`compass_sparse.problem.MCP` with an analytic sparse Jacobian of fixed pattern, and
 whose ``benchmark`` is an exact equilibrium (residual at rounding level).  Sizes:
 ``size_for(n)`` (static) and ``ramsey_size_for(n)`` (dynamic) give keyword arguments for a
-target number of variables.
+target number of variables.  :func:`economics_report` tells what a counterfactual changed
+(prices, quantities, incomes, each household's equivalent variation).
 """
 from .dynamic import ramsey_cge, ramsey_size, ramsey_size_for
 from .model import CGEModel, benchmark_residuals, homogeneity_check, walras_check
+from .report import Change, EconomicsReport, Welfare, economics_report
 from .sam import SAM, random_sam, ras
 from .static import size_for, static_cge, static_from_sam, static_size
 
 __all__ = [
     "CGEModel",
+    "Change",
+    "EconomicsReport",
+    "Welfare",
+    "economics_report",
     "SAM",
     "benchmark_residuals",
     "homogeneity_check",

@@ -1,0 +1,480 @@
+"""Small and medium models (n = 1 ... 1000): compass_sparse against PATH 5.2, per solve.
+
+Groups
+------
+* ``known``: the problems with known solutions of the test suite (``tests/known_problems.py``:
+  kojshin, josephy, mathiesen, cournot2, nash5, boxvi, double_root, billups, log_ncp,
+  sqrt_ncp).  For PATH each one is written once in GAMSPy (:func:`_gamspy_known`, the same
+  formulas as the Python F).
+* ``thesis``: the COMPASS thesis' random nonlinear families 1 and 2 at n = 10, 50, 100, 200
+  (PATH gets the same data through ``solve_quadratic_mcp_with_path``, as bench_thesis.py).
+* ``cge``: the one-sector Lau-Pahlke-Rutherford Ramsey model at n ~ 100, 360, 990 with a 25%
+  capital tax (PATH: the GAMSPy model of bench_cge.py), and the static Armington CGE model
+  (25% tariff) at n ~ 90 and 830 (compass_sparse only: no GAMSPy version of it exists).
+
+Timing
+------
+Everything runs in this one warm process: numba kernels are compiled (or loaded from the
+disk cache) by a warm-up before anything is timed.  Each problem is solved ``--repeats`` times
+by each solver and the MEDIAN is reported.  For compass_sparse, ``time`` is the wall time of
+``solve_mcp`` MINUS the time spent inside the user's F and J (measured by wrapping the
+callbacks); ``user`` is that F/J time.  For PATH, ``time`` is PATH's own "Total Time" from
+its log (the GAMS process start and model generation are not counted; PATH evaluates F and J
+through GAMS' compiled instructions, included in its time).  Success = OUR natural residual
+``||z - clip(z - F(z), l, u)||_inf <= 1e-6`` of the returned point, for both solvers.
+
+    python3 benchmarks/bench_small.py                     # all groups, 5 repeats
+    python3 benchmarks/bench_small.py --groups known --repeats 21
+    python3 benchmarks/bench_small.py --no-path           # compass_sparse only
+    python3 benchmarks/bench_small.py --import-time       # only the import-time measurement
+
+Results: ``benchmarks/results/small<suffix>.csv`` (one row per problem and solver) and a
+summary printed as markdown (copied into small.md).
+"""
+from __future__ import annotations
+
+import argparse
+import copy
+import math
+import os
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE.parent))
+sys.path.insert(0, str(HERE.parent / "tests"))
+from _common import (
+    RESULTS,
+    SUCCESS_TOL,
+    CsvLog,
+    fmt_time,
+    machine_info,
+    md_table,
+    natural_residual,
+    path_available,
+    path_session,
+    print_machine,
+    warm_up,
+)
+
+FIELDS = ["group", "name", "n", "solver", "success", "status", "natural", "time", "user",
+          "wall", "cpu", "user_cpu", "major", "minor", "repeats", "error"]
+
+
+# --------------------------------------------------------------------------- cases
+class Case:
+    """One problem: our MCP, an independent F for the residual, and a PATH runner."""
+
+    def __init__(self, group, name, problem, F, lb, ub, path_run=None):
+        self.group, self.name, self.problem = group, name, problem
+        self.F, self.lb, self.ub = F, lb, ub
+        self.path_run = path_run  # () -> (x, PATH total time, status) or None
+
+    @property
+    def n(self):
+        return self.problem.n
+
+
+def _known_cases():
+    import known_problems as kp
+
+    from compass_sparse import MCP
+
+    makers = dict(kp.ALL_SOLVABLE)
+    makers.update(double_root=kp.degenerate_root, billups=kp.billups,
+                  log_ncp=lambda: kp.log_ncp(raise_errors=False), sqrt_ncp=kp.sqrt_ncp)
+    cases = []
+    for name, make in makers.items():
+        p = make()
+        prob = MCP(p.F, p.J, p.lb, p.ub, p.x0)
+        cases.append(Case("known", name, prob, p.F, p.lb, p.ub,
+                          lambda p=p, name=name: _gamspy_known(name, p)))
+    return cases
+
+
+def _gamspy_known(name, p):
+    """The known problem ``name`` written in GAMSPy (scalar variables x0..x{n-1}) and solved
+    by PATH from the same start point.  Returns (x, PATH total time, exit message)."""
+    import io
+    import logging
+
+    import gamspy as gp
+
+    from compass_sparse.interfaces.path_gamspy import parse_path_log
+
+    m = gp.Container()
+    n = p.n
+    xs = [gp.Variable(m, f"x{k}") for k in range(n)]
+    for k in range(n):
+        if np.isfinite(p.lb[k]):
+            xs[k].lo[...] = float(p.lb[k])
+        if np.isfinite(p.ub[k]):
+            xs[k].up[...] = float(p.ub[k])
+        xs[k].l[...] = float(p.x0[k])
+    x = xs
+    if name in ("kojshin", "josephy"):
+        x1, x2, x3, x4 = x
+        c3 = (9, 9) if name == "kojshin" else (3, 1)
+        F = [3 * x1**2 + 2 * x1 * x2 + 2 * x2**2 + x3 + 3 * x4 - 6,
+             2 * x1**2 + x1 + x2**2 + 3 * x3 + 2 * x4 - 2,
+             3 * x1**2 + x1 * x2 + 2 * x2**2 + 2 * x3 + c3[0] * x4 - c3[1],
+             x1**2 + 3 * x2**2 + 2 * x3 + 3 * x4 - 3]
+    elif name == "mathiesen":
+        x1, x2, x3, x4 = x
+        F = [-x2 + x3 + x4, x1 - (4.5 * x3 + 2.7 * x4) / (x2 + 1.0),
+             5.0 - x1 - (0.5 * x3 + 0.3 * x4) / (x3 + 1.0), 3.0 - x1]
+    elif name == "cournot2":
+        c, a, b = (1.0, 2.0), 10.0, 1.0
+        F = [c[i] - (a - b * (x[0] + x[1])) + b * x[i] for i in range(2)]
+    elif name == "nash5":
+        from known_problems import MSS_BETA, MSS_C, MSS_GAMMA, MSS_L
+
+        g = MSS_GAMMA
+        k = 5000.0 ** (1.0 / g)
+        Q = x[0] + x[1] + x[2] + x[3] + x[4]
+        p_ = k * gp.math.rpower(Q, -1.0 / g)
+        c_, L_, b_ = (MSS_C.tolist(), MSS_L.tolist(), MSS_BETA.tolist())  # python floats
+        F = [c_[i] + gp.math.rpower(L_[i] * x[i], 1.0 / b_[i]) - p_
+             - x[i] * (-(1.0 / g) * p_ / Q) for i in range(5)]
+    elif name == "boxvi":
+        c = [8.0, -1.0, 27.0, 0.125, -8.0, 1.0]
+        F = [gp.math.power(x[i], 3) - c[i] for i in range(6)]
+    elif name == "double_root":
+        F = [gp.math.sqr(x[0]) - 2.0 * x[0] + 1.0]
+    elif name == "billups":
+        F = [gp.math.sqr(x[0] - 1.0) - 1.01]
+    elif name == "log_ncp":
+        c = [-3.0, -2.0, 0.5, 1.0]
+        F = [gp.math.log(x[i]) - c[i] for i in range(4)]
+    elif name == "sqrt_ncp":
+        F = [gp.math.sqrt(x[0] - 1.0) + x[0] - 3.0]
+    else:
+        raise KeyError(name)
+    eqs = []
+    for k in range(n):
+        e = gp.Equation(m, f"e{k}", type="nonbinding")  # =N=: complementarity by matching
+        e[...] = F[k]
+        eqs.append(e)
+    model = gp.Model(m, f"known_{name}", problem="MCP",
+                     matches={eqs[k]: xs[k] for k in range(n)})
+    buf = io.StringIO()
+    lg = logging.getLogger("MODEL")
+    old = lg.level
+    lg.setLevel(logging.ERROR)
+    try:
+        model.solve(solver="PATH", solver_options={"convergence_tolerance": 1e-6}, output=buf)
+    finally:
+        lg.setLevel(old)
+    info = parse_path_log(buf.getvalue())
+    xv = np.array([float(v.records["level"].iloc[0]) if v.records is not None else 0.0
+                   for v in xs])
+    return xv, info.get("path_time"), str(info.get("exit_message") or model.solve_status)
+
+
+def _thesis_cases(sizes, families, seeds):
+    from compass_sparse.generators import thesis_family
+    from compass_sparse.interfaces.path_gamspy import solve_quadratic_mcp_with_path
+
+    cases = []
+    for fam in families:
+        for n in sizes:
+            for seed in seeds:
+                g = thesis_family(n, fam, seed)
+                info = g.info
+
+                def F(x, info=info):
+                    return info["D"] * x * x + info["A"] @ x + info["b"]
+
+                def run(info=info, n=n):
+                    r = solve_quadratic_mcp_with_path(
+                        info["D"], info["A"], info["b"], info["lb"], info["ub"], info["x0"],
+                        convergence_tolerance=1e-6, time_limit=60.0,
+                        session=path_session(n, True))
+                    return r.x, (r.path_time if r.path_time is not None else r.wall_time), \
+                        str(r.exit_message or r.solver_status)
+
+                cases.append(Case("thesis", f"fam{fam}_n{n}_s{seed}", g.problem, F,
+                                  info["lb"], info["ub"], run))
+    return cases
+
+
+def _cge_cases(ramsey_T, static_n):
+    from compass_sparse.generators.cge import ramsey_cge, size_for, static_cge
+
+    cases = []
+    for T in ramsey_T:
+        m = ramsey_cge(periods=T, sectors=1)
+        ms = m.with_shock(capital_tax=0.25)
+        prob = ms.problem
+
+        def run(T=T, m=m):
+            from bench_cge import ramsey_gamspy
+
+            out = ramsey_gamspy(T, 0.25, m.benchmark)
+            return out["x"], (out["time"] if out["time"] is not None else out["wall"]), \
+                out["status"]
+
+        cases.append(Case("cge", f"ramsey_T{T}_tax25", prob, ms.F, prob.lb, prob.ub, run))
+    for n in static_n:
+        m = static_cge(**size_for(n))
+        ms = m.with_shock(tariff=0.25)
+        prob = ms.problem
+        cases.append(Case("cge", f"static_n{prob.n}_tariff25", prob, ms.F, prob.lb, prob.ub,
+                          None))
+    return cases
+
+
+# --------------------------------------------------------------------------- timing
+class _Timed:
+    """Wraps a user callback and accumulates the seconds spent inside it."""
+
+    def __init__(self, fn, clock):
+        self.fn, self.clock = fn, clock
+
+    def __call__(self, x):
+        t0, c0 = time.perf_counter(), time.process_time()
+        try:
+            return self.fn(x)
+        finally:
+            self.clock[0] += time.perf_counter() - t0
+            self.clock[1] += time.process_time() - c0
+
+
+def _timed_problem(problem, clock):
+    """A copy of the problem whose user callbacks are timed (the evaluation object's F
+    and J; before that object existed, the MCP's own)."""
+    p = copy.copy(problem)
+    ev = getattr(problem, "evaluator", None)
+    owner, f_attr, j_attr = (p, "_F", "_jac") if ev is None else (None, "_user_F", "_user_jac")
+    if ev is not None:
+        owner = p.evaluator = ev.fresh()
+    setattr(owner, f_attr, _Timed(getattr(owner, f_attr), clock))
+    if callable(getattr(owner, j_attr)):
+        setattr(owner, j_attr, _Timed(getattr(owner, j_attr), clock))
+    return p
+
+
+def run_ours(case, repeats, time_limit):
+    from compass_sparse import solve_mcp
+
+    clock = [0.0, 0.0]
+    prob = _timed_problem(case.problem, clock)
+    times, users, walls, cpus, ucpus = [], [], [], [], []
+    res = None
+    for _ in range(repeats):
+        clock[:] = [0.0, 0.0]
+        p = prob.with_start(case.problem.x0)
+        t0, c0 = time.perf_counter(), time.process_time()
+        res = solve_mcp(p, options={"time_limit": time_limit})
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        walls.append(wall)
+        users.append(clock[0])
+        times.append(wall - clock[0])
+        cpus.append(cpu - clock[1])
+        ucpus.append(clock[1])
+    nat = natural_residual(res.x, case.F(res.x), case.lb, case.ub)
+    return dict(group=case.group, name=case.name, n=case.n, solver="compass_sparse",
+                success=nat <= SUCCESS_TOL, status=res.status.name, natural=nat,
+                time=statistics.median(times), user=statistics.median(users),
+                wall=statistics.median(walls), cpu=statistics.median(cpus),
+                user_cpu=statistics.median(ucpus), major=res.nit, minor=res.minor_iterations,
+                repeats=repeats, error="")
+
+
+def run_path(case, repeats):
+    times, x, status = [], None, ""
+    try:
+        for _ in range(repeats):
+            x, t, status = case.path_run()
+            times.append(float(t))
+    except Exception as exc:  # a failing PATH run is a data point, not a crash
+        return dict(group=case.group, name=case.name, n=case.n, solver="PATH",
+                    success=False, status="exception", natural=math.inf, time=math.nan,
+                    user=math.nan, wall=math.nan, repeats=0,
+                    error=str(exc).strip().splitlines()[0][:200])
+    nat = natural_residual(x, case.F(x), case.lb, case.ub)
+    return dict(group=case.group, name=case.name, n=case.n, solver="PATH",
+                success=nat <= SUCCESS_TOL, status=status, natural=nat,
+                time=statistics.median(times), user=math.nan, wall=math.nan,
+                major="", minor="", repeats=repeats, error="")
+
+
+# --------------------------------------------------------------------------- import time
+def import_time(repeats=7):
+    """Median wall times of ``import compass_sparse`` in fresh interpreters (warm caches:
+    one discarded run first): (total, own) where own is the import after numpy and
+    scipy.sparse are already loaded (what the package itself adds)."""
+    code = ("import time; t = time.perf_counter(); import numpy, scipy.sparse; "
+            "t1 = time.perf_counter(); import compass_sparse; t2 = time.perf_counter(); "
+            "print(t2 - t, t2 - t1)")
+    env = dict(os.environ)
+    env["PYTHONPATH"] = str(HERE.parent)
+    tot, own = [], []
+    for k in range(repeats + 1):
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                           check=True, env=env, cwd=HERE.parent)
+        if k:
+            a, b = r.stdout.strip().splitlines()[-1].split()
+            tot.append(float(a))
+            own.append(float(b))
+    return statistics.median(tot), statistics.median(own)
+
+
+# --------------------------------------------------------------------------- summary
+def _ours(o) -> float:
+    """Our solver time of a row: CPU time when recorded (the machine is shared), else wall."""
+    c = o.get("cpu", "")
+    return float(c) if c not in ("", None) and not math.isnan(float(c)) else float(o["time"])
+
+
+def summarize(rows, imp=None) -> str:
+    by = {}
+    for r in rows:
+        by.setdefault((r["group"], r["name"]), {})[r["solver"]] = r
+    out = []
+    table = []
+    for (g, name), d in by.items():
+        o, p = d.get("compass_sparse"), d.get("PATH")
+        ratio = (_ours(o) / p["time"] if o and p and p["success"] and o["success"]
+                 and p["time"] > 0 else math.nan)
+        table.append([g, name, o["n"] if o else p["n"],
+                      ("yes" if o["success"] else "NO") if o else "–",
+                      fmt_time(_ours(o)) if o else "–", fmt_time(o["time"]) if o else "–",
+                      fmt_time(o["user"]) if o else "–", o["minor"] if o else "–",
+                      ("yes" if p["success"] else "NO") if p else "–",
+                      fmt_time(p["time"]) if p else "–",
+                      f"{ratio:.2f}" if not math.isnan(ratio) else "–"])
+    out.append(md_table(["group", "problem", "n", "ours ok", "ours CPU", "ours wall", "in F/J",
+                         "pivots", "PATH ok", "PATH time", "ratio"], table))
+    out.append("")
+    gt = []
+    for g in dict.fromkeys(r["group"] for r in rows):
+        pairs = [(d["compass_sparse"], d["PATH"]) for (gg, _), d in by.items()
+                 if gg == g and "compass_sparse" in d and "PATH" in d
+                 and d["compass_sparse"]["success"] and d["PATH"]["success"]]
+        ours_all = [d["compass_sparse"] for (gg, _), d in by.items()
+                    if gg == g and "compass_sparse" in d]
+        ok_o = sum(bool(r["success"]) for r in ours_all)
+        ok_p = sum(bool(d["PATH"]["success"]) for (gg, _), d in by.items()
+                   if gg == g and "PATH" in d)
+        ratios = [_ours(o) / p["time"] for o, p in pairs if p["time"] > 0]
+        gt.append([g, len(ours_all), ok_o, ok_p,
+                   fmt_time(statistics.median([_ours(o) for o, _ in pairs])) if pairs else "–",
+                   fmt_time(statistics.median([p["time"] for _, p in pairs])) if pairs else "–",
+                   f"{statistics.median(ratios):.2f}" if ratios else "–",
+                   f"{max(ratios):.2f}" if ratios else "–"])
+    out.append(md_table(["group", "problems", "ours solved", "PATH solved",
+                         "median ours (both solved)", "median PATH", "median ratio",
+                         "worst ratio"], gt))
+    small = [r for r in rows if r["solver"] == "compass_sparse" and int(r["n"]) <= 10]
+    if small:
+        out.append("")
+        out.append(f"n <= 10 ({len(small)} problems): median solver time (CPU) "
+                   f"{fmt_time(statistics.median([_ours(r) for r in small]))}, worst "
+                   f"{fmt_time(max(_ours(r) for r in small))}")
+    if imp is not None:
+        out.append(f"import compass_sparse (fresh interpreter, warm caches, median of 7): "
+                   f"{imp[0]:.3f} s in all, {imp[1]:.3f} s after numpy and scipy.sparse")
+    return "\n".join(out)
+
+
+def compare(before, after) -> str:
+    """Per-group table of two runs (e.g. before and after a change): our median CPU time,
+    successes, and PATH's median from the run that has it."""
+    def index(rows):
+        return {(r["group"], r["name"], r["solver"]): r for r in rows}
+
+    b, a = index(before), index(after)
+    out = []
+    for g in dict.fromkeys(r["group"] for r in after):
+        names = [k[1] for k in a if k[0] == g and k[2] == "compass_sparse"]
+        ob = [b[(g, nm, "compass_sparse")] for nm in names if (g, nm, "compass_sparse") in b]
+        oa = [a[(g, nm, "compass_sparse")] for nm in names]
+        pa = [a.get((g, nm, "PATH")) or b.get((g, nm, "PATH")) for nm in names]
+        both = [(x, p) for x, p in zip(oa, pa) if p and p["success"] and x["success"]]
+        out.append([g, len(names), sum(bool(x["success"]) for x in ob),
+                    sum(bool(x["success"]) for x in oa),
+                    fmt_time(statistics.median([_ours(x) for x in ob])) if ob else "–",
+                    fmt_time(statistics.median([_ours(x) for x in oa])),
+                    fmt_time(statistics.median([p["time"] for p in pa if p and p["success"]]))
+                    if any(p and p["success"] for p in pa) else "–",
+                    f"{max(_ours(x) / p['time'] for x, p in both):.1f}" if both else "–"])
+    return md_table(["group", "problems", "solved before", "solved after",
+                     "median CPU before", "median CPU after", "median PATH (its solves)",
+                     "worst ratio after / PATH"], out)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--groups", nargs="+", default=["known", "thesis", "cge"],
+                    choices=["known", "thesis", "cge"])
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--path-repeats", type=int, default=3)
+    ap.add_argument("--thesis-n", nargs="+", type=int, default=[10, 50, 100, 200])
+    ap.add_argument("--families", nargs="+", type=int, default=[1, 2])
+    ap.add_argument("--seeds", nargs="+", type=int, default=[1, 2])
+    ap.add_argument("--ramsey-T", nargs="+", type=int, default=[11, 40, 110])
+    ap.add_argument("--static-n", nargs="+", type=int, default=[90, 830])
+    ap.add_argument("--time-limit", type=float, default=60.0)
+    ap.add_argument("--no-path", action="store_true")
+    ap.add_argument("--import-time", action="store_true", help="only measure import time")
+    ap.add_argument("--suffix", default="")
+    ap.add_argument("--summarize", metavar="CSV", help="print the tables of an existing CSV")
+    ap.add_argument("--compare", nargs=2, metavar=("BEFORE", "AFTER"),
+                    help="per-group table of two CSVs")
+    a = ap.parse_args(argv)
+    if a.compare:
+        from _common import read_csv
+
+        print(compare(read_csv(Path(a.compare[0])), read_csv(Path(a.compare[1]))))
+        return
+    if a.summarize:
+        from _common import read_csv
+
+        print(summarize(read_csv(Path(a.summarize))))
+        return
+    if a.import_time:
+        tot, own = import_time()
+        print(f"import compass_sparse: {tot:.3f} s in all, {own:.3f} s after numpy and "
+              f"scipy.sparse (median of 7)")
+        return
+    info = machine_info()
+    print_machine(info)
+    use_path = not a.no_path and path_available()
+    warm_up(with_path=use_path)
+    cases = []
+    if "known" in a.groups:
+        cases += _known_cases()
+    if "thesis" in a.groups:
+        cases += _thesis_cases(a.thesis_n, a.families, a.seeds)
+    if "cge" in a.groups:
+        cases += _cge_cases(a.ramsey_T, a.static_n)
+    log = CsvLog(RESULTS / f"small{a.suffix}.csv", FIELDS)
+    rows = []
+    for c in cases:
+        run_ours(c, 1, a.time_limit)  # first solve of a new shape: not timed
+        r = run_ours(c, a.repeats, a.time_limit)
+        log.write(r)
+        rows.append(r)
+        line = f"{c.group:7s} {c.name:22s} n={c.n:5d} ours {fmt_time(r['time']):>9s} " \
+               f"(F/J {fmt_time(r['user'])}) {'ok' if r['success'] else 'FAIL'}"
+        if use_path and c.path_run is not None:
+            p = run_path(c, a.path_repeats)
+            log.write(p)
+            rows.append(p)
+            line += f" | PATH {fmt_time(p['time']):>9s} {'ok' if p['success'] else 'FAIL'}"
+        print(line, flush=True)
+    log.close()
+    imp = import_time()
+    print()
+    print(summarize(rows, imp))
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,53 @@
+"""Compiled Fischer–Burmeister vector and J^T u for :mod:`compass_sparse.merit`.
+
+Same formulas as merit.fischer / merit.fb_phi, one element at a time: the arguments of
+phi(a, b) = sqrt(a^2 + b^2) - a - b are scaled by the power of two of max(|a|, |b|) (exact)
+and the cancelling case a + b > 0 is evaluated as -2ab / (sqrt(a^2 + b^2) + a + b).  One
+pass over the vector instead of ~30 array operations: a small problem evaluates Phi at
+every trial point of every line search, where the array version cost ~50 us per call.
+"""
+import math
+
+import numpy as np
+
+from ._jit import njit
+
+
+@njit(cache=True, inline="always")
+def _fischer(a, b):
+    big = max(abs(a), abs(b))
+    e = math.frexp(big)[1] if np.isfinite(big) else 1
+    a = math.ldexp(a, -e)
+    b = math.ldexp(b, -e)
+    r = math.hypot(a, b)
+    s = a + b
+    if s > 0.0:
+        out = -2.0 * (a / (r + s)) * b if r + s > 0.0 else 0.0
+    else:
+        out = r - s
+    return math.ldexp(out, e)
+
+
+@njit(cache=True)
+def fb_phi_kernel(z, f, lb, ub, phi):
+    for i in range(z.shape[0]):
+        fl = np.isfinite(lb[i])
+        fu = np.isfinite(ub[i])
+        if fl and not fu:
+            phi[i] = _fischer(z[i] - lb[i], f[i])
+        elif fu and not fl:
+            phi[i] = -_fischer(ub[i] - z[i], -f[i])
+        elif fl and fu:
+            phi[i] = _fischer(z[i] - lb[i], _fischer(ub[i] - z[i], -f[i]))
+        else:
+            phi[i] = -f[i]
+
+
+@njit(cache=True)
+def csc_rmatvec(indptr, indices, data, u, out):
+    """out = A^T u for A in CSC form (column j of A is row j of A^T)."""
+    for j in range(out.shape[0]):
+        s = 0.0
+        for k in range(indptr[j], indptr[j + 1]):
+            s += data[k] * u[indices[k]]
+        out[j] = s

@@ -1,0 +1,128 @@
+"""When a point counts as a solution of MCP(F, [l, u]).
+
+Two tests, both at the user's ``convergence_tolerance`` tol:
+
+1. *Residuals.*  ||Phi_FB(z)||_2 <= tol **and** the natural residual
+   ||z - pi(z - F(z))||_inf <= tol.  Neither bounds the other tightly (|Phi_i| can be
+   as small as (2 - sqrt 2) |min-map_i|), so both are required: a solution meets the
+   documented tolerance on both residuals.
+
+2. *Scale.*  A small residual means little where F is flat: F = exp(-x) on [0, inf) has
+   residual 8e-7 at x = 14, far from its solution x = 0.  With H = Da + Db J an element of
+   the generalized Jacobian of Phi (see :mod:`.merit`), the Newton step on row i would move
+   the point by about
+
+       d_i = |Phi_i| / ||H_i||_inf,
+
+   so the point is accepted only when, for every row with Phi_i != 0,
+
+       d_i <= FLAT_STEP_RTOL * (1 + |z_i|).
+
+   At a genuine solution d_i is of the order of the residual divided by the row's scale;
+   in a flat tail it is the distance still to go (1 for exp(-x), x for -1/(1+x)).  A row
+   with H_i = 0 and Phi_i != 0 fails.  A point that passes (1) but fails (2) is not a
+   solution; when the solve ends there the status says that the residual is small only
+   because F is flat (``Status.FLAT_RESIDUAL``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from .merit import fb_jacobian_diagonals, fb_phi, min_map
+
+__all__ = ["FLAT_STEP_RTOL", "Verdict", "judge", "residuals_small", "Acceptance"]
+
+FLAT_STEP_RTOL = 1e-3
+"""Largest Newton displacement d_i, relative to 1 + |z_i|, of an accepted point."""
+
+
+@dataclass
+class Verdict:
+    solved: bool
+    small_residual: bool  #: test (1) passed
+    flat_row: int = -1  #: when (1) passed but (2) failed: the row with the largest d_i / (1+|z_i|)
+    step: float = 0.0  #: that row's d_i
+
+    def flat_message(self, row_label) -> str:
+        return (f"the residual is below the tolerance only because F is flat: a Newton step "
+                f"would still move the point by {self.step:.3g} in row "
+                f"{row_label(self.flat_row)}")
+
+
+def residuals_small(z, f, lb, ub, tol) -> bool:
+    """Test (1): both residuals at most tol."""
+    if float(np.linalg.norm(fb_phi(z, f, lb, ub))) > tol:
+        return False
+    mm = min_map(z, f, lb, ub)
+    return bool(np.all(np.abs(mm) <= tol))
+
+
+def judge(z, f, lb, ub, tol, jac=None) -> Verdict:
+    """Both tests.  ``jac(z)`` returns J(z) (sparse) or None when it cannot be evaluated;
+    without a Jacobian only test (1) is applied."""
+    z = np.asarray(z, dtype=float)
+    f = np.asarray(f, dtype=float)
+    if not residuals_small(z, f, lb, ub, tol):
+        return Verdict(False, False)
+    phi = fb_phi(z, f, lb, ub)
+    rows = np.flatnonzero(phi != 0)
+    if rows.size == 0 or jac is None:
+        return Verdict(True, True)
+    J = jac(z)
+    if J is None:
+        return Verdict(True, True)
+    da, db = fb_jacobian_diagonals(z, f, lb, ub)
+    # ||H_i||_inf over the row: |da_i + db_i J_ii| on the diagonal, |db_i J_ij| elsewhere
+    Jr = J.tocsr()
+    absJ = abs(Jr)
+    row_max = np.zeros(z.size)
+    nz = np.diff(absJ.indptr) > 0
+    if nz.any():
+        row_max[nz] = absJ.max(axis=1).toarray().ravel()[nz]
+    diag = Jr.diagonal()
+    h = np.maximum(np.abs(db) * row_max, np.abs(da + db * diag))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = np.where(h[rows] > 0, np.abs(phi[rows]) / h[rows], np.inf)
+    ratio = d / (1.0 + np.abs(z[rows]))
+    k = int(np.argmax(ratio))
+    if ratio[k] <= FLAT_STEP_RTOL:
+        return Verdict(True, True)
+    return Verdict(False, True, flat_row=int(rows[k]), step=float(d[k]))
+
+
+class Acceptance:
+    """Both tests for the points of a solve that may work on a scaled problem
+    (z_user = col * z, F_user = f / row; see :mod:`compass_sparse.scaling`): the verdict is
+    always on the user's problem, at the user's tolerance."""
+
+    def __init__(self, lb, ub, tol, row=None, col=None):
+        self.lb, self.ub, self.tol = lb, ub, tol
+        self.row, self.col = row, col
+
+    def user_point(self, z, f):
+        """(z, F) in the user's units."""
+        if self.row is None:
+            return z, f
+        return self.col * z, f / self.row
+
+    def small(self, z, f) -> bool:
+        """Test (1) only (cheap: no Jacobian)."""
+        zu, fu = self.user_point(z, f)
+        return residuals_small(zu, fu, self.lb, self.ub, self.tol)
+
+    def judge(self, z, f, jac=None) -> Verdict:
+        """Both tests; ``jac(z)`` evaluates the Jacobian of the problem being solved at z."""
+        zu, fu = self.user_point(z, f)
+        if jac is None:
+            return judge(zu, fu, self.lb, self.ub, self.tol)
+
+        def user_jac(_):
+            J = jac(z)
+            if J is None or self.row is None:
+                return J
+            return sp.diags(1.0 / self.row) @ J @ sp.diags(1.0 / self.col)
+
+        return judge(zu, fu, self.lb, self.ub, self.tol, jac=user_jac)

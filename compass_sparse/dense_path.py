@@ -1,0 +1,197 @@
+"""The small-problem engine: the whole pivotal path in compiled code on a dense LU.
+
+For small n the cost of a path is not arithmetic but the Python work around each pivot
+and each factorization (slot tables, column specs, manager calls: 50-200 us per pivot and
+~1 ms per path, measured on 4-variable problems).  :class:`DensePathEngine` stands where a
+basis manager stands (the solver's manager factory hands it out for n <=
+``DENSE_ENGINE_MAX_N``) and :meth:`PivotalPath.run` hands it the slot table it set up; the
+initial factorization with artificial repair, every pivot (FTRAN, Harris ratio test,
+column replacement, refactorization, complement rule, cycle rule) and the final solution
+check then run in :mod:`compass_sparse._dense_path_kernels` with no Python per pivot.
+Results are returned through the same PivotalPath fields, so the algorithm, the codes and
+the messages are those of the Python loop.
+
+The factorization is a dense LU with partial pivoting and product-form updates, refreshed
+every ``factorization_update_limit`` pivots (see the kernels' docstring) — not an
+explicitly updated inverse.  All work arrays (L, U, etas, breakpoints) are allocated once
+per engine and reused by every path of a solve.
+
+Tolerances: a column whose eliminated pivot is at most ``rank_tolerance`` (1e-9, the dense
+reference basis' repair threshold) times
+max(1, its inf-norm) is dependent and repaired by an artificial; a replacement with
+``|d_s| <= pivot_tolerance * max(1, ||d||_inf)`` (1e-11) is refused and the basis
+refactorized (the sparse manager's tests, same defaults).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import scipy.sparse as sp
+
+from . import _dense_path_kernels as K
+from .basis.types import BasisStats
+
+__all__ = ["DENSE_ENGINE_MAX_N", "DensePathEngine"]
+
+DENSE_ENGINE_MAX_N = 500
+"""Largest n solved by the compiled dense engine (above: the sparse basis manager)."""
+
+PIVOT_CHUNK = 1000
+"""Pivots per compiled call: the time limit is checked between calls."""
+
+_NAMES = "zwvatS"
+
+
+class DensePathEngine:
+    """Runs pivotal paths of a linear MCP with matrix M (n x n) in compiled code.
+
+    Takes the place of the basis manager: ``set_matrix`` / ``set_dense_column`` / ``stats``
+    as the managers, and :meth:`run_path` called by :meth:`PivotalPath.run`."""
+
+    runs_paths = True
+
+    def __init__(self, M, options=None, *, update_limit: int | None = None,
+                 pivot_tolerance: float = 1e-11, rank_tolerance: float = 1e-9):
+        if update_limit is None:
+            update_limit = options.factorization_update_limit if options is not None else 50
+        self.update_limit = max(1, int(update_limit))
+        self.pivot_tolerance = float(pivot_tolerance)
+        self.rank_tolerance = float(rank_tolerance)
+        self.stats = BasisStats()
+        self.set_matrix(M)
+        n = self.n
+        self.L = np.zeros((n, n), order="F")
+        self.U = np.zeros((n, n), order="F")
+        self.prow = np.zeros(n, dtype=np.int64)
+        self.qslot = np.zeros(n, dtype=np.int64)
+        self.eta_s = np.zeros(self.update_limit, dtype=np.int64)
+        self.eta_d = np.zeros((self.update_limit, n))
+        self.work = np.zeros((8, n))
+        self.n_breakpoints = max(1, min(200, 5_000_000 // max(n, 1)))
+        self.bp_t = np.zeros(self.n_breakpoints)
+        self.bp_x = np.zeros((self.n_breakpoints, n))
+        self.best_x = np.zeros(n)
+        self.enter_count = np.zeros((6, n), dtype=np.int64)
+        self.displaced = np.full(n, -1, dtype=np.int64)
+        self.r = np.zeros(n)
+
+    def set_matrix(self, M):
+        A = M.toarray() if sp.issparse(M) else np.asarray(M, dtype=float)
+        self.M = np.asfortranarray(A, dtype=float)
+        self.n = self.M.shape[0]
+
+    def set_dense_column(self, r):
+        self.r = np.ascontiguousarray(r, dtype=float)
+
+    # ------------------------------------------------------------------ the path
+    def _factor(self, path, istate, fstate):
+        st = path.st
+        msg = K.refactor(self.M, path.q, self.r, st.sk, st.si, st.xb, st.zval,
+                         st.art_sign, self.displaced, istate, fstate, self.L, self.U,
+                         self.prow, self.qslot, self.rank_tolerance, path.lb, path.ub,
+                         self.work)
+        return msg
+
+    def run_path(self, path, z, w, v, slack_basis):
+        """Factor, pivot and check on ``path``'s slot table (set by PivotalPath.run).
+        Leaves the path's fields as its own loop would and returns (LinearCode, message)."""
+        from .path import LinearCode
+
+        lb = np.ascontiguousarray(path.lb, dtype=float)
+        ub = np.ascontiguousarray(path.ub, dtype=float)
+        path.lb, path.ub = lb, ub
+        q = path.q = np.ascontiguousarray(path.q, dtype=float)
+        istate = np.zeros(10, dtype=np.int64)
+        fstate = np.zeros(5)
+        istate[K.I_TSLOT] = -1
+        self.displaced[:] = -1
+        st = path.st  # the run's PathState: slot table set by PivotalPath.run
+        msg = self._factor(path, istate, fstate)
+        if slack_basis is not None and (msg != 0 or np.any(st.sk == K.VAR_A)):
+            path._reset_slots(slack_basis, z, w, v)
+            self.displaced[:] = -1
+            msg = self._factor(path, istate, fstate)
+        if msg != 0:
+            self._account(istate)
+            return LinearCode.SINGULAR, self._message(msg, istate, fstate, path)
+        fstate[K.F_T] = 0.0
+        istate[K.I_EK], istate[K.I_EI] = K.VAR_T, 0
+        fstate[K.F_ES], fstate[K.F_EV] = 1.0, 0.0
+        self.enter_count[:] = 0
+        opt = path.opt
+        while True:
+            code, msg = K.path_loop(
+                self.M, q, self.r, lb, ub, st.sk, st.si, st.xb, st.zval,
+                st.art_sign, self.displaced, self.enter_count, istate, fstate, self.L,
+                self.U, self.prow, self.qslot, self.eta_s, self.eta_d, self.best_x, self.bp_t,
+                self.bp_x, self.work, opt.pivot_tolerance, opt.ratio_tolerance,
+                self.rank_tolerance, self.pivot_tolerance, int(path.minor_limit),
+                int(opt.lemke_cycle_limit), PIVOT_CHUNK)
+            if code != K.RUNNING:
+                break
+            if path.deadline is not None and time.perf_counter() > path.deadline:
+                code, msg = K.MINOR_LIMIT, -1
+                break
+        if code == K.SOLVED:
+            code, msg = K.verify(self.M, q, self.r, st.sk, st.si, st.xb, st.zval,
+                                 st.art_sign, self.displaced, istate, fstate, self.L, self.U,
+                                 self.prow, self.qslot, self.rank_tolerance, lb, ub,
+                                 self.work)
+        st.unbounded = msg == K.MSG_RAY_UNBOUNDED
+        if st.unbounded:
+            # z moves along dz: basic z's at their rates, an entering z at its direction
+            # (the rates of the last pivot are still in the work area).
+            ek, ei = int(istate[K.I_EK]), int(istate[K.I_EI])
+            dz = np.zeros(self.n)
+            m = st.sk == K.VAR_Z
+            dz[st.si[m]] = self.work[7][m]
+            if ek == K.VAR_Z:
+                dz[ei] += fstate[K.F_ES]
+            st.ray = (path._current_point()[0], dz)
+        st.t = float(fstate[K.F_T])
+        st.t_slot = int(istate[K.I_TSLOT])
+        st.pivots = int(istate[K.I_PIV])
+        nbp = int(istate[K.I_NBP])
+        st.breakpoints = [(float(self.bp_t[k]), self.bp_x[k].copy()) for k in range(nbp)]
+        if fstate[K.F_BEST_T] > 0.0:
+            st.best = (float(fstate[K.F_BEST_T]), self.best_x.copy())
+        self._account(istate)
+        codes = {K.SOLVED: LinearCode.SOLVED, K.RAY: LinearCode.RAY, K.CYCLE: LinearCode.CYCLE,
+                 K.MINOR_LIMIT: LinearCode.MINOR_LIMIT, K.SINGULAR: LinearCode.SINGULAR,
+                 K.TOLERANCE: LinearCode.TOLERANCE, K.ERROR: LinearCode.ERROR}
+        return codes[int(code)], self._message(msg, istate, fstate, path)
+
+    def _account(self, istate):
+        self.stats.factorizations += int(istate[K.I_NFAC])
+        self.stats.updates += int(istate[K.I_NUPD])
+        self.stats.refused_updates += int(istate[K.I_REFUSED])
+
+    @staticmethod
+    def _message(msg, istate, fstate, path) -> str:
+        ek, ei = int(istate[K.I_EK]), int(istate[K.I_EI])
+        if msg == -1:
+            return "time limit during the path"
+        if msg == K.MSG_NONE:
+            return ""
+        if msg == K.MSG_LIMIT:
+            return f"{int(istate[K.I_PIV])} pivots: minor iteration limit"
+        if msg == K.MSG_CYCLE:
+            return f"{_NAMES[ek]}[{ei}] entered {path.opt.lemke_cycle_limit} times"
+        if msg == K.MSG_RAY_UNBOUNDED:
+            return f"ray: {_NAMES[ek]}[{ei}] unbounded"
+        if msg == K.MSG_TOL:
+            return f"linear residual {fstate[K.F_RES]:.2e} after refactorization"
+        return _MESSAGES[msg]
+
+
+_MESSAGES = {
+    K.MSG_T_ZERO: "t decreased to 0",
+    K.MSG_SING_FACTOR: "the basis could not be factorized",
+    K.MSG_SING_T: "the covering vector is dependent on the basis",
+    K.MSG_SING_SLACK: "slack columns are dependent",
+    K.MSG_SING_ART: "t reached 1 with nonzero artificial variables",
+    K.MSG_NO_DISPLACED: "artificial without a displaced variable",
+    K.MSG_LEAVE_KIND: "unexpected leaving kind",
+    K.MSG_BOUNDED_SLACK: "bounded entering slack",
+}

@@ -1,0 +1,150 @@
+"""Scaling pass: row and column equilibration of the Jacobian at the start point.
+
+With positive diagonal matrices R (rows) and C (columns) the MCP
+
+    l <= z <= u  _|_  F(z)
+
+has exactly the solutions z = C y of the scaled MCP
+
+    l / C <= y <= u / C  _|_  G(y) = R F(C y),
+
+because positive factors keep every sign condition of complementarity (row i of G is
+still paired with variable i).  G's Jacobian R J(C y) C has J's pattern.  A model written
+in badly chosen units (a row in millions next to a row in millionths) has Jacobian rows
+and columns of very different size; the pivotal path's tolerances, the merit function and
+the step tests then weigh the rows unequally, and a row scaled by 1e-6 is all but ignored.
+
+R and C are computed once from J(z0) as PATH does, by equilibration: ``SWEEPS`` sweeps of
+Ruiz's method (divide every row and every column by the square root of its largest
+|entry|), so that the largest |entry| of every non-empty row and column of R J C is close
+to 1.  The factors are rounded to powers of two (scaling is then exact in floating point)
+and kept within [1 / FACTOR_LIMIT, FACTOR_LIMIT].  The pass applies only when J(z0) is
+badly scaled: when the largest row or column norm exceeds the smallest (non-empty) one by
+more than ``SPREAD_TRIGGER``.
+
+The solve's tolerance still refers to the user's problem: a point of the scaled problem
+is accepted only when z = C y meets the acceptance test on F itself
+(see :class:`compass_sparse.acceptance.Acceptance`), and the Result is reported on F.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from .evaluation import Evaluator
+from .problem import MCP
+
+__all__ = ["SPREAD_TRIGGER", "SWEEPS", "FACTOR_LIMIT", "Scaling", "equilibrate", "scale_problem",
+           "ScaledEvaluator"]
+
+SPREAD_TRIGGER = 1e2
+"""Apply the pass when the row or column max-norms of J(z0) spread over more than this."""
+
+SWEEPS = 5
+"""Ruiz equilibration sweeps."""
+
+FACTOR_LIMIT = 2.0 ** 40
+"""Largest row or column factor (and 1 / smallest): about 1e12."""
+
+
+@dataclass
+class Scaling:
+    """z = col * y and G = row * F."""
+
+    row: np.ndarray
+    col: np.ndarray
+    spread_before: float
+    spread_after: float
+
+    def scale_jacobian(self, J) -> sp.csc_matrix:
+        """R J C entry by entry (the stored entries, explicit zeros included, are kept)."""
+        J = sp.csc_matrix(J)
+        cols = np.repeat(np.arange(J.shape[1]), np.diff(J.indptr))
+        return sp.csc_matrix((J.data * self.row[J.indices] * self.col[cols], J.indices.copy(),
+                              J.indptr.copy()), shape=J.shape)
+
+    def summary(self) -> str:
+        return (f"row/column max-norm spread {self.spread_before:.1e} -> "
+                f"{self.spread_after:.1e}")
+
+
+def _maxnorms(A: sp.csc_matrix):
+    absA = abs(A)
+    rows = np.zeros(A.shape[0])
+    cols = np.zeros(A.shape[1])
+    if A.nnz:
+        rows = np.asarray(absA.max(axis=1).todense()).ravel()
+        cols = np.asarray(absA.max(axis=0).todense()).ravel()
+    return rows, cols
+
+
+def _spread(v) -> float:
+    v = v[v > 0]
+    return float(v.max() / v.min()) if v.size else 1.0
+
+
+def spread(J) -> float:
+    """max / min of the non-zero row and column max-norms of J (1 for a well-scaled J)."""
+    r, c = _maxnorms(sp.csc_matrix(J))
+    return max(_spread(r), _spread(c))
+
+
+def equilibrate(J) -> Scaling:
+    """Power-of-two factors with R J C equilibrated (see the module docstring)."""
+    A = sp.csc_matrix(J, copy=True)
+    n = A.shape[0]
+    row = np.ones(n)
+    col = np.ones(n)
+    before = spread(A)
+    for _ in range(SWEEPS):
+        r, c = _maxnorms(sp.diags(row) @ A @ sp.diags(col))
+        row /= np.sqrt(np.where(r > 0, r, 1.0))
+        col /= np.sqrt(np.where(c > 0, c, 1.0))
+    row = np.clip(2.0 ** np.round(np.log2(row)), 1.0 / FACTOR_LIMIT, FACTOR_LIMIT)
+    col = np.clip(2.0 ** np.round(np.log2(col)), 1.0 / FACTOR_LIMIT, FACTOR_LIMIT)
+    after = spread(sp.diags(row) @ A @ sp.diags(col))
+    return Scaling(row, col, before, after)
+
+
+def scale_problem(problem: MCP, s: Scaling) -> MCP:
+    """The scaled MCP G(y) = R F(C y) on l / C <= y <= u / C (names and pattern kept); its
+    evaluations go through the problem's evaluator (shared memo and counters)."""
+    ev = ScaledEvaluator(problem.evaluator, s)
+    out = MCP.from_evaluator(ev, problem.lb / s.col, problem.ub / s.col, problem.x0 / s.col,
+                             var_names=problem.var_names, eqn_names=problem.eqn_names)
+    return out
+
+
+class ScaledEvaluator(Evaluator):
+    """G(y) = R F(C y) and R J(C y) C through the parent evaluator's counted calls."""
+
+    def __init__(self, parent: Evaluator, s: Scaling):
+        super().__init__(None, parent.jac_mode, parent.n, pattern=parent.pattern,
+                         fd_step=parent.fd_step, ub=parent.ub / s.col,
+                         row_label=parent.row_label, var_label=parent.var_label,
+                         counters=parent.counters)
+        self.parent = parent
+        self.scaling = s
+        self.pattern_declared = parent.pattern_declared
+
+    def _call_F(self, y):  # finite differences on G go through the parent's primitive
+        return self.scaling.row * self.parent._call_F(self.scaling.col * y)[0], None
+
+    def F(self, y) -> np.ndarray:
+        return self.scaling.row * self.parent.F(self.scaling.col * y)
+
+    def J(self, y, f=None) -> sp.csc_matrix:
+        if self.jac_mode is None:
+            return super().J(y, f)
+        J = self.parent.J(self.scaling.col * y)
+        return self._fix_pattern(self.scaling.scale_jacobian(J))
+
+    def pin(self, y):
+        self.parent.pin(self.scaling.col * y)
+        super().pin(y)
+
+    def forget(self):
+        self.parent.forget()
+        super().forget()

@@ -1,0 +1,202 @@
+"""The small-problem engine (compass_sparse.dense_path): its LU kernels against numpy, and
+its paths against the Python pivot loop on the dense reference basis (same algorithm:
+same codes, pivots and points) on random, degenerate and rank-deficient linear MCPs.
+
+The ordinary path tests (tests/test_path.py) run with this engine as a third manager.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import compass_sparse.generators as gen
+from compass_sparse import MCP, Options, dense_path, solve_lcp, solve_mcp
+from compass_sparse import _dense_path_kernels as K
+from compass_sparse.basis.dense import DenseBasis
+from compass_sparse.dense_path import DensePathEngine
+from compass_sparse.path import LinearCode, PivotalPath
+
+
+def _lu(B_slots, M, r=None):
+    """Factor a slot table (kinds, indices) with the engine's kernels."""
+    sk, si = (np.asarray(a, dtype=np.int64) for a in B_slots)
+    n = sk.size
+    r = np.zeros(n) if r is None else r
+    L, U = np.zeros((n, n), order="F"), np.zeros((n, n), order="F")
+    prow, qslot = np.zeros(n, np.int64), np.zeros(n, np.int64)
+    rs, rr = np.zeros(n, np.int64), np.zeros(n, np.int64)
+    nrep = K.factor(np.asfortranarray(M), r, sk, si, np.ones(n, np.int64), L, U, prow, qslot,
+                    1e-9, rs, rr, False)
+    return nrep, (L, U, prow, qslot), rs[:nrep], rr[:nrep]
+
+
+def _basis(sk, si, M, r):
+    n = sk.size
+    B = np.zeros((n, n))
+    for k in range(n):
+        if sk[k] == K.VAR_Z:
+            B[:, k] = M[:, si[k]]
+        elif sk[k] == K.VAR_T:
+            B[:, k] = r
+        else:
+            B[si[k], k] = -1.0 if sk[k] in (K.VAR_W, K.VAR_S) else 1.0
+    return B
+
+
+@pytest.mark.parametrize("n,seed", [(1, 0), (5, 1), (30, 2), (80, 3)])
+def test_lu_solve_and_updates_agree_with_numpy(n, seed):
+    rng = np.random.default_rng(seed)
+    M = rng.standard_normal((n, n))
+    r = rng.standard_normal(n)
+    sk = rng.choice([K.VAR_Z, K.VAR_W, K.VAR_V], size=n).astype(np.int64)
+    sk[rng.integers(n)] = K.VAR_T
+    si = np.arange(n, dtype=np.int64)
+    nrep, (L, U, prow, qslot), _, _ = _lu((sk, si), M, r)
+    assert nrep == 0
+    B = _basis(sk, si, M, r)
+    b = rng.standard_normal(n)
+    x, w = np.zeros(n), np.zeros(n)
+    K.lu_solve(L, U, prow, qslot, b, x, w)
+    assert np.max(np.abs(B @ x - b)) <= 1e-10 * (1 + np.abs(B).max() * np.abs(x).max())
+    # Product-form updates: replace slots one after another by M columns, compare solves.
+    limit = 5
+    eta_s, eta_d = np.zeros(limit, np.int64), np.zeros((limit, n))
+    Mf = np.asfortranarray(M)
+    for k in range(min(limit, n)):
+        j = int(rng.integers(n))
+        a = M[:, j].copy()
+        d = np.zeros(n)
+        K.ftran(L, U, prow, qslot, eta_s, eta_d, k, a, d, w)
+        slot = int(np.argmax(np.abs(d)))  # a regular replacement
+        eta_s[k], eta_d[k] = slot, d
+        sk[slot], si[slot] = K.VAR_Z, j
+        B = _basis(sk, si, Mf, r)
+        K.ftran(L, U, prow, qslot, eta_s, eta_d, k + 1, b, x, w)
+        assert np.max(np.abs(B @ x - b)) <= 1e-8 * (1 + np.abs(B).max() * np.abs(x).max())
+
+
+def test_factor_repairs_dependent_columns_with_artificials_on_their_rows():
+    """Two equal M columns basic together: the second is dependent; its artificial takes
+    the slot on the column's home row, and the repaired basis is regular."""
+    n = 6
+    rng = np.random.default_rng(4)
+    M = rng.standard_normal((n, n))
+    M[:, 4] = M[:, 1]
+    sk = np.full(n, K.VAR_Z, np.int64)
+    si = np.arange(n, dtype=np.int64)
+    L, U = np.zeros((n, n), order="F"), np.zeros((n, n), order="F")
+    prow, qslot = np.zeros(n, np.int64), np.zeros(n, np.int64)
+    rs, rr = np.zeros(n, np.int64), np.zeros(n, np.int64)
+    nrep = K.factor(np.asfortranarray(M), np.zeros(n), sk, si, np.ones(n, np.int64), L, U,
+                    prow, qslot, 1e-9, rs, rr, True)
+    assert nrep == 1 and rs[0] == 4 and rr[0] == 4
+    sk[4] = K.VAR_A
+    B = _basis(sk, si, M, np.zeros(n))
+    B[4, 4] = 1.0
+    assert np.linalg.matrix_rank(B) == n
+
+
+def _both(lcp, x=None, options=None, **kw):
+    M, q, lb, ub = lcp
+    x = np.clip(np.zeros(q.size), lb, ub) if x is None else x
+    opt = options or Options()
+    out = []
+    for mgr in (DenseBasis, DensePathEngine):
+        res = PivotalPath(M, q, lb, ub, mgr(M), opt).run(x, **kw)
+        out.append(res)
+    return out
+
+
+def _assert_same_path(py, cc, M, q):
+    assert cc.code is py.code, (py.code, cc.code, py.message, cc.message)
+    assert cc.message == py.message
+    assert cc.pivots == py.pivots
+    assert cc.artificials == py.artificials
+    assert abs(cc.t - py.t) <= 1e-9
+    scale = 1.0 + np.abs(py.z).max(initial=0.0)
+    assert np.max(np.abs(cc.z - py.z), initial=0.0) <= 1e-8 * scale
+    assert np.array_equal(cc.basis.basic, py.basis.basic)
+    assert cc.unbounded == py.unbounded
+    if py.unbounded:  # the same ray: base point and direction of z
+        assert np.allclose(cc.ray_base, py.ray_base, rtol=1e-8, atol=1e-8)
+        assert np.allclose(cc.ray, py.ray, rtol=1e-8, atol=1e-8)
+
+
+@pytest.mark.parametrize("structure", ["grid", "banded"])
+@pytest.mark.parametrize("bounds", ["ncp", "box", "mixed"])
+@pytest.mark.parametrize("n,seed", [(12, 0), (45, 1), (100, 2)])
+def test_same_path_as_python_loop_on_p_matrix_lcps(structure, bounds, n, seed):
+    g = gen.p_matrix_lcp(n, structure, seed, bounds)
+    py, cc = _both(g.lcp)
+    _assert_same_path(py, cc, *g.lcp[:2])
+    assert cc.code is LinearCode.SOLVED
+    assert np.max(np.abs(cc.z - g.solution)) <= 1e-8
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("ray_start", [False, True])
+def test_same_path_on_degenerate_and_rank_deficient_lcps(seed, ray_start):
+    for g in (gen.obstacle_problem(8, seed, degenerate_fraction=0.5),
+              gen.monotone_lcp(30, seed, rank=10),
+              gen.duplicated_columns_lcp(40, seed, bounds="mixed")):
+        py, cc = _both(g.lcp, ray_start=ray_start)
+        _assert_same_path(py, cc, *g.lcp[:2])
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_same_status_on_infeasible_lcp(seed):
+    g = gen.infeasible_lcp(20, seed)
+    py, cc = _both(g.lcp, ray_start=True)
+    _assert_same_path(py, cc, *g.lcp[:2])
+    assert cc.code is LinearCode.RAY
+
+
+def test_same_limits_cycle_and_minor():
+    g = gen.p_matrix_lcp(60, "grid", 5, "mixed")
+    for opt in (Options(lemke_cycle_limit=1), Options(minor_iteration_limit=3)):
+        py, cc = _both(g.lcp, options=opt)
+        _assert_same_path(py, cc, *g.lcp[:2])
+
+
+def test_engine_path_stops_at_the_time_limit_between_pivot_chunks(monkeypatch):
+    """The deadline is checked between compiled chunks of pivots: with a chunk of one
+    pivot and a deadline in the past the path stops after one pivot."""
+    import time
+
+    monkeypatch.setattr(dense_path, "PIVOT_CHUNK", 1)
+    g = gen.p_matrix_lcp(50, "grid", 1, "ncp")
+    M, q, lb, ub = g.lcp
+    res = PivotalPath(M, q, lb, ub, DensePathEngine(M), Options(),
+                      deadline=time.perf_counter() - 1.0).run(np.zeros(q.size))
+    assert res.code is LinearCode.MINOR_LIMIT
+    assert res.message == "time limit during the path"
+    assert res.pivots == 1
+
+
+def test_solves_agree_with_and_without_the_engine(monkeypatch):
+    """solve_lcp and solve_mcp give the same statuses and points with the compiled engine
+    and with the Python loop on the dense reference basis."""
+    cases = [gen.p_matrix_lcp(40, "banded", 3, "mixed"), gen.obstacle_problem(7, 2),
+             gen.duplicated_columns_lcp(30, 1, bounds="box")]
+    points = {}
+    for thr in (dense_path.DENSE_ENGINE_MAX_N, 0):
+        monkeypatch.setattr(dense_path, "DENSE_ENGINE_MAX_N", thr)
+        points[thr] = []
+        for g in cases:
+            M, q, lb, ub = g.lcp
+            r = solve_lcp(M, q, lb, ub)
+            assert r.success, r.message
+            points[thr].append(r.x)
+            Md = M.toarray()
+
+            def F(z, Md=Md, q=q):
+                return Md @ z + q + 0.1 * z**3 * (z > 0)
+
+            def J(z, Md=Md):
+                return Md + np.diag(0.3 * z**2 * (z > 0))
+
+            rm = solve_mcp(MCP(F, J, lb, ub, np.clip(np.zeros(q.size), lb, ub)))
+            assert rm.success, rm.message
+            points[thr].append(rm.x)
+    for a, b in zip(points[0], points[dense_path.DENSE_ENGINE_MAX_N]):
+        assert np.max(np.abs(a - b)) <= 1e-6 * (1 + np.abs(b).max())

@@ -1,0 +1,205 @@
+"""Faults end in a true status with the best point: exceptions and Ctrl-C in F, failures at
+the start point, a failing callback, the time limit on every looping path.
+
+Time limits are tested on a simulated clock (every F evaluation advances it by COST
+seconds), never on the wall clock: the property is that the solve stops within 10% of the
+limit plus one evaluation, whatever the machine's load.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from compass_sparse import MCP, MCPSolver, PointStatus, Status, solve_lcp, solve_mcp
+from compass_sparse.merit import fb_phi
+
+N = 12
+_rng = np.random.default_rng(0)
+_B = _rng.normal(size=(N, N))
+M = _B @ _B.T / N + np.eye(N)
+q = _rng.normal(size=N)
+
+
+def F_ok(x):
+    return M @ x + q + 0.1 * x ** 3
+
+
+def J_ok(x):
+    return sp.csc_matrix(M + np.diag(0.3 * x ** 2))
+
+
+def failing_on_call(k, exc):
+    calls = {"i": 0}
+
+    def F(x):
+        calls["i"] += 1
+        if calls["i"] == k:
+            raise exc("boom")
+        return F_ok(x)
+
+    return F
+
+
+@pytest.mark.parametrize("k", [2, 3, 4, 5])
+@pytest.mark.parametrize("exc", [ValueError, KeyboardInterrupt])
+def test_F_raising_on_its_kth_call_gives_a_result_not_a_crash(k, exc):
+    F = failing_on_call(k, exc)
+    r = solve_mcp(F, J_ok, 0.0, np.inf, np.zeros(N))
+    if exc is KeyboardInterrupt:
+        assert r.status is Status.USER_INTERRUPT
+    else:
+        assert r.status is Status.SOLVED
+    assert np.all(np.isfinite(r.x))
+    # the reported residual is that of the returned point
+    f = F_ok(r.x)
+    assert np.linalg.norm(fb_phi(r.x, f, 0.0, np.inf)) == pytest.approx(r.residual.fb_norm)
+
+
+def test_ctrl_c_at_the_first_evaluation_of_a_solve_returns_the_start_point():
+    F = failing_on_call(1, KeyboardInterrupt)
+    r = solve_mcp(MCP(F, J_ok, 0.0, np.inf, np.zeros(N), check=False))
+    assert r.status is Status.USER_INTERRUPT and r.point_status is PointStatus.START_POINT
+
+
+def test_domain_error_at_a_new_start_point_is_a_status_not_an_exception():
+    def F(x):
+        if np.any(x > 5):
+            raise ValueError("log of a negative number")
+        return F_ok(x)
+
+    P = MCP(F, J_ok, 0.0, np.inf, np.zeros(N))
+    r = MCPSolver(P).solve(x0=np.full(N, 10.0))
+    assert r.status is Status.DOMAIN_ERROR and "log of a negative" in r.message
+    r = solve_mcp(MCP(F, J_ok, 0.0, np.inf, np.full(N, 10.0), check=False))
+    assert r.status is Status.DOMAIN_ERROR
+
+
+def test_callback_exception_stops_with_the_best_point_not_raw():
+    seen = []
+
+    def cb(info):
+        seen.append(info.residual)
+        raise RuntimeError("plotting failed")
+
+    r = solve_mcp(F_ok, J_ok, 0.0, np.inf, np.full(N, 3.0), callback=cb)
+    assert r.status is Status.CALLBACK_STOP and "plotting failed" in r.message
+    assert r.residual.fb_norm <= min(seen) + 1e-12
+
+
+@pytest.mark.parametrize("seed", [0, 1, 6])
+def test_best_point_includes_the_crash_trial_points(seed):
+    # Stopped by the callback at the first major iteration, after the crash: the returned
+    # point is the best of every point where F was evaluated, crash trial points included.
+    rng = np.random.default_rng(seed)
+    B = rng.normal(size=(N, N))
+    A = B - B.T + 0.2 * np.eye(N) + 0.3 * B
+    c = rng.normal(size=N) * 3
+    evaluated = []
+
+    def F(x):
+        f = A @ x + c + 0.5 * np.sin(3 * x) * x + 0.1 * x ** 3
+        evaluated.append(float(np.linalg.norm(fb_phi(x, f, 0.0, np.inf))))
+        return f
+
+    def J(x):
+        return sp.csc_matrix(A + np.diag(0.5 * np.sin(3 * x) + 1.5 * x * np.cos(3 * x)
+                                         + 0.3 * x ** 2))
+
+    r = solve_mcp(F, J, 0.0, np.inf, np.ones(N), callback=lambda info: True)
+    assert r.status is Status.CALLBACK_STOP and r.crash_iterations >= 0
+    assert r.residual.fb_norm <= min(evaluated) * (1 + 1e-12)
+
+
+def test_point_status_says_start_point_when_nothing_better_was_found():
+    # F = 1 + x^2 at x = 0 is already the best point (a stationary point of the merit)
+    r = solve_mcp(lambda x: 1 + x ** 2, lambda x: sp.csc_matrix(np.diag(2 * x)), -np.inf,
+                  np.inf, np.zeros(3), options={"restart_limit": 1})
+    assert not r.success
+    assert (r.point_status is PointStatus.START_POINT) == bool(np.array_equal(r.x, np.zeros(3)))
+
+
+# ------------------------------------------------------------------ time limits
+COST = 0.05
+
+
+class Clock:
+    """A simulated clock: F evaluations advance it."""
+
+    def __init__(self):
+        self.now = 1000.0
+
+    def __call__(self):
+        return self.now
+
+
+@pytest.fixture
+def clock(monkeypatch):
+    c = Clock()
+    monkeypatch.setattr(time, "perf_counter", c)
+    return c
+
+
+def _costly(F, clock):
+    def G(x):
+        clock.now += COST
+        return F(x)
+
+    return G
+
+
+def _assert_within_limit(r, clock, start, limit):
+    assert r.status is Status.TIME_LIMIT or "time limit" in r.message, r.message
+    assert clock.now - start <= 1.1 * limit + COST + 1e-9, clock.now - start
+
+
+@pytest.mark.parametrize("searchtype", ["line", "arc"])
+@pytest.mark.parametrize("lm", [True, False])
+def test_time_limit_holds_through_watchdog_and_fallback_loops(clock, searchtype, lm):
+    # F = x^2 + 1 has no zero; from next to its merit's stationary point x = 0 the Newton
+    # point is far away and the watchdog search backtracks through ~60 trial points before
+    # the merit decreases (1.55 s on a 1 s limit before the limit was checked there), then
+    # the fallbacks and restarts loop until the limit
+    F = _costly(lambda x: x ** 2 + 1.0, clock)
+    J = lambda x: sp.csc_matrix(np.diag(2 * x))  # noqa: E731
+    start = clock.now
+    r = solve_mcp(F, J, -np.inf, np.inf, np.full(1, 1e-3),
+                  options={"time_limit": 1.0, "restart_limit": 10 ** 6,
+                           "nms_searchtype": searchtype, "lm_fallback": lm})
+    _assert_within_limit(r, clock, start, 1.0)
+
+
+def test_time_limit_holds_when_solve_lcp_hands_over_to_the_general_method(clock):
+    # M = -I, q = -1 on z >= 0 has no solution and M is not monotone: the path's ray proves
+    # nothing and the general method takes over, within what is left of the limit
+    n = 3
+    Mn = -sp.identity(n, format="csc")
+    qn = -np.ones(n)
+    import compass_sparse.solve as solve_module
+
+    real = solve_module.MCP
+
+    def costly_mcp(F, *a, **k):
+        return real(_costly(F, clock), *a, **k)
+
+    try:
+        solve_module.MCP = costly_mcp
+        start = clock.now
+        r = solve_lcp(Mn, qn, options={"time_limit": 1.0, "restart_limit": 10 ** 6})
+    finally:
+        solve_module.MCP = real
+    _assert_within_limit(r, clock, start, 1.0)
+
+
+def test_time_limit_holds_through_the_crash_searches(clock):
+    # a crash that keeps halving its step (no solution: F_i = x_i^2 + 1 + small coupling)
+    C = 0.01 * _B
+    F = _costly(lambda x: x ** 2 + 1.0 + C @ x, clock)
+    J = lambda x: sp.csc_matrix(np.diag(2 * x) + C)  # noqa: E731
+    start = clock.now
+    r = solve_mcp(F, J, -np.inf, np.inf, np.full(N, 1e-3),
+                  options={"time_limit": 0.5, "restart_limit": 10 ** 6,
+                           "crash_minimum_dimension": 1, "crash_iteration_limit": 200})
+    _assert_within_limit(r, clock, start, 0.5)
