@@ -77,12 +77,14 @@ def _repeat(once, repeats):
     return rec
 
 
-def task_ours(family, n, seed, time_limit, tol, repeats=1):
+def task_ours(family, n, seed, time_limit, tol, repeats=1, homotopy=None):
     from compass_sparse import solve_mcp
 
     g = _instance(family, n, seed)
     info = g.info
     opts = {"time_limit": float(time_limit), "convergence_tolerance": float(tol)}
+    if homotopy is not None:
+        opts["homotopy"] = homotopy
 
     def once():
         t0 = time.perf_counter()
@@ -246,6 +248,10 @@ def main(argv=None):
                     help="append to --out and skip solves already in it")
     ap.add_argument("--summarize", type=Path, default=None, metavar="CSV",
                     help="print the tables of an existing CSV and exit")
+    ap.add_argument("--path-only", action="store_true",
+                    help="PATH only (e.g. to add PATH's rows to a CSV with --resume)")
+    ap.add_argument("--homotopy", choices=("auto", "off", "only"), default=None,
+                    help="compass_sparse's homotopy option (default: the solver's default)")
     ap.add_argument("--tolerances", action="store_true",
                     help="time against achieved error for convergence_tolerance 1e-4..1e-12")
     a = ap.parse_args(argv)
@@ -261,6 +267,8 @@ def main(argv=None):
     if not a.no_path and not use_path:
         print("# PATH (gamspy) not available: compass_sparse only", flush=True)
     solvers = [s for s in SOLVERS if s == "compass_sparse" or use_path]
+    if a.path_only:
+        solvers = [s for s in solvers if s == "PATH"]
     tl = a.time_limit if a.time_limit is not None else (20.0 if a.quick else 60.0)
     hard = 2.0 * tl + 30.0
     worker = Worker(warm_up, dict(with_path=use_path))
@@ -308,6 +316,7 @@ def main(argv=None):
     write_json(out.with_suffix(".json"), dict(machine=info, time_limit=tl, instances=K,
                                               sizes=sizes, families=a.families,
                                               family2_max=a.family2_max, seed0=a.seed0,
+                                              homotopy=a.homotopy,
                                               success_tol=SUCCESS_TOL))
     t_start = time.perf_counter()
     # instance-major order: every pass over k adds one instance to every cell
@@ -320,8 +329,10 @@ def main(argv=None):
                 for s in solvers:
                     if (fam, n, seed, s) in done:
                         continue
+                    extra = ({} if s != "compass_sparse" or a.homotopy is None
+                             else dict(homotopy=a.homotopy))
                     rec = run_task(worker, TASKS[s], s, hard, family=fam, n=n, seed=seed,
-                                   time_limit=tl, tol=1e-6, repeats=a.repeats)
+                                   time_limit=tl, tol=1e-6, repeats=a.repeats, **extra)
                     rec.update(family=fam, n=n, seed=seed, tol=1e-6, solver=s)
                     log.write(rec)
                     rows.append(rec)

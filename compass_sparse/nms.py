@@ -34,7 +34,8 @@ Major-iteration log (verbosity >= 2), fixed-width columns as in PATH:
 path, func/grad = cumulative F/J evaluations, residual = ||Phi_FB||_2, type = two
 letters: the path's code (S solved, R ray, C cycle, I pivot limit, N singular basis,
 T tolerance lost, E error) and the step (D d-step, M m-step, O both tests passed,
-W watchdog, G projected gradient, L Levenberg–Marquardt), prox = eps, inorm = ||Phi||_inf
+W watchdog, G projected gradient, L Levenberg–Marquardt; ``-H``: a homotopy pass, counted
+as one major iteration), prox = eps, inorm = ||Phi||_inf
 with the worst row's name.  Crash lines: ``crash iter changes size residual step``.
 """
 from __future__ import annotations
@@ -556,8 +557,15 @@ class NMSSolver:
         schedule = RestartSchedule(self.opt0)
         self._last_J = None
         try:
+            if self.opt0.homotopy == "only":
+                self._consider(start.z, start.f, start.phi, start.psi)
+                raise _Stop(Status.NO_PROGRESS, self._homotopy(z0))
             while True:
                 why = self._run(start, opt)
+                if (self.opt0.homotopy == "auto" and "homotopy" not in self.passes and
+                        self.restarts >= min(self.opt0.homotopy_after_restarts,
+                                             self.opt0.restart_limit)):
+                    why = self._homotopy(z0)
                 if self.restarts >= self.opt0.restart_limit:
                     status, message = Status.NO_PROGRESS, f"{why}; restart limit reached"
                     break
@@ -588,10 +596,26 @@ class NMSSolver:
             crash_iterations=self.crash_its, restarts=self.restarts,
             gradient_steps=self.grad_steps, lm_steps=self.lm_steps,
             factorizations=(bm.stats.factorizations if bm is not None else 0)
-            + self.passes["crash"].factorizations,
+            + self.passes["crash"].factorizations
+            + self.passes.get("homotopy", PassStats()).factorizations,
             updates=bm.stats.updates if bm is not None else 0,
             basis=self.basis, passes=self.passes,
         )
+
+    def _homotopy(self, start):
+        """The homotopy pass from ``start`` (a solution stops the solve from inside)."""
+        from .homotopy import HomotopyStatus, homotopy_pass
+
+        polish = None if self.opt0.homotopy == "only" else (lambda z: self._run(z, self.opt0))
+        self.nit += 1  # the pass is one major iteration of the log and the history
+        try:
+            out = homotopy_pass(self, start, polish=polish)
+        finally:
+            self.history.append(Iteration(self.nit, self.best.fbn, "-H", 0, 0.0,
+                                          time.perf_counter() - self._t_start))
+        if out.status is HomotopyStatus.TIME_LIMIT:
+            raise _Stop(Status.TIME_LIMIT, "time limit reached on the homotopy path")
+        return f"homotopy {out.status.value} ({out.message})"
 
     def _diagnose(self, status, message):
         """A failed solve names the rows that keep the merit up; one that converged to a

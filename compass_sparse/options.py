@@ -26,6 +26,16 @@ PATH_NAMES: dict[str, str | None] = {
     "presolve": "preprocess",
     "verbosity": "output",  # PATH: on/off; our levels select the summary and the logs
     "lm_fallback": None,
+    "homotopy": None,  # PATH has no homotopy fallback
+    "homotopy_after_restarts": None,
+    "homotopy_path_limit": None,
+    "homotopy_step_limit": None,
+    "homotopy_smoothing": None,
+    "homotopy_initial_step": None,
+    "homotopy_maximum_step": None,
+    "homotopy_step_minimum": None,
+    "homotopy_end_lambda": None,
+    "homotopy_divergence_bound": None,
     "lm_initial_mu": None,
     "seed": None,
     "progress": None,
@@ -151,6 +161,39 @@ class Options(OptionsMixin):
         "restarts 3-8x cheaper; waiting 10 in the first four runs solved a few more "
         "instances but tripled the median time of a success)", lo=1)
     seed: int = _opt(0, "seed of the random restart points", lo=0)
+
+    # --- homotopy fallback (Billups & Watson 2002; module compass_sparse.homotopy) --------
+    homotopy: str = _opt(
+        "auto", "probability-one homotopy on the smoothed normal map: 'auto' (entered when "
+        "NMS and its restarts stall, see homotopy_after_restarts), 'off', or 'only' (the "
+        "homotopy alone, with its Newton end game, instead of NMS)",
+        choices=("auto", "off", "only"))
+    homotopy_after_restarts: int = _opt(
+        3, "'auto' enters the homotopy after this many restarts failed (3: after PATH's "
+        "three restart configurations); later restarts continue if it fails", lo=0)
+    homotopy_path_limit: int = _opt(
+        3, "paths followed per homotopy pass: the first from the start point, the others "
+        "from random points of the box", lo=1)
+    homotopy_step_limit: int = _opt(
+        3000, "accepted predictor-corrector steps per path", lo=1)
+    homotopy_smoothing: float = _opt(
+        1.0, "initial smoothing mu0 of the projection, relative to the median finite box "
+        "width; mu = mu0 (1 - lam) goes to 0 at the end of the path (on the thesis families "
+        "at n = 100, 1.0 took 3-7x fewer steps than 0.1 and 0.01; 3 and 10 were alike)",
+        lo=0.0, lo_open=True)
+    homotopy_initial_step: float = _opt(
+        0.01, "first arclength step, relative to 1 + ||a||_inf", lo=0.0, lo_open=True)
+    homotopy_maximum_step: float = _opt(
+        1.0, "largest arclength step, relative to 1 + ||x||_inf", lo=0.0, lo_open=True)
+    homotopy_step_minimum: float = _opt(
+        1e-10, "a path whose corrector fails at this step (relative to 1 + ||a||_inf) ends",
+        lo=0.0, lo_open=True)
+    homotopy_end_lambda: float = _opt(
+        0.9, "from this lam on every path point is handed to Newton's method on the normal "
+        "map (Speight's hybrid); a miss moves the switch to 1 - (1 - lam) / 10",
+        lo=0.0, hi=1.0)
+    homotopy_divergence_bound: float = _opt(
+        1e4, "a path with ||x||_inf above this times (1 + ||a||_inf) has diverged", lo=1.0)
 
     # --- passes -------------------------------------------------------------------------
     presolve: bool = _opt(True, "run the preprocessor when the problem has linear structure")

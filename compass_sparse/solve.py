@@ -308,7 +308,7 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
         status = Status.SOLVED if at_solution else Status.MAJOR_ITERATION_LIMIT
         msg = ("the start point is a solution" if status is Status.SOLVED
                else "major_iteration_limit = 0: start point evaluated")
-        for k in ("crash", "path", "fallback"):
+        for k in ("crash", "path", "fallback", "homotopy"):
             passes[k] = PassStats(reason="start point already solved"
                                   if status is Status.SOLVED else "major_iteration_limit = 0")
         return _finish(problem, pre, status, msg, z0, opt, t0, passes,
@@ -333,6 +333,9 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
         out = solver.solve(Point(z0, f0, phi0, fb_psi(phi0), J0))
     passes.update(out.passes)
     passes["nms"] = PassStats(ran=True, iterations=out.nit, time=time.perf_counter() - tn)
+    passes.setdefault("homotopy", PassStats(
+        reason="homotopy off" if opt.homotopy == "off" else "NMS did not stall"
+        if out.status is Status.SOLVED else f"not reached ({out.status.name.lower()})"))
     zb, fb = out.best.z, out.best.f
     if sc is not None:  # back to the user's units
         zb, fb = sc.col * zb, fb / sc.row

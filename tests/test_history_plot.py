@@ -32,7 +32,7 @@ def test_history_step_types_are_the_logs_two_letter_codes():
     r = cs.solve_mcp(_thesis(50, seed=4))
     codes = [e.step for e in r.history[1:] if e.step]
     assert codes, "at least one logged major iteration"
-    assert all(len(c) == 2 and c[0] in "SRCINTE-" and c[1] in "DMOWGL" for c in codes)
+    assert all(len(c) == 2 and c[0] in "SRCINTE-" and c[1] in "DMOWGLH" for c in codes)
 
 
 def test_history_is_none_when_the_newton_method_never_ran():

@@ -1,0 +1,563 @@
+"""Probability-one homotopy on the smoothed normal map: the fallback when the stabilized
+Newton method stalls at a stationary point of its merit function (Billups & Watson,
+SIAM J. Optim. 12, 2002; Zhou & Yu, J. Ind. Manag. Optim. 7, 2011; Speight 1999).
+
+The equation
+------------
+For the box B = [l, u] the normal map F_B(x) = F(pi(x)) + x - pi(x) vanishes exactly when
+z = pi(x) solves the MCP (thesis §3.1).  It is only piecewise smooth, so we follow a
+smoothed version.  With the smoothed plus function
+
+    s_mu(r) = (r + sqrt(r^2 + 4 mu^2)) / 2       (Chen-Harker-Kanzow-Smale; s_0 = max(r, 0))
+
+the smoothed projection is, row by row,
+
+    both bounds   p_mu(x) = l + s_mu(x - l) - s_mu(x - u)
+    lower only    p_mu(x) = l + s_mu(x - l)
+    upper only    p_mu(x) = u - s_mu(u - x)
+    free          p_mu(x) = x,
+
+smooth in (x, mu) for mu > 0 with 0 < d p_mu / dx < 1 on bounded rows, and p_0 = pi.  The
+smoothed normal map is G_mu(x) = F(p_mu(x)) + x - p_mu(x), with Jacobian
+G_x = J(p) D + I - D, D = diag(p_mu'(x)).
+
+The homotopy
+------------
+For a start point a (random in the box) and smoothing driven to 0 along the path,
+
+    H_a(x, lam) = lam G_{mu(lam)}(x) + (1 - lam)(x - a),    mu(lam) = mu0 (1 - lam).
+
+At lam = 0 the unique zero is x = a with H_x = I.  Because dH/da = -(1 - lam) I has full
+rank for lam < 1, the parametrized Sard theorem says that for almost every a the zero set
+of H_a in [0, 1) x R^n contains a smooth curve gamma_a starting at (a, 0) with no
+bifurcations (this is the "probability one").  When the box is bounded, x - p_mu(x) points
+outwards and F(p_mu(x)) stays bounded, so H_a has no zeros with large ||x||: gamma_a is
+bounded and reaches lam = 1, where its limit points x* solve F_B(x*) = 0.  With infinite
+bounds the curve stays bounded when the MCP has no "solution at infinity" (Zhou & Yu's
+condition); otherwise it can diverge, and that is reported (``HomotopyStatus.DIVERGED``).
+
+Path tracking
+-------------
+gamma_a is followed in its arclength s (so lam may decrease: turning points are passed
+without special treatment) by a predictor-corrector method:
+
+* tangent: the unit kernel vector of DH = [H_x, H_lam], from the bordered system
+  [[H_x, H_lam], [v^T]] w = e_{n+1} with v the previous tangent, oriented so that
+  w^T v > 0 (at the start v = e_{n+1}, so lam increases first);
+* predictor: Euler step y_p = y + h tau;
+* corrector: chord Newton iterations on {H(y) = 0, v^T (y - y_p) = 0} with the bordered
+  matrix factorized at the last accepted point (one factorization per accepted step serves
+  both the tangent and the corrector);
+* step control (after Allgower & Georg): a corrector whose corrections do not contract
+  (ratio > ``CONTRACTION_MAX``), whose first correction is long compared with the step, or
+  that needs more than ``CORRECTOR_ITERATIONS`` iterations halves h and retries; an
+  accepted step rescales h by the observed contraction and first correction against
+  their nominal values (at most doubling it); h below ``homotopy_step_minimum`` ends the
+  path.  Points are followed to the relative accuracy ``CORRECTOR_TOLERANCE`` only.
+
+The bordered matrix is factorized densely (LAPACK) when the Jacobian is dense or small and
+by SuperLU otherwise (the border adds one dense row and column).
+
+End game (Speight's hybrid)
+---------------------------
+Near the end of the path (lam >= ``homotopy_end_lambda``) every accepted point is handed to
+Newton's method on the piecewise smooth normal map, x+ = x - (J D_B + I - D_B)^{-1} F_B(x),
+D_B the 0/1 diagonal of pi' (Robinson's normal-map Newton), accepting only decreases of
+||F_B||.  If Newton does not reach the tolerance the path resumes with a later switch
+(the gap 1 - lam shrinks tenfold).  The caller may also pass a ``polish`` function (the
+stabilized Newton method) that receives the end point of the path.
+
+Every accepted path point and every end-game point is offered to the caller
+(``on_point``), so the best point is kept whatever happens; a path that fails is followed
+by a new one from a random point of the box, up to ``homotopy_path_limit`` paths.
+"""
+from __future__ import annotations
+
+import enum
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ._blas import single_threaded_blas
+from .merit import fb_phi, fb_psi, project
+from .restarts import random_point
+from .result import PassStats
+
+logger = logging.getLogger("compass_sparse")
+
+__all__ = ["HomotopyStatus", "HomotopyOutcome", "SmoothedNormalMap", "track_paths",
+           "homotopy_pass"]
+
+CORRECTOR_ITERATIONS = 6
+"""Chord iterations allowed per step before the step is halved."""
+CONTRACTION_MAX = 0.5
+"""A corrector whose correction shrinks by less than this factor is rejected."""
+DISTANCE_MAX = 0.5
+"""A first correction longer than this times the step rejects the step (the predictor
+left the curve's neighbourhood)."""
+KAPPA_NOMINAL = 0.2
+DISTANCE_NOMINAL = 0.1
+"""Step control: the next step is h / f with f = max(kappa / KAPPA_NOMINAL,
+delta_1 / (DISTANCE_NOMINAL h)) clipped to [0.5, 2] (Allgower & Georg's nominal
+contraction and distance)."""
+CORRECTOR_TOLERANCE = 1e-4
+"""Relative size of the last correction (to 1 + ||y||) at which the corrector stops.  The
+path only has to be followed closely enough not to jump to another branch; the end game
+gets the solution's accuracy.  On the thesis families 1e-4 took half the steps and a
+quarter of the evaluations of 1e-8 and found the same solutions."""
+DENSE_DENSITY = 0.1
+"""Bordered systems whose Jacobian is at least this dense, or small (n <= DENSE_MAX_N),
+are factorized densely."""
+DENSE_MAX_N = 300
+NEWTON_ITERATIONS = 20
+"""Iterations of the normal-map Newton end game per attempt."""
+END_GAP = 1e-10
+"""A path point with lam >= 1 - END_GAP is the end of the path."""
+NEWTON_STEP_MAX = 1.0
+"""Longest end-game Newton step, relative to 1 + ||x||_inf."""
+
+
+class HomotopyStatus(enum.Enum):
+    """How a homotopy pass ended."""
+
+    SOLVED = "solved"  #: a point meeting the convergence tolerance was reached
+    END_REACHED = "end reached"  #: lam = 1 reached but the end game missed the tolerance
+    DIVERGED = "diverged"  #: ||x|| exceeded the divergence bound (unbounded curve)
+    STEP_TOO_SMALL = "step too small"  #: the corrector failed down to the minimum step
+    SINGULAR = "singular"  #: the augmented Jacobian [H_x, H_lam] lost rank (not a regular path)
+    STEP_LIMIT = "step limit"  #: homotopy_step_limit steps without reaching lam = 1
+    RETURNED = "returned"  #: the curve came back below lam = 0 (numerical failure)
+    EVALUATION_ERROR = "evaluation error"  #: F or J undefined along the path
+    TIME_LIMIT = "time limit"  #: the solve's deadline passed
+
+
+@dataclass
+class HomotopyOutcome:
+    status: HomotopyStatus
+    message: str
+    z: np.ndarray | None = None  #: best point (lowest merit) of the pass
+    lam: float = 0.0
+    paths: int = 0
+    steps: int = 0
+    rejected: int = 0
+    turning_points: int = 0
+    newton_iterations: int = 0
+    factorizations: int = 0
+    path_status: list = field(default_factory=list)  #: status of each path
+
+
+# ------------------------------------------------------------------ the smoothed equation
+def _splus(r, mu):
+    """s_mu(r) and its derivatives d/dr, d/dmu.  Written as max(r, 0) + 2 mu^2 / (q + |r|),
+    q = sqrt(r^2 + 4 mu^2) (the same value on both signs of r), so it has no cancellation
+    for r << 0 and no branch."""
+    if mu <= 0.0:
+        return np.maximum(r, 0.0), (r > 0).astype(float), np.zeros_like(r)
+    q = np.sqrt(r * r + 4.0 * mu * mu)
+    val = np.maximum(r, 0.0) + 2.0 * mu * mu / (q + np.abs(r))
+    return val, 0.5 * (1.0 + r / q), 2.0 * mu / q
+
+
+class SmoothedNormalMap:
+    """p_mu(x) and its derivatives for the box [lb, ub] (see the module docstring)."""
+
+    def __init__(self, lb, ub):
+        self.lb = np.asarray(lb, dtype=float)
+        self.ub = np.asarray(ub, dtype=float)
+        self.has_l = np.isfinite(self.lb)
+        self.has_u = np.isfinite(self.ub)
+        # One formula for every kind of row: p = base + c_l s_mu(x - l) - c_u s_mu(x - u),
+        # base = l on rows with a lower bound and x elsewhere (then s_mu(-r) = s_mu(r) - r
+        # gives the upper-bound-only row u - s_mu(u - x) = x - s_mu(x - u)).
+        self.cl = self.has_l.astype(float)
+        self.cu = self.has_u.astype(float)
+        self.l0 = np.where(self.has_l, self.lb, 0.0)
+        self.u0 = np.where(self.has_u, self.ub, 0.0)
+
+    def project(self, x, mu):
+        """(p, dp/dx, dp/dmu) at x."""
+        sl, dl, ml = _splus(x - self.l0, mu)
+        su, du, mu_u = _splus(x - self.u0, mu)
+        p = np.where(self.has_l, self.l0, x) + self.cl * sl - self.cu * su
+        dx = (1.0 - self.cl) + self.cl * dl - self.cu * du
+        dmu = self.cl * ml - self.cu * mu_u
+        # The smoothed projection may leave the box by rounding only; clip it.
+        return np.clip(p, self.lb, self.ub), dx, dmu
+
+
+# ------------------------------------------------------------------ bordered linear algebra
+class _Bordered:
+    """LU of [[A, c], [v^T, 0]] (A n x n sparse, c, v dense), dense or sparse."""
+
+    def __init__(self, A, c, v, dense: bool):
+        n = A.shape[0]
+        self.dense = dense
+        if dense:
+            B = np.empty((n + 1, n + 1))
+            B[:n, :n] = A
+            B[:n, n] = c[:n]
+            B[n, :] = v
+            B[n, n] = v[n]
+            self.lu = sla.lu_factor(B, check_finite=False)
+            d = np.abs(np.diag(self.lu[0]))
+            if not np.all(np.isfinite(d)) or d.min() <= 1e-14 * max(d.max(), 1e-300):
+                raise np.linalg.LinAlgError("singular bordered matrix")
+        else:
+            col = sp.csc_matrix(c[:n].reshape(-1, 1))
+            row = sp.csr_matrix(v[:n].reshape(1, -1))
+            B = sp.bmat([[A, col], [row, sp.csc_matrix([[v[n]]])]], format="csc")
+            self.lu = spla.splu(B, permc_spec="COLAMD")
+
+    def solve(self, b):
+        x = sla.lu_solve(self.lu, b, check_finite=False) if self.dense else self.lu.solve(b)
+        if not np.all(np.isfinite(x)):
+            raise np.linalg.LinAlgError("non-finite solution of the bordered system")
+        return x
+
+
+def _solve_square(A, b, dense: bool):
+    if dense:
+        M = A.toarray() if sp.issparse(A) else A
+        return sla.lu_solve(sla.lu_factor(M, check_finite=False), b, check_finite=False)
+    return spla.splu(sp.csc_matrix(A), permc_spec="COLAMD").solve(b)
+
+
+# ------------------------------------------------------------------ the tracker
+class _Stop(Exception):
+    def __init__(self, status: HomotopyStatus, message: str):
+        self.status = status
+        self.message = message
+
+
+class _Tracker:
+    """Follows the zero curves of H_a for one problem; counts its own work."""
+
+    def __init__(self, evalr, lb, ub, opt, *, deadline, on_point, tol, log):
+        self.ev = evalr
+        self.lb, self.ub = np.asarray(lb, float), np.asarray(ub, float)
+        self.n = self.lb.size
+        self.opt = opt
+        self.deadline = deadline
+        self.on_point = on_point
+        self.tol = tol
+        self.log = log
+        self.smooth = SmoothedNormalMap(lb, ub)
+        self.factorizations = 0
+        self.steps = 0
+        self.rejected = 0
+        self.turning_points = 0
+        self.newton_iterations = 0
+        self.dense = None
+        self.best = None  # (z, psi) of the lowest merit seen
+        width = np.where(np.isfinite(self.ub - self.lb), self.ub - self.lb, np.nan)
+        scale = float(np.nanmedian(width)) if np.any(np.isfinite(width)) else 1.0
+        self.mu0 = opt.homotopy_smoothing * max(scale, 1e-8)
+
+    # -------------------------------------------------------------- evaluations
+    def _check_time(self):
+        if self.deadline is not None and time.perf_counter() > self.deadline:
+            raise _Stop(HomotopyStatus.TIME_LIMIT, "time limit reached on the path")
+
+    def _offer(self, z, f):
+        phi = fb_phi(z, f, self.lb, self.ub)
+        psi = fb_psi(phi)
+        if self.best is None or psi < self.best[1]:
+            self.best = (z.copy(), psi)
+        if self.on_point is not None:
+            # the caller's acceptance test decides what a solution is (it raises then)
+            self.on_point(z, f, phi, psi)
+        elif np.sqrt(2.0 * psi) <= self.tol:
+            raise _Stop(HomotopyStatus.SOLVED, "solution found on the homotopy pass")
+
+    def residual(self, y, a, want_jac):
+        """H(y), and with want_jac the pieces of DH: (H, Hx, Hlam).  Points where the
+        Jacobian is evaluated (the accepted ones) are offered as candidate best points."""
+        x, lam = y[:-1], y[-1]
+        mu = self.mu0 * max(1.0 - lam, 0.0)
+        p, dx, dmu = self.smooth.project(x, mu)
+        if want_jac:
+            f, J = self.ev.fj(p)
+        else:
+            f, J = self.ev.f(p), None
+        if f is None:
+            return None
+        if want_jac:
+            self._offer(p, f)
+        G = f + x - p
+        H = lam * G + (1.0 - lam) * (x - a)
+        if not want_jac:
+            return H, None, None
+        if J is None:
+            return None
+        J = sp.csc_matrix(J)
+        if self.dense is None:
+            self.dense = self.n <= DENSE_MAX_N or J.nnz >= DENSE_DENSITY * self.n * self.n
+        # H_x = lam (J D + I - D) + (1 - lam) I = lam J D + I - lam D
+        if self.dense:
+            Hx = J.toarray()
+            Hx *= lam * dx  # scales column j by lam dx_j
+            Hx[np.diag_indices(self.n)] += 1.0 - lam * dx
+        else:
+            Hx = (lam * (J @ sp.diags(dx)) + sp.diags(1.0 - lam * dx)).tocsc()
+        # dH/dlam = G - (x - a) + lam (J - I) dp/dmu * dmu/dlam,  dmu/dlam = -mu0
+        dGdmu = J @ dmu - dmu
+        Hlam = G - (x - a) - lam * self.mu0 * dGdmu
+        return H, Hx, Hlam
+
+    def factor(self, Hx, Hlam, v):
+        self.factorizations += 1
+        return _Bordered(Hx, np.append(Hlam, 0.0), v, self.dense)
+
+    # -------------------------------------------------------------- one path
+    def follow(self, a, polish=None):
+        """Track gamma_a from (a, 0).  Returns (status, message, last point (x, lam))."""
+        opt = self.opt
+        n = self.n
+        y = np.append(a, 0.0)
+        self._y = y
+        v = np.zeros(n + 1)
+        v[-1] = 1.0
+        bound = opt.homotopy_divergence_bound * (1.0 + float(np.max(np.abs(a), initial=0.0)))
+        out = self.residual(y, a, True)
+        if out is None:
+            raise _Stop(HomotopyStatus.EVALUATION_ERROR, "F or J undefined at the start of the path")
+        H, Hx, Hlam = out
+        lam_end = opt.homotopy_end_lambda
+        h = opt.homotopy_initial_step * (1.0 + float(np.linalg.norm(a, np.inf)))
+        hmin = opt.homotopy_step_minimum * (1.0 + float(np.linalg.norm(a, np.inf)))
+        for _ in range(opt.homotopy_step_limit):
+            self._check_time()
+            # --- tangent at y, from the factorization that also serves the corrector
+            try:
+                Bf = self.factor(Hx, Hlam, v)
+                e = np.zeros(n + 1)
+                e[-1] = 1.0
+                w = Bf.solve(e)
+            except (np.linalg.LinAlgError, RuntimeError):
+                return (HomotopyStatus.SINGULAR,
+                        f"singular augmented Jacobian at lam = {y[-1]:.6f}", y)
+            tau = w / np.linalg.norm(w)
+            if tau @ v < 0:  # keep the orientation
+                tau = -tau
+            if tau[-1] * v[-1] < 0:  # lam changed direction: a turning point was passed
+                self.turning_points += 1
+            # --- predictor-corrector with step control
+            retried = False
+            while True:
+                self._check_time()
+                yp = y + h * tau
+                if yp[-1] > 1.0:  # do not step past the end: mu(lam) must stay >= 0
+                    hh = (1.0 - y[-1]) / tau[-1] if tau[-1] > 0 else h
+                    yp = y + min(h, hh) * tau
+                yn, ok = self._correct(yp, a, Bf, v)
+                if ok:
+                    break
+                self.rejected += 1
+                retried = True
+                h *= 0.5
+                if h < hmin:
+                    return (HomotopyStatus.STEP_TOO_SMALL,
+                            f"corrector failed at step {h:.1e} (lam = {y[-1]:.6f})", y)
+            yn, factor = yn
+            if retried:  # do not grow right after a rejection (avoids oscillating)
+                factor = max(factor, 1.0)
+            self.steps += 1
+            h = min(max(h, float(np.linalg.norm(yn - y))) / factor,
+                    opt.homotopy_maximum_step * (1.0 + np.linalg.norm(yn[:-1], np.inf)))
+            y, v = yn, tau
+            self._y = y
+            lam = y[-1]
+            if self.log is not None and self.steps % 20 == 0:
+                self.log(f"homotopy step {self.steps:5d} lam {lam:.6f} h {h:9.2e} "
+                         f"|x| {np.linalg.norm(y[:-1], np.inf):9.2e}")
+            if not np.all(np.isfinite(y)) or np.linalg.norm(y[:-1], np.inf) > bound:
+                return (HomotopyStatus.DIVERGED,
+                        f"||x|| exceeded {bound:.3g} at lam = {lam:.6f}", y)
+            if lam < -0.5:
+                return HomotopyStatus.RETURNED, "the path returned below lam = 0", y
+            out = self.residual(y, a, True)
+            if out is None:
+                return HomotopyStatus.EVALUATION_ERROR, "F or J undefined on the path", y
+            H, Hx, Hlam = out
+            if lam >= lam_end or lam >= 1.0 - END_GAP:
+                z_end = self.end_game(y[:-1])  # raises _Stop(SOLVED) on success
+                if lam >= 1.0 - END_GAP:
+                    if polish is not None and z_end is not None:
+                        polish(z_end)
+                    return (HomotopyStatus.END_REACHED,
+                            "lam = 1 reached; Newton's method missed the tolerance", y)
+                lam_end = 1.0 - 0.1 * (1.0 - lam)
+        return (HomotopyStatus.STEP_LIMIT,
+                f"{opt.homotopy_step_limit} steps without reaching lam = 1", y)
+
+    def _correct(self, yp, a, Bf, v):
+        """Chord iterations with the factorization Bf.  Returns ((y, step factor), ok): the
+        factor by which the next step is divided, from the contraction ratio kappa and the
+        first correction delta relative to the step h (both grow like h)."""
+        y = yp.copy()
+        h = max(float(np.linalg.norm(yp - self._y)), 1e-300)
+        first = prev = None
+        kappa = 0.0
+        tol_y = CORRECTOR_TOLERANCE * (1.0 + float(np.linalg.norm(yp)))
+        for _ in range(CORRECTOR_ITERATIONS):
+            r = self.residual(y, a, False)
+            if r is None:
+                return None, False
+            rhs = np.append(-r[0], -(v @ (y - yp)))
+            try:
+                d = Bf.solve(rhs)
+            except np.linalg.LinAlgError:  # a non-finite correction: a shorter step
+                return None, False
+            dn = float(np.linalg.norm(d))
+            if prev is not None:
+                kappa = max(kappa, dn / max(prev, 1e-300))
+                if kappa > CONTRACTION_MAX:
+                    return None, False
+            else:
+                first = dn
+                # The base point itself is only on the curve to the tracking tolerance:
+                # a correction of that size is not the predictor's error.
+                if first > max(DISTANCE_MAX * h, 10.0 * tol_y):
+                    return None, False
+            y = y + d
+            if dn <= tol_y:
+                factor = max(kappa / KAPPA_NOMINAL, first / (DISTANCE_NOMINAL * h))
+                return (y, float(np.clip(factor, 0.5, 2.0))), True
+            prev = dn
+        return None, False
+
+    # -------------------------------------------------------------- end game
+    def end_game(self, x):
+        """Newton on F_B from x.  Returns its last point pi(x) when it missed the tolerance
+        (a solution raises through ``_offer``)."""
+        lb, ub = self.lb, self.ub
+        z = project(x, lb, ub)
+        f = self.ev.f(z)
+        if f is None:
+            return None
+        self._offer(z, f)
+        fb = f + x - z
+        nrm = float(np.linalg.norm(fb))
+        for _ in range(NEWTON_ITERATIONS):
+            self._check_time()
+            J = self.ev.jac(z, f)
+            if J is None:
+                break
+            d = ((x > lb) & (x < ub)).astype(float)
+            A = sp.csc_matrix(J) @ sp.diags(d) + sp.diags(1.0 - d)
+            try:
+                self.factorizations += 1
+                dx = _solve_square(A, -fb, self.dense)
+            except (np.linalg.LinAlgError, RuntimeError, ValueError):
+                break
+            if not np.all(np.isfinite(dx)):
+                break
+            # The end game is local: a step much longer than the point is a singular
+            # Jacobian's, not Newton's convergence (it once jumped from 1 to 1e7).
+            alpha = min(1.0, NEWTON_STEP_MAX * (1.0 + np.linalg.norm(x, np.inf))
+                        / max(np.linalg.norm(dx, np.inf), 1e-300))
+            accepted = False
+            while alpha >= 1e-3:
+                xt = x + alpha * dx
+                zt = project(xt, lb, ub)
+                ft = self.ev.f(zt)
+                if ft is not None:
+                    self._offer(zt, ft)  # raises in the caller when zt is a solution
+                    fbt = ft + xt - zt
+                    nt = float(np.linalg.norm(fbt))
+                    if nt < (1.0 - 1e-4 * alpha) * nrm:
+                        x, z, f, fb, nrm, accepted = xt, zt, ft, fbt, nt, True
+                        break
+                alpha *= 0.5
+            self.newton_iterations += 1
+            if not accepted:
+                break
+        return z
+
+
+def track_paths(evalr, lb, ub, z_start, opt, *, on_point=None, rng, deadline=None, tol=1e-6,
+                polish=None, log=None, _tracker_out=None) -> HomotopyOutcome:
+    """Follow up to ``opt.homotopy_path_limit`` homotopy paths, the first from ``z_start``,
+    the others from random points of the box.
+
+    ``on_point(z, f, phi, psi)`` receives every accepted path point and every end-game
+    point and may raise to stop the pass (the stabilized Newton method raises when a point is a solution); ``polish(z)``
+    (optional) is called with the end point of a path (lam = 1) whose Newton end game
+    missed the tolerance."""
+    tr = _Tracker(evalr, lb, ub, opt, deadline=deadline, on_point=on_point, tol=tol, log=log)
+    if _tracker_out is not None:  # lets homotopy_pass count work when a stop is raised
+        _tracker_out["tracker"] = tr
+    lb = tr.lb
+    ub = tr.ub
+    statuses = []
+    status, message, y = HomotopyStatus.STEP_LIMIT, "no path followed", None
+    a = project(np.asarray(z_start, float), lb, ub)
+    for k in range(opt.homotopy_path_limit):
+        if k > 0:
+            a = random_point(rng, np.asarray(z_start, float), lb, ub)
+        try:
+            status, message, y = tr.follow(a, polish=polish)
+        except _Stop as stop:
+            status, message = stop.status, stop.message
+        statuses.append(status)
+        if status is HomotopyStatus.SOLVED:
+            break
+        if log is not None:
+            log(f"homotopy path {k + 1}: {status.value} ({message}); "
+                f"{tr.steps} steps so far, {tr.factorizations} factorizations")
+        if status is HomotopyStatus.TIME_LIMIT:
+            break
+    z = tr.best[0] if tr.best is not None else None
+    return HomotopyOutcome(
+        status=status, message=message, z=z, lam=float(y[-1]) if y is not None else 0.0,
+        paths=len(statuses), steps=tr.steps, rejected=tr.rejected,
+        turning_points=tr.turning_points, newton_iterations=tr.newton_iterations,
+        factorizations=tr.factorizations, path_status=statuses)
+
+
+def homotopy_pass(solver, z_start, *, polish=None) -> HomotopyOutcome:
+    """The homotopy as a pass of the stabilized Newton method ``solver`` (an NMSSolver):
+    its evaluator, deadline, best-point bookkeeping and random stream; the work done is
+    added to ``solver.passes['homotopy']`` whether the pass ends normally or by a stop
+    raised from ``solver._consider`` (a solution)."""
+    st = solver.passes.setdefault("homotopy", PassStats())
+    counters = solver.p.counters
+    nf0, nj0 = counters.nfev, counters.njev
+    t0 = time.perf_counter()
+    out = None
+    stopped = ""
+    tracker_box = {}
+
+    def log(line):
+        if solver.log_major is not None:
+            solver.log_major(line)
+
+    try:
+        # dense LU of the bordered system: one BLAS thread (a multithreaded BLAS ran these
+        # factorizations 10x slower on a loaded machine: 150 ms against 15 ms at n = 500)
+        with single_threaded_blas():
+            out = track_paths(solver.ev, solver.lb, solver.ub, z_start, solver.opt0,
+                              on_point=solver._consider, rng=solver.rng,
+                              deadline=solver.deadline, tol=solver.tol, polish=polish, log=log,
+                              _tracker_out=tracker_box)
+        return out
+    except BaseException as exc:  # a solution or a limit of the solve, raised through us
+        stopped = getattr(exc, "message", type(exc).__name__)
+        raise
+    finally:
+        tr = tracker_box.get("tracker")
+        st.ran = True
+        st.time += time.perf_counter() - t0
+        st.nfev += counters.nfev - nf0
+        st.njev += counters.njev - nj0
+        if tr is not None:
+            st.iterations += tr.steps
+            st.factorizations += tr.factorizations
+        st.reason = (f"{out.status.value}: {out.message} ({out.paths} paths, {out.steps} steps, "
+                     f"{out.turning_points} turning points)" if out is not None
+                     else f"stopped on the path: {stopped}")

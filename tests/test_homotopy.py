@@ -1,0 +1,313 @@
+"""The probability-one homotopy pass (compass_sparse.homotopy): the smoothed projection,
+path tracking to a solution where the stabilized Newton method stalls at a stationary
+point of its merit function, the divergence and time-limit statuses, and the pass table."""
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import compass_sparse.homotopy as hom
+from compass_sparse import MCP, Options, solve_mcp
+from compass_sparse.generators import thesis_family
+from compass_sparse.homotopy import HomotopyStatus, SmoothedNormalMap, track_paths
+from compass_sparse.merit import fb_gradient, fb_phi, natural_residual
+from compass_sparse.result import Status
+
+
+def _quadratic(D, A, b):
+    D, A, b = (np.asarray(v, dtype=float) for v in (D, A, b))
+
+    def F(x):
+        return D * x * x + A @ x + b
+
+    def J(x):
+        return sp.csc_matrix(np.diag(2.0 * D * x) + A)
+
+    return F, J
+
+
+# A one-dimensional MCP on the box [-3.04, 3.18] with F(x) = 0.27 x^2 - 0.69 x - 5.68 < 0
+# on the whole box: its only solution is the upper bound.  The merit function has a
+# stationary point over the box at the lower bound (F decreases there, so the Newton
+# model pushes the wrong way and no descent direction stays in the box).
+STATIONARY = dict(D=[0.27], A=[[-0.69]], b=[-5.68], lb=[-3.04], ub=[3.18], x0=[-2.9])
+
+
+def _stationary_problem():
+    d = STATIONARY
+    F, J = _quadratic(d["D"], d["A"], d["b"])
+    return F, J, np.array(d["lb"]), np.array(d["ub"]), np.array(d["x0"])
+
+
+def _projected_gradient(F, J, z, lb, ub):
+    f = F(z)
+    g = fb_gradient(z, f, J(z), lb, ub, fb_phi(z, f, lb, ub))
+    return z - np.clip(z - g, lb, ub)
+
+
+def test_nms_stalls_at_a_stationary_point_where_the_homotopy_reaches_the_solution():
+    F, J, lb, ub, x0 = _stationary_problem()
+    stalled = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "off", "restart_limit": 0})
+    assert not stalled.success
+    assert stalled.residual.fb_norm > 0.1
+    # ... at a stationary point of the merit function over the box, not a solution:
+    assert np.linalg.norm(_projected_gradient(F, J, stalled.x, lb, ub)) <= 1e-8
+    assert natural_residual(stalled.x, F(stalled.x), lb, ub) > 0.1
+
+    res = solve_mcp(F, J, lb, ub, x0, options={"restart_limit": 0})
+    assert res.success and res.status is Status.SOLVED
+    assert natural_residual(res.x, F(res.x), lb, ub) <= 1e-6
+    assert res.x == pytest.approx(ub, abs=1e-6)  # the unique solution
+    h = res.passes["homotopy"]
+    assert h.ran and h.iterations > 0 and h.factorizations > 0 and h.time > 0
+
+
+def test_homotopy_alone_reaches_the_solution_of_the_stationary_problem():
+    F, J, lb, ub, x0 = _stationary_problem()
+    res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"})
+    assert res.success
+    assert natural_residual(res.x, F(res.x), lb, ub) <= 1e-6
+    assert res.nit == 1  # the homotopy pass alone: no Newton iteration of NMS ran
+    assert [h.step for h in res.history] == ["", "-H"]
+
+
+@pytest.mark.parametrize("family,n,seed", [(1, 30, 0), (2, 20, 1)])
+def test_homotopy_alone_solves_thesis_instances(family, n, seed):
+    g = thesis_family(n, family, seed=seed)
+    res = solve_mcp(g.problem, options={"homotopy": "only"})
+    assert res.success, res.message
+    info = g.info
+    f = info["D"] * res.x ** 2 + info["A"] @ res.x + info["b"]
+    assert natural_residual(res.x, f, info["lb"], info["ub"]) <= 1e-6
+
+
+def _diverging_problem(n=2):
+    # F(x) = -x on free variables: the solution is 0, but the zero curve of
+    # H = lam (-x) + (1 - lam)(x - a) is x = (1 - lam) a / (1 - 2 lam), unbounded at lam = 1/2.
+    def F(x):
+        return -x
+
+    def J(x):
+        return -sp.identity(x.size, format="csc")
+
+    return F, J, np.full(n, -np.inf), np.full(n, np.inf), np.ones(n)
+
+
+def test_path_divergence_is_reported_with_its_status():
+    F, J, lb, ub, x0 = _diverging_problem()
+    ev = MCP(F, J, lb, ub, x0).evaluator
+    seen = []
+    out = track_paths(ev, lb, ub, x0, Options(homotopy_path_limit=2),
+                      on_point=lambda z, f, phi, psi: seen.append(psi),
+                      rng=np.random.default_rng(0))
+    assert out.status is HomotopyStatus.DIVERGED
+    assert out.path_status == [HomotopyStatus.DIVERGED] * 2
+    assert out.lam == pytest.approx(0.5, abs=1e-3)  # where (1 - 2 lam) vanishes
+    # the best point is kept: the lowest merit seen on the paths
+    assert out.z is not None and 0.5 * np.sum(F(out.z) ** 2) == pytest.approx(min(seen))
+
+
+def test_solve_reports_a_diverged_homotopy_as_no_progress_with_the_best_point():
+    F, J, lb, ub, x0 = _diverging_problem()
+    res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"})
+    assert res.status is Status.NO_PROGRESS and not res.success
+    assert "diverged" in res.message
+    assert res.passes["homotopy"].reason.startswith("diverged")
+    assert res.residual.fb_norm <= np.linalg.norm(F(x0))  # never worse than the start
+
+
+def test_homotopy_time_limit_status_keeps_the_best_point(monkeypatch):
+    # The deadline passes after 5 path steps (a clock that cannot depend on the machine's
+    # speed: 0.05 s was enough to solve this instance on a quiet machine).
+    calls = {"n": 0}
+
+    def check_time(self):
+        calls["n"] += 1
+        if calls["n"] > 5:
+            raise hom._Stop(HomotopyStatus.TIME_LIMIT, "time limit reached on the path")
+
+    monkeypatch.setattr(hom._Tracker, "_check_time", check_time)
+    g = thesis_family(60, 1, seed=3)
+    start = solve_mcp(g.problem, options={"major_iteration_limit": 0})
+    res = solve_mcp(g.problem, options={"homotopy": "only"})
+    assert res.status is Status.TIME_LIMIT and not res.success
+    assert res.x.shape == (60,) and np.all(np.isfinite(res.x))
+    assert res.residual.fb_norm <= start.residual.fb_norm  # the best point, kept
+    h = res.passes["homotopy"]
+    assert h.ran and h.reason.startswith("time limit") and h.iterations >= 1
+
+
+def test_a_solve_stopped_before_the_homotopy_says_so():
+    g = thesis_family(60, 1, seed=3)
+    res = solve_mcp(g.problem, options={"time_limit": 1e-9})
+    assert res.status is Status.TIME_LIMIT
+    assert res.passes["homotopy"].reason == "not reached (time_limit)"
+
+
+def test_pass_table_says_why_the_homotopy_did_not_run():
+    F, J = _quadratic([0.0, 0.0], [[2.0, 0.0], [0.0, 3.0]], [-1.0, 1.0])
+    res = solve_mcp(F, J, 0.0, np.inf, [1.0, 1.0])
+    assert res.success
+    h = res.passes["homotopy"]
+    assert not h.ran and h.reason == "NMS did not stall"
+    off = solve_mcp(F, J, 0.0, np.inf, [1.0, 1.0], options={"homotopy": "off"})
+    assert off.passes["homotopy"].reason == "homotopy off"
+
+
+# ------------------------------------------------------------------ the smoothed projection
+@pytest.mark.parametrize("mu", [1e-1, 1e-4, 1e-8])
+def test_smoothed_projection_tends_to_the_projection_with_error_at_most_mu(mu):
+    lb = np.array([-1.0, -1.0, -np.inf, -np.inf, 0.0])
+    ub = np.array([2.0, np.inf, 3.0, np.inf, 0.0])
+    sm = SmoothedNormalMap(lb, ub)
+    rng = np.random.default_rng(0)
+    for x in list(rng.uniform(-5, 5, (50, 5))) + [np.array([-1e12, 1e12, 1e12, -1e12, 1.0])]:
+        p, dx, dmu = sm.project(x, mu)
+        # |s_mu(r) - max(r, 0)| <= mu, and both bounds contribute at most mu each
+        assert np.all(np.abs(p - np.clip(x, lb, ub)) <= 2 * mu + 1e-12 * np.abs(x))
+        assert np.all((dx >= 0) & (dx <= 1))
+        assert np.all(np.isfinite(dmu))
+
+
+def test_smoothed_projection_derivatives_match_finite_differences():
+    lb = np.array([-1.0, -1.0, -np.inf, -np.inf])
+    ub = np.array([2.0, np.inf, 3.0, np.inf])
+    sm = SmoothedNormalMap(lb, ub)
+    x = np.array([-0.9, 0.3, 2.95, 7.0])
+    mu, h = 0.05, 1e-7
+    p, dx, dmu = sm.project(x, mu)
+    fd_x = (sm.project(x + h, mu)[0] - sm.project(x - h, mu)[0]) / (2 * h)
+    fd_mu = (sm.project(x, mu + h)[0] - sm.project(x, mu - h)[0]) / (2 * h)
+    assert dx == pytest.approx(fd_x, rel=1e-6, abs=1e-8)
+    assert dmu == pytest.approx(fd_mu, rel=1e-6, abs=1e-8)
+
+
+def test_sparse_bordered_solve_follows_the_same_path_as_the_dense_one(monkeypatch):
+    g = thesis_family(15, 1, seed=2)
+    dense = solve_mcp(g.problem, options={"homotopy": "only"})
+    monkeypatch.setattr(hom, "DENSE_MAX_N", 0)
+    monkeypatch.setattr(hom, "DENSE_DENSITY", 2.0)
+    sparse = solve_mcp(thesis_family(15, 1, seed=2).problem, options={"homotopy": "only"})
+    assert dense.success and sparse.success
+    assert sparse.x == pytest.approx(dense.x, abs=1e-5)
+    assert sparse.passes["homotopy"].iterations == pytest.approx(
+        dense.passes["homotopy"].iterations, rel=0.2)
+
+
+@pytest.mark.parametrize("tol", [1e-4, 1e-8, 1e-10])
+def test_homotopy_meets_each_convergence_tolerance(tol):
+    F, J, lb, ub, x0 = _stationary_problem()
+    res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only",
+                                               "convergence_tolerance": tol})
+    assert res.success and res.residual.fb_norm <= tol
+
+
+def test_homotopy_options_are_validated():
+    from compass_sparse.exceptions import OptionError
+
+    with pytest.raises(OptionError):
+        Options(homotopy="sometimes")
+    with pytest.raises(OptionError):
+        Options(homotopy_end_lambda=1.5)
+    with pytest.raises(OptionError):
+        Options(homotopy_smoothing=0.0)
+
+
+def test_tight_path_tracking_reaches_the_same_solution(monkeypatch):
+    # CORRECTOR_TOLERANCE only decides how closely the path is followed; a 1e4 times
+    # tighter value must follow the same curve to the same end point (the stationary
+    # problem's unique solution, and the same solution of a thesis instance).
+    F, J, lb, ub, x0 = _stationary_problem()
+    g = thesis_family(25, 2, seed=4)
+    loose = [solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"}),
+             solve_mcp(g.problem, options={"homotopy": "only"})]
+    monkeypatch.setattr(hom, "CORRECTOR_TOLERANCE", hom.CORRECTOR_TOLERANCE * 1e-4)
+    tight = [solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"}),
+             solve_mcp(thesis_family(25, 2, seed=4).problem, options={"homotopy": "only"})]
+    for a, b in zip(loose, tight):
+        assert a.success and b.success
+        assert a.x == pytest.approx(b.x, abs=1e-6)
+        assert b.passes["homotopy"].iterations >= a.passes["homotopy"].iterations
+
+
+def test_corrector_accepts_tiny_steps_from_a_base_point_on_the_curve_to_tracking_accuracy():
+    # The accepted points are on the curve only to CORRECTOR_TOLERANCE; a first correction
+    # of that size must not reject a tiny step (it once rejected every step down to 1e-9
+    # and ended paths of family 2 at n = 500 as "step too small").
+    F, J, lb, ub, x0 = _stationary_problem()
+    ev = MCP(F, J, lb, ub, x0).evaluator
+    tr = hom._Tracker(ev, lb, ub, Options(), deadline=None, on_point=None, tol=1e-12, log=None)
+    a = x0.copy()
+    y = np.append(a, 0.3)
+    for _ in range(30):  # Newton in x at fixed lam: onto the curve ...
+        H, Hx, Hlam = tr.residual(y, a, True)
+        y[:-1] += np.linalg.solve(Hx, -H)
+    assert np.linalg.norm(tr.residual(y, a, False)[0]) <= 1e-12
+    y[:-1] += 0.5 * hom.CORRECTOR_TOLERANCE  # ... then off it by half the tolerance
+    H, Hx, Hlam = tr.residual(y, a, True)
+    v = np.array([0.0, 1.0])
+    Bf = tr.factor(Hx, Hlam, v)
+    tau = Bf.solve(np.array([0.0, 1.0]))
+    tau /= np.linalg.norm(tau)
+    tr._y = y
+    out, ok = tr._correct(y + 1e-9 * tau, a, Bf, v)
+    assert ok
+    yc = out[0]
+    assert np.linalg.norm(tr.residual(yc, a, False)[0]) <= 1e-6
+
+
+def test_pass_table_names_the_stop_that_ended_the_homotopy():
+    F, J, lb, ub, x0 = _stationary_problem()
+    res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"})
+    assert res.passes["homotopy"].reason == "stopped on the path: solution found"
+
+
+def test_step_limit_ends_every_path_with_its_status():
+    g = thesis_family(20, 2, seed=1)
+    res = solve_mcp(g.problem, options={"homotopy": "only", "homotopy_step_limit": 2,
+                                        "homotopy_path_limit": 2})
+    assert not res.success and res.status is Status.NO_PROGRESS
+    h = res.passes["homotopy"]
+    assert h.reason.startswith("step limit") and "(2 paths, 4 steps" in h.reason
+
+
+def test_a_smaller_divergence_bound_stops_the_path_earlier():
+    F, J, lb, ub, x0 = _diverging_problem()
+    ev = MCP(F, J, lb, ub, x0).evaluator
+    lams = []
+    for bound in (1e2, 1e4):
+        out = track_paths(ev, lb, ub, x0, Options(homotopy_path_limit=1,
+                                                  homotopy_divergence_bound=bound),
+                          rng=np.random.default_rng(0))
+        assert out.status is HomotopyStatus.DIVERGED
+        lams.append(out.lam)
+    # x = (1 - lam) a / (1 - 2 lam) passes 1e2 (1 + |a|) before 1e4 (1 + |a|)
+    assert lams[0] < lams[1] < 0.5
+
+
+def test_end_game_from_the_end_of_the_path_only_still_solves():
+    F, J, lb, ub, x0 = _stationary_problem()
+    res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only", "homotopy_end_lambda": 1.0})
+    assert res.success
+
+
+def test_a_non_finite_correction_shortens_the_step_instead_of_failing_the_solve(monkeypatch):
+    # _Bordered.solve raises on a non-finite solution; in the corrector that once escaped
+    # the pass.  Every third corrector solve fails here (the tangent's right-hand side is
+    # e_{n+1}): the pass must carry on with shorter steps.
+    calls = {"n": 0}
+    solve = hom._Bordered.solve
+
+    def flaky(self, b):
+        if b[-1] == 1.0 and not np.any(b[:-1]):
+            return solve(self, b)
+        calls["n"] += 1
+        if calls["n"] % 3 == 0:
+            raise np.linalg.LinAlgError("non-finite solution of the bordered system")
+        return solve(self, b)
+
+    monkeypatch.setattr(hom._Bordered, "solve", flaky)
+    F, J, lb, ub, x0 = _stationary_problem()
+    res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"})
+    assert calls["n"] >= 3
+    assert res.x.shape == (1,) and res.passes["homotopy"].ran
+    assert res.success or res.status is Status.NO_PROGRESS
