@@ -140,8 +140,9 @@ def test_bad_input_table_on_the_trust_page_is_the_readmes(built):
     p.feed((out / "trust.html").read_text(encoding="utf-8"))
     lines = (ROOT / "README.md").read_text(encoding="utf-8").splitlines()
     start = next(i for i, line in enumerate(lines) if line.startswith("Bad inputs and faults"))
+    first = next(i for i in range(start, len(lines)) if lines[i].startswith("|"))
     md = []
-    for line in lines[start + 2:]:
+    for line in lines[first:]:
         if not line.startswith("|"):
             break
         if not line.startswith("|---"):

@@ -266,10 +266,10 @@ class ReadmeTable(SphinxDirective):
             raise self.error(f"README.md has no line starting with {marker!r}") from None
         rows = []
         for line in lines[start + 1:]:
-            if not line.strip() and not rows:
-                continue
             if not line.startswith("|"):
-                break
+                if rows:
+                    break
+                continue  # the rest of the introducing paragraph
             cells = [c.strip().replace("\\|", "|")
                      for c in re.split(r"(?<!\\)\|", line.strip())[1:-1]]
             if not all(re.fullmatch(r":?-+:?", c) for c in cells):
