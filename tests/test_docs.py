@@ -128,9 +128,26 @@ def test_documented_status_table_lists_every_status_with_its_path_code(built):
     assert [r[0] for r in rows] == [f"Status.{s.name}" for s in cs.Status]
     for r, s in zip(rows, cs.Status):
         assert int(r[1]) == int(s) and int(r[2]) == s.path_code()
+        assert r[4], f"Status.{s.name} has no '#:' comment saying when it is returned"
     pts = _table_rows(out, "options.html", "compass-point-statuses")
     assert [r[0] for r in pts] == [f"PointStatus.{s.name}" for s in cs.PointStatus]
     assert all(r[2] for r in pts)
+
+
+def test_bad_input_table_on_the_trust_page_is_the_readmes(built):
+    _, out = built
+    p = _Tables("compass-readme")
+    p.feed((out / "trust.html").read_text(encoding="utf-8"))
+    lines = (ROOT / "README.md").read_text(encoding="utf-8").splitlines()
+    start = next(i for i, line in enumerate(lines) if line.startswith("Bad inputs and faults"))
+    first = next(i for i in range(start, len(lines)) if lines[i].startswith("|"))
+    md = []
+    for line in lines[first:]:
+        if not line.startswith("|"):
+            break
+        if not line.startswith("|---"):
+            md.append([c.strip().replace("`", "") for c in line.strip().strip("|").split(" | ")])
+    assert len(md) > 10 and p.rows == md
 
 
 def test_path_name_table_covers_every_option_that_path_has(built):
@@ -185,10 +202,22 @@ def _code_blocks(page):
 
 _NAMESPACES = {}
 
+# The optional extras a page's examples import, beyond matplotlib (every page may plot).
+PAGE_EXTRAS = {
+    "guides/modelling_languages.rst": [
+        ("pyomo.environ", "the pyomo extra (pyomo) is not installed"),
+        ("casadi", "the pyomo extra (casadi) is not installed"),
+        ("gamspy", "the gams extra (gamspy) is not installed"),
+    ],
+    "guides/batches.rst": [("pyarrow", "the batch extra (pyarrow) is not installed")],
+}
+
 
 def _run_page(page, tmp_path):
     if page not in _NAMESPACES:
         pytest.importorskip("matplotlib", reason="the plot extra (matplotlib) is not installed")
+        for module, reason in PAGE_EXTRAS.get(page, []):
+            pytest.importorskip(module, reason=reason)
         import matplotlib
 
         matplotlib.use("Agg")
@@ -212,7 +241,8 @@ PAGES_WITH_CODE = [p for p in PAGES if _code_blocks(p)]
 
 def test_every_guide_page_has_a_tested_example():
     for page in ("getting_started.rst", "jacobian.rst", "guides/cge.rst", "guides/lcp.rst",
-                 "guides/warm_start.rst"):
+                 "guides/warm_start.rst", "guides/modelling_languages.rst",
+                 "guides/batches.rst", "trust.rst"):
         assert page in PAGES_WITH_CODE
 
 

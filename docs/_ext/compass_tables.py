@@ -9,7 +9,9 @@ the documentation cannot drift from it:
   termination code (``Status.path_code()``) and meaning;
 * ``.. compass-point-statuses::`` every :class:`compass_sparse.PointStatus`;
 * ``.. compass-step-codes::``    the pivotal path's one-letter codes (``LinearCode``);
-* ``.. compass-benchmark-records::`` every ``benchmarks/*.md``, verbatim.
+* ``.. compass-benchmark-records::`` every ``benchmarks/*.md``, verbatim;
+* ``.. compass-readme-table:: <text>`` the Markdown table of ``README.md`` that follows the
+  line starting with <text> (one source for the README and these pages).
 
 Tables are built from docutils nodes (no RST re-parsing), so option texts need no escaping.
 """
@@ -170,12 +172,18 @@ class StatusTable(SphinxDirective):
 
 
 def member_comments(cls) -> dict:
-    """``NAME = value  #: text`` comments of an enum's source, by member name."""
-    out = {}
+    """The ``#:`` comments of an enum's members, by member name: on the member's line
+    (``NAME = value  #: text``) or on the comment lines just above it."""
+    out, above = {}, []
     for line in inspect.getsource(cls).splitlines():
-        m = re.match(r"\s*(\w+)\s*=.*#:\s*(.+)$", line)
-        if m:
-            out[m.group(1)] = m.group(2).strip()
+        c = re.match(r"\s*#:\s*(.+)$", line)
+        if c:
+            above.append(c.group(1).strip())
+            continue
+        m = re.match(r"\s*(\w+)\s*=.*?(?:#:\s*(.+))?$", line)
+        if m and (m.group(2) or above):
+            out[m.group(1)] = (m.group(2) or " ".join(above)).strip()
+        above = []
     return out
 
 
@@ -230,6 +238,60 @@ class BenchmarkRecords(SphinxDirective):
         return out
 
 
+def _inline(text):
+    """A paragraph of Markdown cell text: ``code`` spans as literals, the rest as text."""
+    para = nodes.paragraph()
+    for k, part in enumerate(re.split(r"`([^`]*)`", text)):
+        if part:
+            para += nodes.literal(text=part) if k % 2 else nodes.Text(part)
+    return para
+
+
+class ReadmeTable(SphinxDirective):
+    """The Markdown table after the README line that starts with the argument."""
+
+    required_arguments = 1
+    final_argument_whitespace = True
+
+    def run(self):
+        from pathlib import Path
+
+        readme = Path(self.env.srcdir).parent / "README.md"
+        self.env.note_dependency(str(readme))
+        lines = readme.read_text(encoding="utf-8").splitlines()
+        marker = self.arguments[0]
+        try:
+            start = next(i for i, line in enumerate(lines) if line.startswith(marker))
+        except StopIteration:
+            raise self.error(f"README.md has no line starting with {marker!r}") from None
+        rows = []
+        for line in lines[start + 1:]:
+            if not line.startswith("|"):
+                if rows:
+                    break
+                continue  # the rest of the introducing paragraph
+            cells = [c.strip().replace("\\|", "|")
+                     for c in re.split(r"(?<!\\)\|", line.strip())[1:-1]]
+            if not all(re.fullmatch(r":?-+:?", c) for c in cells):
+                rows.append(cells)
+        if len(rows) < 2:
+            raise self.error(f"no Markdown table after {marker!r} in README.md")
+        table = nodes.table(classes=["compass-readme"])
+        group = nodes.tgroup(cols=len(rows[0]))
+        table += group
+        for _ in rows[0]:
+            group += nodes.colspec(colwidth=10)
+        head, body = nodes.thead(), nodes.tbody()
+        for k, cells in enumerate(rows):
+            row = nodes.row()
+            for c in cells:
+                row += _cell(_inline(c))
+            (head if k == 0 else body).append(row)
+        group += head
+        group += body
+        return [table]
+
+
 def setup(app):
     app.add_directive("compass-options", OptionsTable)
     app.add_directive("compass-path-names", PathNamesTable)
@@ -237,4 +299,5 @@ def setup(app):
     app.add_directive("compass-point-statuses", PointStatusTable)
     app.add_directive("compass-step-codes", StepCodeTable)
     app.add_directive("compass-benchmark-records", BenchmarkRecords)
+    app.add_directive("compass-readme-table", ReadmeTable)
     return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}
