@@ -648,6 +648,9 @@ def _termination(status):
         Status.DOMAIN_ERROR: (SolverStatus.error, TC.solverFailure),
         Status.INFEASIBLE: (SolverStatus.warning, TC.infeasible),
         Status.ERROR: (SolverStatus.error, TC.internalSolverError),
+        Status.MEMORY_LIMIT: (SolverStatus.aborted, TC.resourceInterrupt),
+        Status.FLAT_RESIDUAL: (SolverStatus.warning, TC.other),
+        Status.STATIONARY_POINT: (SolverStatus.warning, TC.noSolution),
     }
     return table.get(status, (SolverStatus.unknown, TC.unknown))
 

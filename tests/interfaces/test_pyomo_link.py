@@ -241,3 +241,16 @@ def test_sub_blocks_are_read_and_deactivated_components_ignored():
     pe.assert_optimal_termination(opt.solve(m))
     assert pe.value(m.b.x) == pytest.approx(3.0) and pe.value(m.y) == pytest.approx(6.0)
     assert cpy.compiled(m).var_names == ["b.x", "y"]
+
+
+def test_every_status_has_a_pyomo_termination_condition():
+    # Pinned gap: statuses added after the link was written (FLAT_RESIDUAL,
+    # STATIONARY_POINT, MEMORY_LIMIT) came back as unknown/unknown.
+    from pyomo.opt import SolverStatus
+
+    from compass_sparse import Status
+    from compass_sparse.interfaces.pyomo import _termination
+
+    for st in Status:
+        solver_status, tc = _termination(st)
+        assert solver_status is not SolverStatus.unknown and tc.name != "unknown", st
