@@ -119,7 +119,9 @@ class _Memo:
 
     @staticmethod
     def _same(a, x):
-        return a is not None and a.shape == x.shape and np.array_equal(a, x)
+        # (a == x).all() on the arrays themselves: np.array_equal's conversions and checks
+        # cost more than the comparison for the small vectors of a small problem
+        return a is not None and a.shape == x.shape and bool((a == x).all())
 
     def get(self, x):
         if self._same(self.x, x):
