@@ -115,25 +115,22 @@ class Linearizer:
 
     def __init__(self, J: sp.csc_matrix):
         n = J.shape[0]
-        ones = sp.csc_matrix((np.ones(J.nnz), J.indices, J.indptr), shape=J.shape)
-        # Structural union: values of J could cancel against the identity and vanish.
-        P = (ones + sp.identity(n, format="csc")).tocsc()
-        P.sort_indices()
-        P.data[:] = 0.0
-        self.M = P
-        # position of each J entry and each diagonal entry inside P
-        col = np.repeat(np.arange(n), np.diff(J.indptr))
-        self.pos_J = self._positions(P, J.indices, col)
-        self.pos_D = self._positions(P, np.arange(n), np.arange(n))
+        # Structural union of pattern(J) and the diagonal, as sorted keys col * n + row
+        # (values of J could cancel against the identity and vanish); built with array
+        # operations, no sparse arithmetic: small problems build one per solve.
+        col = np.repeat(np.arange(n, dtype=np.int64), np.diff(J.indptr))
+        key_J = col * n + J.indices
+        key_D = np.arange(n, dtype=np.int64) * (n + 1)
+        keys = np.union1d(key_J, key_D)
+        indices = (keys % n).astype(J.indices.dtype)
+        indptr = np.searchsorted(keys, np.arange(n + 1, dtype=np.int64) * n).astype(
+            J.indptr.dtype)
+        self.M = sp.csc_matrix((np.zeros(keys.size), indices, indptr), shape=(n, n))
+        # position of each J entry and each diagonal entry inside M's pattern
+        self.pos_J = np.searchsorted(keys, key_J)
+        self.pos_D = np.searchsorted(keys, key_D)
         self.n = n
         self.nnz_J = J.nnz
-
-    @staticmethod
-    def _positions(P, rows, cols):
-        key_p = np.repeat(np.arange(P.shape[1]), np.diff(P.indptr)).astype(np.int64) * \
-            P.shape[0] + P.indices
-        key = cols.astype(np.int64) * P.shape[0] + rows
-        return np.searchsorted(key_p, key)
 
     def __call__(self, J, eps: float) -> sp.csc_matrix:
         data = np.zeros_like(self.M.data)
