@@ -43,6 +43,7 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
+from ._csc import trusted_csc
 from .exceptions import (CompassError, EvaluationError, JacobianPatternError, ProblemError,
                          ShapeError)
 
@@ -92,8 +93,7 @@ def canonical_csc(J, n: int) -> sp.csc_matrix:
         # evaluates it every major iteration); copies of the index arrays, since scipy
         # may sort or prune them in place.
         indptr, indices = _full_pattern(n)
-        return sp.csc_matrix((A.T.ravel().copy(), indices.copy(), indptr.copy()),
-                             shape=(n, n))
+        return trusted_csc(A.T.flatten(), indices.copy(), indptr.copy(), (n, n))
     if not C.has_canonical_format:
         C.sum_duplicates()  # sorts indices too
     C.sort_indices()

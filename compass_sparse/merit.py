@@ -187,6 +187,8 @@ def min_map(z, f, lb, ub):
     forms z - F: a small F next to a large z is not absorbed by rounding."""
     z = np.asarray(z, dtype=float)
     f = np.asarray(f, dtype=float)
+    if np.isfinite(z).all():  # the solver's points: no inf - inf, no errstate to pay for
+        return np.minimum(np.maximum(f, z - ub), z - lb)
     with np.errstate(invalid="ignore"):
         return np.minimum(np.maximum(f, z - ub), z - lb)
 

@@ -46,6 +46,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from ._csc import trusted_csc
 from .acceptance import Acceptance
 from .crash import crash
 from .fallback import gradient_steps, lm_step
@@ -122,9 +123,8 @@ class Linearizer:
         key_J = col * n + J.indices
         key_D = np.arange(n, dtype=np.int64) * (n + 1)
         keys = np.union1d(key_J, key_D)
-        indices = (keys % n).astype(J.indices.dtype)
-        indptr = np.searchsorted(keys, np.arange(n + 1, dtype=np.int64) * n).astype(
-            J.indptr.dtype)
+        indices = (keys % n).astype(np.int32)
+        indptr = np.searchsorted(keys, np.arange(n + 1, dtype=np.int64) * n).astype(np.int32)
         self.M = sp.csc_matrix((np.zeros(keys.size), indices, indptr), shape=(n, n))
         # position of each J entry and each diagonal entry inside M's pattern
         self.pos_J = np.searchsorted(keys, key_J)
@@ -137,8 +137,7 @@ class Linearizer:
         data[self.pos_J] = J.data  # canonical pattern: positions are distinct
         if eps:
             data[self.pos_D] += eps
-        M = sp.csc_matrix((data, self.M.indices, self.M.indptr), shape=self.M.shape)
-        return M
+        return trusted_csc(data, self.M.indices, self.M.indptr, self.M.shape)
 
 
 @dataclass

@@ -1,0 +1,38 @@
+"""CSC matrices from arrays the solver already knows to be valid, without scipy's checks.
+
+scipy's ``csc_matrix((data, indices, indptr), shape)`` validates and re-types its index
+arrays on every call (about 20 us); a small problem builds a dozen such matrices per solve
+from arrays that are valid by construction (the full pattern of a dense Jacobian, the
+fixed pattern of J + eps I).  :func:`trusted_csc` sets the same attributes directly.  It is
+used only where the caller guarantees: int32 index arrays of a canonical pattern (sorted
+row indices, no duplicates) for the given shape, float64 data of length indptr[-1].  When
+this scipy keeps other attributes than the ones known here, the checked constructor is
+used instead (probed once, at first use).
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+_KNOWN = {"_shape", "maxprint", "indices", "indptr", "data"}
+_STATE = []  # [usable: bool, maxprint] after the probe
+
+
+def _probe():
+    A = sp.csc_matrix((np.zeros(1), np.zeros(1, dtype=np.int32),
+                       np.array([0, 1], dtype=np.int32)), shape=(1, 1))
+    _STATE[:] = [set(vars(A)) == _KNOWN and A.indices.dtype == np.int32,
+                 getattr(A, "maxprint", None)]
+
+
+def trusted_csc(data, indices, indptr, shape) -> sp.csc_matrix:
+    """csc_matrix((data, indices, indptr), shape) for valid canonical int32 arrays."""
+    if not _STATE:
+        _probe()
+    if not _STATE[0] or indices.dtype != np.int32 or indptr.dtype != np.int32:
+        return sp.csc_matrix((data, indices, indptr), shape=shape)
+    M = sp.csc_matrix.__new__(sp.csc_matrix)
+    M._shape = (int(shape[0]), int(shape[1]))
+    M.maxprint = _STATE[1]
+    M.indices, M.indptr, M.data = indices, indptr, data
+    return M
