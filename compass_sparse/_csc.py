@@ -3,11 +3,13 @@
 scipy's ``csc_matrix((data, indices, indptr), shape)`` validates and re-types its index
 arrays on every call (about 20 us); a small problem builds a dozen such matrices per solve
 from arrays that are valid by construction (the full pattern of a dense Jacobian, the
-fixed pattern of J + eps I).  :func:`trusted_csc` sets the same attributes directly.  It is
-used only where the caller guarantees: int32 index arrays of a canonical pattern (sorted
-row indices, no duplicates) for the given shape, float64 data of length indptr[-1].  When
-this scipy keeps other attributes than the ones known here, the checked constructor is
-used instead (probed once, at first use).
+fixed pattern of J + eps I, a copy of the stored pattern).  :func:`trusted_csc` sets the
+same attributes directly.  It is used only where the caller guarantees a structurally
+valid matrix: int32 index arrays, indptr non-decreasing from 0 to len(indices) = len(data),
+row indices within the shape.  Nothing more is assumed: scipy still computes the sorted
+and canonical flags from the arrays when asked.  When this scipy keeps other attributes
+than the ones known here, or an index array is not int32, the checked constructor is used
+instead (probed once, at first use).
 """
 from __future__ import annotations
 

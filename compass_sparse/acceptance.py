@@ -59,7 +59,7 @@ def residuals_small(z, f, lb, ub, tol, phi=None) -> bool:
     if float(np.linalg.norm(phi)) > tol:
         return False
     mm = min_map(z, f, lb, ub)
-    return bool(np.all(np.abs(mm) <= tol))
+    return bool((np.abs(mm) <= tol).all())
 
 
 def judge(z, f, lb, ub, tol, jac=None) -> Verdict:

@@ -197,9 +197,8 @@ class Evaluator:
         """The structural pattern (CSC, data = 1), None until the first Jacobian."""
         if self._pattern is None:
             return None
-        P = self._pattern.copy()
-        P.data = np.ones_like(P.data)
-        return P
+        P = self._pattern
+        return trusted_csc(np.ones(P.nnz), P.indices.copy(), P.indptr.copy(), P.shape)
 
     def _set_pattern(self, C):
         self._pattern = C.copy()
@@ -395,7 +394,7 @@ class Evaluator:
             raise
         except Exception as exc:  # the user's F failed here: reject the point
             return self._reject(repr(exc))
-        if not np.all(np.isfinite(f)):
+        if not np.isfinite(f).all():
             return self._reject("F returned NaN/Inf")
         return f
 
@@ -407,7 +406,7 @@ class Evaluator:
             raise
         except Exception as exc:
             return self._reject(repr(exc))
-        if not np.all(np.isfinite(J.data)):
+        if not np.isfinite(J.data).all():
             return self._reject("J returned NaN/Inf")
         return J
 
@@ -444,7 +443,7 @@ class Evaluator:
             raise EvaluationError(
                 f"F is {f[i]} in row {self.row_label(i)} at the start point "
                 f"({bad.size} non-finite rows)")
-        if not np.all(np.isfinite(J.data)):
+        if not np.isfinite(J.data).all():
             k = int(np.flatnonzero(~np.isfinite(J.data))[0])
             j = int(np.searchsorted(J.indptr, k, side="right") - 1)
             i = int(J.indices[k])

@@ -125,7 +125,7 @@ class Linearizer:
         keys = np.union1d(key_J, key_D)
         indices = (keys % n).astype(np.int32)
         indptr = np.searchsorted(keys, np.arange(n + 1, dtype=np.int64) * n).astype(np.int32)
-        self.M = sp.csc_matrix((np.zeros(keys.size), indices, indptr), shape=(n, n))
+        self.M = trusted_csc(np.zeros(keys.size), indices, indptr, (n, n))
         # position of each J entry and each diagonal entry inside M's pattern
         self.pos_J = np.searchsorted(keys, key_J)
         self.pos_D = np.searchsorted(keys, key_D)
