@@ -79,7 +79,8 @@ def judge(z, f, lb, ub, tol, jac=None) -> Verdict:
     da, db = fb_jacobian_diagonals(z, f, lb, ub)
     # ||H_i||_inf over the row: |da_i + db_i J_ii| on the diagonal, |db_i J_ij| elsewhere;
     # read off the stored entries of the canonical CSC (no sparse matrix built per solve)
-    J = sp.csc_matrix(J)
+    if not (sp.issparse(J) and J.format == "csc"):
+        J = sp.csc_matrix(J)
     if not J.has_canonical_format:
         J = J.copy()
         J.sum_duplicates()

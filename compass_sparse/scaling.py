@@ -77,7 +77,7 @@ def _columns(A: sp.csc_matrix) -> np.ndarray:
 
 def _canonical(A) -> sp.csc_matrix:
     """A as CSC without duplicate entries (a duplicate's |sum| is what a max-norm sees)."""
-    A = sp.csc_matrix(A)
+    A = A if sp.issparse(A) and A.format == "csc" else sp.csc_matrix(A)
     if not A.has_canonical_format:
         A = A.copy()
         A.sum_duplicates()

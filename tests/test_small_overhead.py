@@ -38,6 +38,30 @@ def test_fb_phi_kernel_matches_array_formula_bitwise_across_magnitudes(seed):
     assert np.array_equal(a, b, equal_nan=True)
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_fb_diagonals_kernel_matches_array_formula_bitwise_across_magnitudes(seed):
+    """The same stress for the diagonals (da, db) of the generalized Jacobian, with
+    points at their bounds (the (0, 0) direction of the Fischer function)."""
+    rng = np.random.default_rng(seed)
+    n = 5000
+    z = rng.standard_normal(n) * 10.0 ** rng.integers(-300, 300, n)
+    f = rng.standard_normal(n) * 10.0 ** rng.integers(-300, 300, n)
+    lb, ub = _random_box(rng, n)
+    z = np.clip(z, lb, ub)
+    at = rng.random(n) < 0.2
+    z[at] = np.where(np.isfinite(lb[at]), lb[at], z[at])
+    f[at & (rng.random(n) < 0.5)] = 0.0
+    f[:10] = [np.inf, -np.inf, np.nan, 0.0, -0.0, 1e308, -1e308, 5e-324, -5e-324, 0.0]
+    da, db = merit.fb_jacobian_diagonals(z, f, lb, ub)
+    with np.errstate(all="ignore"):
+        ra, rb = merit.fb_jacobian_diagonals_arrays(z, f, lb, ub)
+    assert np.array_equal(da, ra, equal_nan=True)
+    assert np.array_equal(db, rb, equal_nan=True)
+    # each partial of phi lies in [-2, 0]; a box row chains two: |da| <= 2 + 2 * 2
+    assert (np.abs(da[np.isfinite(da)]) <= 6.0).all()
+    assert (np.abs(db[np.isfinite(db)]) <= 4.0).all()
+
+
 def test_fb_phi_scalar_bounds_still_broadcast():
     z = np.array([0.0, 1.0, 2.0])
     f = np.array([1.0, 0.0, -1.0])
