@@ -138,6 +138,23 @@ def test_blas_limit_reuses_one_controller():
     assert len(_blas._CONTROLLER) == 1 and _blas._CONTROLLER[0] is first[0]
 
 
+def test_blas_limit_is_one_thread_inside_and_restored_after():
+    from threadpoolctl import threadpool_info
+
+    from compass_sparse import _blas
+
+    def blas_threads():
+        return [d["num_threads"] for d in threadpool_info() if d["user_api"] == "blas"]
+
+    before = blas_threads()
+    with _blas.single_threaded_blas():
+        assert all(k == 1 for k in blas_threads())
+        with _blas.single_threaded_blas():  # nested: still one, and the outer restores
+            assert all(k == 1 for k in blas_threads())
+        assert all(k == 1 for k in blas_threads())
+    assert blas_threads() == before
+
+
 def test_dense_jacobian_gets_canonical_full_pattern_each_call():
     from compass_sparse.evaluation import canonical_csc as _canonical_csc
 
