@@ -22,16 +22,28 @@ def _random_box(rng, n):
     return lb, ub
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_fb_phi_kernel_matches_array_formula_bitwise_across_magnitudes(seed):
-    """Stress over 600 orders of magnitude, every bound kind, infinite and NaN entries."""
+def _stress_point(seed, at_bounds=0.0):
+    """5000 entries over 600 orders of magnitude, every bound kind, infinite and NaN F
+    values; a fraction ``at_bounds`` of the points on a finite lower bound (half of them
+    with F = 0 there: the (0, 0) corner of the Fischer function)."""
     rng = np.random.default_rng(seed)
     n = 5000
     z = rng.standard_normal(n) * 10.0 ** rng.integers(-300, 300, n)
     f = rng.standard_normal(n) * 10.0 ** rng.integers(-300, 300, n)
     lb, ub = _random_box(rng, n)
     z = np.clip(z, lb, ub)
+    if at_bounds:
+        at = rng.random(n) < at_bounds
+        z[at] = np.where(np.isfinite(lb[at]), lb[at], z[at])
+        f[at & (rng.random(n) < 0.5)] = 0.0
     f[:10] = [np.inf, -np.inf, np.nan, 0.0, -0.0, 1e308, -1e308, 5e-324, -5e-324, 0.0]
+    return z, f, lb, ub
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_fb_phi_kernel_matches_array_formula_bitwise_across_magnitudes(seed):
+    """Stress over 600 orders of magnitude, every bound kind, infinite and NaN entries."""
+    z, f, lb, ub = _stress_point(seed)
     a = merit.fb_phi(z, f, lb, ub)
     with np.errstate(all="ignore"):  # inf - inf and NaN arguments on purpose
         b = merit.fb_phi_arrays(z, f, lb, ub)
@@ -42,16 +54,7 @@ def test_fb_phi_kernel_matches_array_formula_bitwise_across_magnitudes(seed):
 def test_fb_diagonals_kernel_matches_array_formula_bitwise_across_magnitudes(seed):
     """The same stress for the diagonals (da, db) of the generalized Jacobian, with
     points at their bounds (the (0, 0) direction of the Fischer function)."""
-    rng = np.random.default_rng(seed)
-    n = 5000
-    z = rng.standard_normal(n) * 10.0 ** rng.integers(-300, 300, n)
-    f = rng.standard_normal(n) * 10.0 ** rng.integers(-300, 300, n)
-    lb, ub = _random_box(rng, n)
-    z = np.clip(z, lb, ub)
-    at = rng.random(n) < 0.2
-    z[at] = np.where(np.isfinite(lb[at]), lb[at], z[at])
-    f[at & (rng.random(n) < 0.5)] = 0.0
-    f[:10] = [np.inf, -np.inf, np.nan, 0.0, -0.0, 1e308, -1e308, 5e-324, -5e-324, 0.0]
+    z, f, lb, ub = _stress_point(seed, at_bounds=0.2)
     da, db = merit.fb_jacobian_diagonals(z, f, lb, ub)
     with np.errstate(all="ignore"):
         ra, rb = merit.fb_jacobian_diagonals_arrays(z, f, lb, ub)
