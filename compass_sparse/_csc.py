@@ -28,7 +28,7 @@ def _probe():
 
 
 def trusted_csc(data, indices, indptr, shape) -> sp.csc_matrix:
-    """csc_matrix((data, indices, indptr), shape) for valid canonical int32 arrays."""
+    """csc_matrix((data, indices, indptr), shape) for structurally valid int32 arrays."""
     if not _STATE:
         _probe()
     if not _STATE[0] or indices.dtype != np.int32 or indptr.dtype != np.int32:
