@@ -4,8 +4,9 @@ A multithreaded BLAS on a loaded machine spends its time spinning threads on sma
 medium dense kernels (measured here: a 200 x 200 inverse took 0.2 s against 2 ms on one
 thread, a dense least-squares solve of order 1000 25 s against 0.8 s).  threadpoolctl's
 ``threadpool_limits`` scans the loaded libraries (/proc/self/maps) on every call, 1.7 ms,
-more than a whole small solve should take, so the process keeps one controller and sets
-the limit through it (~10 us).
+more than a whole small solve should take, so the process keeps one controller, and its
+BLAS libraries, found once, are set to one thread and back directly (~2 us; the
+controller's own ``limit`` re-reads every library's state, ~15 us).
 """
 from __future__ import annotations
 
@@ -23,4 +24,38 @@ def single_threaded_blas():
         except ImportError:  # pragma: no cover - a declared dependency
             return contextlib.nullcontext()
         _CONTROLLER.append(ThreadpoolController())
-    return _CONTROLLER[0].limit(limits=1, user_api="blas")
+        libs = _CONTROLLER[0].select(user_api="blas").lib_controllers
+        ok = all(hasattr(c, "get_num_threads") and hasattr(c, "set_num_threads")
+                 for c in libs)
+        _BLAS_LIBS.append(list(libs) if ok else None)
+    if _BLAS_LIBS[0] is None:  # pragma: no cover - an older threadpoolctl
+        return _CONTROLLER[0].limit(limits=1, user_api="blas")
+    return _OneThread(_BLAS_LIBS[0])
+
+
+_BLAS_LIBS = []
+"""[the BLAS library controllers of _CONTROLLER, or None to use its ``limit``]."""
+
+
+class _OneThread:
+    """One BLAS thread inside the block, each library's own count restored after."""
+
+    __slots__ = ("libs", "saved")
+
+    def __init__(self, libs):
+        self.libs = libs
+        self.saved = []
+
+    def __enter__(self):
+        for c in self.libs:
+            k = c.get_num_threads()
+            if k != 1:
+                c.set_num_threads(1)
+                self.saved.append((c, k))
+        return self
+
+    def __exit__(self, *exc):
+        for c, k in self.saved:
+            c.set_num_threads(k)
+        self.saved.clear()
+        return False

@@ -51,3 +51,35 @@ def csc_rmatvec(indptr, indices, data, u, out):
         for k in range(indptr[j], indptr[j + 1]):
             s += data[k] * u[indices[k]]
         out[j] = s
+
+
+@njit(cache=True, inline="always")
+def _fischer_grad(a, b):
+    """(d phi / da, d phi / db), the direction (1, 1)/sqrt(2) at (0, 0) (merit._fischer_grad)."""
+    r = math.hypot(a, b)
+    if r == 0.0:
+        g = 1.0 / math.sqrt(2.0)
+        return g - 1.0, g - 1.0
+    return a / r - 1.0, b / r - 1.0
+
+
+@njit(cache=True)
+def fb_diagonals_kernel(z, f, lb, ub, da, db):
+    """The diagonals of merit.fb_jacobian_diagonals, one element at a time."""
+    for i in range(z.shape[0]):
+        fl = np.isfinite(lb[i])
+        fu = np.isfinite(ub[i])
+        if fl and not fu:
+            da[i], db[i] = _fischer_grad(z[i] - lb[i], f[i])
+        elif fu and not fl:
+            da[i], db[i] = _fischer_grad(ub[i] - z[i], -f[i])
+        elif fl and fu:
+            a1 = ub[i] - z[i]
+            c = _fischer(a1, -f[i])
+            ia, ib = _fischer_grad(a1, -f[i])
+            oa, ob = _fischer_grad(z[i] - lb[i], c)
+            da[i] = oa - ob * ia
+            db[i] = -ob * ib
+        else:
+            da[i] = 0.0
+            db[i] = -1.0

@@ -53,12 +53,24 @@ def normalized(name: str, v, kind: str, *, allow_inf: bool = False, what: str = 
     return x
 
 
+_BUILT: dict = {}
+"""Frozen option instances built from dicts, by (class, the dict's items with types)."""
+_BUILT_MAX = 64
+
+
+@functools.lru_cache(maxsize=None)
+def _field_names(cls) -> frozenset:
+    return frozenset(f.name for f in dataclasses.fields(cls))
+
+
 class OptionsMixin:
     _what = "option"
 
     @classmethod
     def _check_names(cls, keys):
-        names = {f.name for f in dataclasses.fields(cls)}
+        names = _field_names(cls)
+        if names.issuperset(keys):
+            return
         unknown = sorted(set(keys) - names)
         if unknown:
             hints = []
@@ -70,13 +82,29 @@ class OptionsMixin:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]):
         cls._check_names(d)
-        return cls(**dict(d))
+        if not cls.__dataclass_params__.frozen:
+            return cls(**dict(d))
+        # A frozen instance can be shared: a solve loop passing the same dict every time
+        # gets the options built and validated once.  The key holds each value's type,
+        # so that True and 1 (equal and of equal hash) stay apart.
+        try:
+            key = (cls,) + tuple(sorted((k, type(v), v) for k, v in d.items()))
+            hash(key)
+        except TypeError:  # an unhashable value: built (and rejected) as usual
+            return cls(**dict(d))
+        hit = _BUILT.get(key)
+        if hit is None:
+            hit = cls(**dict(d))
+            if len(_BUILT) >= _BUILT_MAX:
+                _BUILT.clear()
+            _BUILT[key] = hit
+        return hit
 
     @classmethod
     def coerce(cls, options):
         """None, a dict or an instance -> an instance."""
         if options is None:
-            return cls()
+            return cls.from_dict({})
         if isinstance(options, cls):
             return options
         if isinstance(options, Mapping):

@@ -52,12 +52,14 @@ class Verdict:
                 f"{row_label(self.flat_row)}")
 
 
-def residuals_small(z, f, lb, ub, tol) -> bool:
-    """Test (1): both residuals at most tol."""
-    if float(np.linalg.norm(fb_phi(z, f, lb, ub))) > tol:
+def residuals_small(z, f, lb, ub, tol, phi=None) -> bool:
+    """Test (1): both residuals at most tol (``phi``: fb_phi(z, f), when already known)."""
+    if phi is None:
+        phi = fb_phi(z, f, lb, ub)
+    if float(np.linalg.norm(phi)) > tol:
         return False
     mm = min_map(z, f, lb, ub)
-    return bool(np.all(np.abs(mm) <= tol))
+    return bool((np.abs(mm) <= tol).all())
 
 
 def judge(z, f, lb, ub, tol, jac=None) -> Verdict:
@@ -65,9 +67,9 @@ def judge(z, f, lb, ub, tol, jac=None) -> Verdict:
     without a Jacobian only test (1) is applied."""
     z = np.asarray(z, dtype=float)
     f = np.asarray(f, dtype=float)
-    if not residuals_small(z, f, lb, ub, tol):
-        return Verdict(False, False)
     phi = fb_phi(z, f, lb, ub)
+    if not residuals_small(z, f, lb, ub, tol, phi):
+        return Verdict(False, False)
     rows = np.flatnonzero(phi != 0)
     if rows.size == 0 or jac is None:
         return Verdict(True, True)
@@ -75,14 +77,16 @@ def judge(z, f, lb, ub, tol, jac=None) -> Verdict:
     if J is None:
         return Verdict(True, True)
     da, db = fb_jacobian_diagonals(z, f, lb, ub)
-    # ||H_i||_inf over the row: |da_i + db_i J_ii| on the diagonal, |db_i J_ij| elsewhere
-    Jr = J.tocsr()
-    absJ = abs(Jr)
+    # ||H_i||_inf over the row: |da_i + db_i J_ii| on the diagonal, |db_i J_ij| elsewhere;
+    # read off the stored entries of the canonical CSC (no sparse matrix built per solve)
+    if not (sp.issparse(J) and J.format == "csc"):
+        J = sp.csc_matrix(J)
+    if not J.has_canonical_format:
+        J = J.copy()
+        J.sum_duplicates()
     row_max = np.zeros(z.size)
-    nz = np.diff(absJ.indptr) > 0
-    if nz.any():
-        row_max[nz] = absJ.max(axis=1).toarray().ravel()[nz]
-    diag = Jr.diagonal()
+    np.maximum.at(row_max, J.indices, np.abs(J.data))
+    diag = J.diagonal()
     h = np.maximum(np.abs(db) * row_max, np.abs(da + db * diag))
     with np.errstate(divide="ignore", invalid="ignore"):
         d = np.where(h[rows] > 0, np.abs(phi[rows]) / h[rows], np.inf)

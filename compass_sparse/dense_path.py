@@ -108,7 +108,7 @@ class DensePathEngine:
         self.displaced[:] = -1
         st = path.st  # the run's PathState: slot table set by PivotalPath.run
         msg = self._factor(path, istate, fstate)
-        if slack_basis is not None and (msg != 0 or np.any(st.sk == K.VAR_A)):
+        if slack_basis is not None and (msg != 0 or (st.sk == K.VAR_A).any()):
             path._reset_slots(slack_basis, z, w, v)
             self.displaced[:] = -1
             msg = self._factor(path, istate, fstate)

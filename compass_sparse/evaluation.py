@@ -43,6 +43,7 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
+from ._csc import trusted_csc
 from .exceptions import (CompassError, EvaluationError, JacobianPatternError, ProblemError,
                          ShapeError)
 
@@ -92,8 +93,7 @@ def canonical_csc(J, n: int) -> sp.csc_matrix:
         # evaluates it every major iteration); copies of the index arrays, since scipy
         # may sort or prune them in place.
         indptr, indices = _full_pattern(n)
-        return sp.csc_matrix((A.T.ravel().copy(), indices.copy(), indptr.copy()),
-                             shape=(n, n))
+        return trusted_csc(A.T.flatten(), indices.copy(), indptr.copy(), (n, n))
     if not C.has_canonical_format:
         C.sum_duplicates()  # sorts indices too
     C.sort_indices()
@@ -119,7 +119,9 @@ class _Memo:
 
     @staticmethod
     def _same(a, x):
-        return a is not None and a.shape == x.shape and np.array_equal(a, x)
+        # (a == x).all() on the arrays themselves: np.array_equal's conversions and checks
+        # cost more than the comparison for the small vectors of a small problem
+        return a is not None and a.shape == x.shape and bool((a == x).all())
 
     def get(self, x):
         if self._same(self.x, x):
@@ -195,9 +197,8 @@ class Evaluator:
         """The structural pattern (CSC, data = 1), None until the first Jacobian."""
         if self._pattern is None:
             return None
-        P = self._pattern.copy()
-        P.data = np.ones_like(P.data)
-        return P
+        P = self._pattern
+        return trusted_csc(np.ones(P.nnz), P.indices.copy(), P.indptr.copy(), P.shape)
 
     def _set_pattern(self, C):
         self._pattern = C.copy()
@@ -393,7 +394,7 @@ class Evaluator:
             raise
         except Exception as exc:  # the user's F failed here: reject the point
             return self._reject(repr(exc))
-        if not np.all(np.isfinite(f)):
+        if not np.isfinite(f).all():
             return self._reject("F returned NaN/Inf")
         return f
 
@@ -405,7 +406,7 @@ class Evaluator:
             raise
         except Exception as exc:
             return self._reject(repr(exc))
-        if not np.all(np.isfinite(J.data)):
+        if not np.isfinite(J.data).all():
             return self._reject("J returned NaN/Inf")
         return J
 
@@ -442,7 +443,7 @@ class Evaluator:
             raise EvaluationError(
                 f"F is {f[i]} in row {self.row_label(i)} at the start point "
                 f"({bad.size} non-finite rows)")
-        if not np.all(np.isfinite(J.data)):
+        if not np.isfinite(J.data).all():
             k = int(np.flatnonzero(~np.isfinite(J.data))[0])
             j = int(np.searchsorted(J.indptr, k, side="right") - 1)
             i = int(J.indices[k])

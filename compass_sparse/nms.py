@@ -47,6 +47,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from ._csc import trusted_csc
 from .acceptance import Acceptance
 from .crash import crash
 from .exceptions import FactorBudgetError
@@ -117,33 +118,28 @@ class Linearizer:
 
     def __init__(self, J: sp.csc_matrix):
         n = J.shape[0]
-        ones = sp.csc_matrix((np.ones(J.nnz), J.indices, J.indptr), shape=J.shape)
-        # Structural union: values of J could cancel against the identity and vanish.
-        P = (ones + sp.identity(n, format="csc")).tocsc()
-        P.sort_indices()
-        P.data[:] = 0.0
-        self.M = P
-        # position of each J entry and each diagonal entry inside P
-        col = np.repeat(np.arange(n), np.diff(J.indptr))
-        self.pos_J = self._positions(P, J.indices, col)
-        self.pos_D = self._positions(P, np.arange(n), np.arange(n))
+        # Structural union of pattern(J) and the diagonal, as sorted keys col * n + row
+        # (values of J could cancel against the identity and vanish); built with array
+        # operations, no sparse arithmetic: small problems build one per solve.
+        col = np.repeat(np.arange(n, dtype=np.int64), np.diff(J.indptr))
+        key_J = col * n + J.indices
+        key_D = np.arange(n, dtype=np.int64) * (n + 1)
+        keys = np.union1d(key_J, key_D)
+        indices = (keys % n).astype(np.int32)
+        indptr = np.searchsorted(keys, np.arange(n + 1, dtype=np.int64) * n).astype(np.int32)
+        self.M = trusted_csc(np.zeros(keys.size), indices, indptr, (n, n))
+        # position of each J entry and each diagonal entry inside M's pattern
+        self.pos_J = np.searchsorted(keys, key_J)
+        self.pos_D = np.searchsorted(keys, key_D)
         self.n = n
         self.nnz_J = J.nnz
-
-    @staticmethod
-    def _positions(P, rows, cols):
-        key_p = np.repeat(np.arange(P.shape[1]), np.diff(P.indptr)).astype(np.int64) * \
-            P.shape[0] + P.indices
-        key = cols.astype(np.int64) * P.shape[0] + rows
-        return np.searchsorted(key_p, key)
 
     def __call__(self, J, eps: float) -> sp.csc_matrix:
         data = np.zeros_like(self.M.data)
         data[self.pos_J] = J.data  # canonical pattern: positions are distinct
         if eps:
             data[self.pos_D] += eps
-        M = sp.csc_matrix((data, self.M.indices, self.M.indptr), shape=self.M.shape)
-        return M
+        return trusted_csc(data, self.M.indices, self.M.indptr, self.M.shape)
 
 
 @dataclass

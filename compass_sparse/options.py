@@ -9,6 +9,7 @@ PATH's manual); defaults are PATH's unless stated.  Build from keywords, from a 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -50,6 +51,23 @@ def _opt(default, doc: str, *, lo=None, hi=None, choices=None, lo_open=False, nu
         metadata={"doc": doc, "lo": lo, "hi": hi, "choices": choices, "lo_open": lo_open,
                   "nullable": nullable, "inf_ok": inf_ok},
     )
+
+
+_PLAIN = {"bool": bool, "int": int, "float": float}
+
+
+@functools.lru_cache(maxsize=None)
+def _field_rules(cls):
+    """(name, kind, metadata) of every field, kind one of choice/bool/int/float: read once
+    per class (options are built on every solve)."""
+    rules = []
+    for f in dataclasses.fields(cls):
+        m = f.metadata
+        kind = ("choice" if m.get("choices") is not None
+                else "bool" if isinstance(f.default, bool) or f.type in ("bool",)
+                else "int" if "int" in str(f.type) else "float")
+        rules.append((f.name, kind, m))
+    return tuple(rules)
 
 
 @keyword_checked
@@ -214,29 +232,29 @@ class Options(OptionsMixin):
     def validate(self):
         """Check every field against its documented range and store it as a plain bool,
         int or float (NumPy scalars, integral floats for integers); raise OptionError."""
-        for f in dataclasses.fields(self):
-            v = getattr(self, f.name)
-            m = f.metadata
+        for name, kind, m in _field_rules(type(self)):
+            v = getattr(self, name)
             if v is None:
                 if m.get("nullable"):
                     continue
-                raise OptionError(f"option {f.name} may not be None")
-            if m.get("choices") is not None:
+                raise OptionError(f"option {name} may not be None")
+            if kind == "choice":
                 if not isinstance(v, str) or v not in m["choices"]:
-                    raise OptionError(f"option {f.name}={v!r}: expected one of {m['choices']}")
+                    raise OptionError(f"option {name}={v!r}: expected one of {m['choices']}")
                 continue
-            kind = ("bool" if isinstance(f.default, bool) or f.type in ("bool",)
-                    else "int" if "int" in str(f.type) else "float")
-            v = normalized(f.name, v, kind, allow_inf=m.get("inf_ok", False))
-            object.__setattr__(self, f.name, v)
+            if type(v) is not _PLAIN[kind]:  # already a plain value: nothing to convert
+                v = normalized(name, v, kind, allow_inf=m.get("inf_ok", False))
+                object.__setattr__(self, name, v)
+            elif kind == "float" and not math.isfinite(v):
+                normalized(name, v, kind, allow_inf=m.get("inf_ok", False))  # NaN raises
             if kind == "bool":
                 continue
             lo, hi = m.get("lo"), m.get("hi")
             if lo is not None and (v < lo or (m.get("lo_open") and v == lo)):
                 op = ">" if m.get("lo_open") else ">="
-                raise OptionError(f"option {f.name}={v!r}: must be {op} {lo}")
+                raise OptionError(f"option {name}={v!r}: must be {op} {lo}")
             if hi is not None and v > hi:
-                raise OptionError(f"option {f.name}={v!r}: must be <= {hi}")
+                raise OptionError(f"option {name}={v!r}: must be <= {hi}")
 
     def minor_limit(self, n: int) -> int:
         return self.minor_iteration_limit or max(2 * n, 100)

@@ -216,7 +216,7 @@ class PivotalPath:
         ck[isz] = KIND_M
         ck[~isz] = KIND_UNIT
         cs[(kinds == VAR_W) | (kinds == VAR_S)] = -1
-        cs[kinds == VAR_A] = self.st.art_sign[idx[kinds == VAR_A]] if np.any(kinds == VAR_A) else 1
+        cs[kinds == VAR_A] = self.st.art_sign[idx[kinds == VAR_A]] if (kinds == VAR_A).any() else 1
         ist = kinds == VAR_T
         ck[ist] = KIND_DENSE
         ci[ist] = 0
@@ -276,7 +276,7 @@ class PivotalPath:
             return self._finish(code, self.st.t, t0, st0, ray_start, msg)
         code, msg = self._factor()
         if slack_basis is not None and (
-                code is not None or np.any(self.st.sk == VAR_A)):
+                code is not None or (self.st.sk == VAR_A).any()):
             self._reset_slots(slack_basis, z, w, v)
             code, msg = self._factor()
         if code is not None:
@@ -295,7 +295,7 @@ class PivotalPath:
         nonzero and the equation holds to working accuracy (else never report 'S')."""
         art = self.st.sk == VAR_A
         tol = 1e-9 * (1.0 + float(np.max(np.abs(self.q))) + float(np.max(np.abs(self.st.r))))
-        if np.any(art) and np.max(np.abs(self.st.xb[art])) > tol:
+        if art.any() and np.max(np.abs(self.st.xb[art])) > tol:
             return LinearCode.SINGULAR, "t reached 1 with nonzero artificial variables"
         for attempt in range(2):
             z, w, v = self._current_point()

@@ -61,7 +61,7 @@ class Scaling:
     def scale_jacobian(self, J) -> sp.csc_matrix:
         """R J C entry by entry (the stored entries, explicit zeros included, are kept)."""
         J = sp.csc_matrix(J)
-        cols = np.repeat(np.arange(J.shape[1]), np.diff(J.indptr))
+        cols = _columns(J)
         return sp.csc_matrix((J.data * self.row[J.indices] * self.col[cols], J.indices.copy(),
                               J.indptr.copy()), shape=J.shape)
 
@@ -70,13 +70,32 @@ class Scaling:
                 f"{self.spread_after:.1e}")
 
 
-def _maxnorms(A: sp.csc_matrix):
-    absA = abs(A)
+def _columns(A: sp.csc_matrix) -> np.ndarray:
+    """The column index of every stored entry of a CSC matrix."""
+    return np.repeat(np.arange(A.shape[1]), np.diff(A.indptr))
+
+
+def _canonical(A) -> sp.csc_matrix:
+    """A as CSC without duplicate entries (a duplicate's |sum| is what a max-norm sees)."""
+    A = A if sp.issparse(A) and A.format == "csc" else sp.csc_matrix(A)
+    if not A.has_canonical_format:
+        A = A.copy()
+        A.sum_duplicates()
+    return A
+
+
+def _maxnorms(A: sp.csc_matrix, row=None, col=None):
+    """Row and column max-norms of diag(row) A diag(col) (A canonical CSC), read off the
+    stored entries: no sparse matrix is built (this runs on every solve)."""
+    a = np.abs(A.data)
+    if row is not None:
+        a = a * row[A.indices] * col[_columns(A)]
     rows = np.zeros(A.shape[0])
     cols = np.zeros(A.shape[1])
     if A.nnz:
-        rows = np.asarray(absA.max(axis=1).todense()).ravel()
-        cols = np.asarray(absA.max(axis=0).todense()).ravel()
+        np.maximum.at(rows, A.indices, a)
+        filled = np.flatnonzero(np.diff(A.indptr))
+        cols[filled] = np.maximum.reduceat(a, A.indptr[filled])
     return rows, cols
 
 
@@ -87,24 +106,25 @@ def _spread(v) -> float:
 
 def spread(J) -> float:
     """max / min of the non-zero row and column max-norms of J (1 for a well-scaled J)."""
-    r, c = _maxnorms(sp.csc_matrix(J))
+    r, c = _maxnorms(_canonical(J))
     return max(_spread(r), _spread(c))
 
 
 def equilibrate(J) -> Scaling:
     """Power-of-two factors with R J C equilibrated (see the module docstring)."""
-    A = sp.csc_matrix(J, copy=True)
+    A = _canonical(J)
     n = A.shape[0]
     row = np.ones(n)
     col = np.ones(n)
     before = spread(A)
     for _ in range(SWEEPS):
-        r, c = _maxnorms(sp.diags(row) @ A @ sp.diags(col))
+        r, c = _maxnorms(A, row, col)
         row /= np.sqrt(np.where(r > 0, r, 1.0))
         col /= np.sqrt(np.where(c > 0, c, 1.0))
     row = np.clip(2.0 ** np.round(np.log2(row)), 1.0 / FACTOR_LIMIT, FACTOR_LIMIT)
     col = np.clip(2.0 ** np.round(np.log2(col)), 1.0 / FACTOR_LIMIT, FACTOR_LIMIT)
-    after = spread(sp.diags(row) @ A @ sp.diags(col))
+    r, c = _maxnorms(A, row, col)
+    after = max(_spread(r), _spread(c))
     return Scaling(row, col, before, after)
 
 

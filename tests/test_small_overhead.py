@@ -22,20 +22,47 @@ def _random_box(rng, n):
     return lb, ub
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
-def test_fb_phi_kernel_matches_array_formula_bitwise_across_magnitudes(seed):
-    """Stress over 600 orders of magnitude, every bound kind, infinite and NaN entries."""
+def _stress_point(seed, at_bounds=0.0):
+    """5000 entries over 600 orders of magnitude, every bound kind, infinite and NaN F
+    values; a fraction ``at_bounds`` of the points on a finite lower bound (half of them
+    with F = 0 there: the (0, 0) corner of the Fischer function)."""
     rng = np.random.default_rng(seed)
     n = 5000
     z = rng.standard_normal(n) * 10.0 ** rng.integers(-300, 300, n)
     f = rng.standard_normal(n) * 10.0 ** rng.integers(-300, 300, n)
     lb, ub = _random_box(rng, n)
     z = np.clip(z, lb, ub)
+    if at_bounds:
+        at = rng.random(n) < at_bounds
+        z[at] = np.where(np.isfinite(lb[at]), lb[at], z[at])
+        f[at & (rng.random(n) < 0.5)] = 0.0
     f[:10] = [np.inf, -np.inf, np.nan, 0.0, -0.0, 1e308, -1e308, 5e-324, -5e-324, 0.0]
+    return z, f, lb, ub
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_fb_phi_kernel_matches_array_formula_bitwise_across_magnitudes(seed):
+    """Stress over 600 orders of magnitude, every bound kind, infinite and NaN entries."""
+    z, f, lb, ub = _stress_point(seed)
     a = merit.fb_phi(z, f, lb, ub)
     with np.errstate(all="ignore"):  # inf - inf and NaN arguments on purpose
         b = merit.fb_phi_arrays(z, f, lb, ub)
     assert np.array_equal(a, b, equal_nan=True)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_fb_diagonals_kernel_matches_array_formula_bitwise_across_magnitudes(seed):
+    """The same stress for the diagonals (da, db) of the generalized Jacobian, with
+    points at their bounds (the (0, 0) direction of the Fischer function)."""
+    z, f, lb, ub = _stress_point(seed, at_bounds=0.2)
+    da, db = merit.fb_jacobian_diagonals(z, f, lb, ub)
+    with np.errstate(all="ignore"):
+        ra, rb = merit.fb_jacobian_diagonals_arrays(z, f, lb, ub)
+    assert np.array_equal(da, ra, equal_nan=True)
+    assert np.array_equal(db, rb, equal_nan=True)
+    # each partial of phi lies in [-2, 0]; a box row chains two: |da| <= 2 + 2 * 2
+    assert (np.abs(da[np.isfinite(da)]) <= 6.0).all()
+    assert (np.abs(db[np.isfinite(db)]) <= 4.0).all()
 
 
 def test_fb_phi_scalar_bounds_still_broadcast():
@@ -114,6 +141,23 @@ def test_blas_limit_reuses_one_controller():
     assert len(_blas._CONTROLLER) == 1 and _blas._CONTROLLER[0] is first[0]
 
 
+def test_blas_limit_is_one_thread_inside_and_restored_after():
+    from threadpoolctl import threadpool_info
+
+    from compass_sparse import _blas
+
+    def blas_threads():
+        return [d["num_threads"] for d in threadpool_info() if d["user_api"] == "blas"]
+
+    before = blas_threads()
+    with _blas.single_threaded_blas():
+        assert all(k == 1 for k in blas_threads())
+        with _blas.single_threaded_blas():  # nested: still one, and the outer restores
+            assert all(k == 1 for k in blas_threads())
+        assert all(k == 1 for k in blas_threads())
+    assert blas_threads() == before
+
+
 def test_dense_jacobian_gets_canonical_full_pattern_each_call():
     from compass_sparse.evaluation import canonical_csc as _canonical_csc
 
@@ -123,3 +167,122 @@ def test_dense_jacobian_gets_canonical_full_pattern_each_call():
     C2 = _canonical_csc(A, 3)
     assert np.array_equal(C2.toarray(), A) and C2.has_canonical_format
     assert C2.nnz == 9
+
+
+# ---------------------------------------------------------------- fixed per-solve cost
+def _valid_csc_arrays(rng, n, density, sort=True):
+    cols = [np.flatnonzero(rng.random(n) < density) for _ in range(n)]
+    if not sort:
+        cols = [rng.permutation(c) for c in cols]
+    indptr = np.concatenate([[0], np.cumsum([c.size for c in cols])]).astype(np.int32)
+    indices = (np.concatenate(cols) if cols else np.zeros(0)).astype(np.int32)
+    return rng.standard_normal(indices.size), indices, indptr
+
+
+@pytest.mark.parametrize("sort", [True, False])
+def test_trusted_csc_equals_the_checked_constructor(sort):
+    from compass_sparse._csc import trusted_csc
+
+    rng = np.random.default_rng(3)
+    for n in (1, 2, 7, 30):
+        data, indices, indptr = _valid_csc_arrays(rng, n, 0.4, sort=sort)
+        T = trusted_csc(data, indices, indptr, (n, n))
+        C = sp.csc_matrix((data, indices, indptr), shape=(n, n))
+        assert type(T) is type(C) and T.shape == C.shape
+        # the flags are computed from the arrays, not assumed
+        assert T.has_sorted_indices == C.has_sorted_indices
+        assert T.has_canonical_format == C.has_canonical_format
+        x = rng.standard_normal(n)
+        np.testing.assert_array_equal(T @ x, C @ x)
+        np.testing.assert_array_equal(T.toarray(), C.toarray())
+        np.testing.assert_array_equal((T + T).toarray(), (C + C).toarray())
+        np.testing.assert_array_equal(T.tocsr().toarray(), C.toarray())
+
+
+def test_trusted_csc_with_int64_indices_falls_back_to_the_checked_constructor():
+    from compass_sparse._csc import trusted_csc
+
+    T = trusted_csc(np.ones(2), np.array([0, 1]), np.array([0, 1, 2]), (2, 2))
+    np.testing.assert_array_equal(T.toarray(), np.eye(2))
+
+
+def test_dense_jacobian_in_fortran_order_is_copied_not_viewed():
+    from compass_sparse.evaluation import canonical_csc
+
+    A = np.asfortranarray(np.arange(9.0).reshape(3, 3))
+    C = canonical_csc(A, 3)
+    A[:] = -1.0
+    np.testing.assert_array_equal(C.toarray(), np.arange(9.0).reshape(3, 3))
+
+
+def test_linearizer_pattern_is_jacobian_pattern_union_diagonal():
+    from compass_sparse.nms import Linearizer
+
+    rng = np.random.default_rng(5)
+    for n in (1, 3, 12, 40):
+        J = sp.random(n, n, density=0.3, random_state=rng, format="csc")
+        J.sort_indices()
+        J.data[: J.nnz // 2] = 0.0  # stored zeros keep their place
+        L = Linearizer(J)
+        ones = sp.csc_matrix((np.ones(J.nnz), J.indices, J.indptr), shape=J.shape)
+        P = (ones + sp.identity(n, format="csc")).tocsc()
+        P.sort_indices()
+        np.testing.assert_array_equal(L.M.indptr, P.indptr)
+        np.testing.assert_array_equal(L.M.indices, P.indices)
+        M = L(J, 0.25)
+        np.testing.assert_array_equal(M.toarray(), J.toarray() + 0.25 * np.eye(n))
+        assert M.nnz == P.nnz
+
+
+def test_maxnorms_equal_scipy_row_and_column_max_of_scaled_matrix():
+    from compass_sparse import scaling
+
+    rng = np.random.default_rng(11)
+    for n in (1, 4, 25):
+        A = sp.random(n, n, density=0.3, random_state=rng, format="csc")
+        A.data *= 10.0 ** rng.uniform(-9, 9, A.nnz) * rng.choice([-1.0, 1.0], A.nnz)
+        row, col = 2.0 ** rng.integers(-6, 6, n), 2.0 ** rng.integers(-6, 6, n)
+        r, c = scaling._maxnorms(A, row, col)
+        B = abs(sp.diags(row) @ A @ sp.diags(col))
+        np.testing.assert_array_equal(r, B.max(axis=1).toarray().ravel())
+        np.testing.assert_array_equal(c, B.max(axis=0).toarray().ravel())
+
+
+def test_maxnorm_spread_sums_duplicate_entries_first():
+    from compass_sparse.scaling import spread
+
+    # two stored entries (1, 1) of 3 and -3 cancel: the matrix is diag(1, 0) plus a
+    # 1e-4 entry in row 1, column 0 -> row norms 1 and 1e-4
+    A = sp.csc_matrix((np.array([1.0, 1e-4, 3.0, -3.0]), np.array([0, 1, 1, 1]),
+                       np.array([0, 2, 4])), shape=(2, 2))
+    assert spread(A) == pytest.approx(1e4)
+
+
+def test_flat_tail_verdict_same_for_duplicate_csr_and_canonical_csc_jacobian():
+    from compass_sparse.acceptance import judge
+
+    z = np.array([1.0, 2.0])
+    f = np.array([1e-9, -1e-9])
+    canonical = sp.csc_matrix(np.array([[1e-12, 0.0], [0.0, 2.0]]))
+    # the same matrix with the (0, 0) entry split in two stored parts, as CSR
+    dup = sp.csr_matrix((np.array([3e-12, -2e-12, 2.0]), np.array([0, 0, 1]),
+                         np.array([0, 2, 3])), shape=(2, 2))
+    a = judge(z, f, np.zeros(2), np.full(2, np.inf), 1e-6, jac=lambda _: canonical)
+    b = judge(z, f, np.zeros(2), np.full(2, np.inf), 1e-6, jac=lambda _: dup)
+    assert not a.solved and a.small_residual and a.flat_row == 0
+    assert (b.solved, b.small_residual, b.flat_row) == (a.solved, a.small_residual, a.flat_row)
+    assert b.step == pytest.approx(a.step, rel=1e-9)
+
+
+def test_options_from_equal_dicts_shared_but_true_and_one_stay_apart():
+    from compass_sparse import Options
+    from compass_sparse.exceptions import OptionError
+
+    a = Options.coerce({"verbosity": 1, "time_limit": 5.0})
+    assert Options.coerce({"time_limit": 5.0, "verbosity": 1}) is a
+    assert Options.coerce(None) is Options.coerce({})
+    with pytest.raises(OptionError):
+        Options.coerce({"verbosity": True})  # equal to 1, but not an integer option value
+    with pytest.raises(OptionError):
+        Options.coerce({"time_limit": float("nan")})
+    assert Options.coerce({"time_limit": float("inf")}).time_limit == float("inf")
