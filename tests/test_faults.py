@@ -14,6 +14,7 @@ import pytest
 import scipy.sparse as sp
 
 from compass_sparse import MCP, MCPSolver, PointStatus, Status, solve_lcp, solve_mcp
+from compass_sparse.exceptions import EvaluationError
 from compass_sparse.merit import fb_phi
 
 N = 12
@@ -62,6 +63,22 @@ def test_ctrl_c_at_the_first_evaluation_of_a_solve_returns_the_start_point():
     F = failing_on_call(1, KeyboardInterrupt)
     r = solve_mcp(MCP(F, J_ok, 0.0, np.inf, np.zeros(N), check=False))
     assert r.status is Status.USER_INTERRUPT and r.point_status is PointStatus.START_POINT
+
+
+@pytest.mark.parametrize("where", ["F", "J"])
+def test_ctrl_c_in_the_first_call_of_solve_mcp_from_functions_returns_the_start_point(where):
+    # solve_mcp builds the MCP itself: its start check is part of the solve, so Ctrl-C
+    # there is USER_INTERRUPT with x0, not a raw KeyboardInterrupt
+    def J_stop(x):
+        raise KeyboardInterrupt
+
+    F, J = (failing_on_call(1, KeyboardInterrupt), J_ok) if where == "F" else (F_ok, J_stop)
+    r = solve_mcp(F, J, 0.0, np.inf, np.full(N, 0.5))
+    assert r.status is Status.USER_INTERRUPT and r.point_status is PointStatus.START_POINT
+    assert np.array_equal(r.x, np.full(N, 0.5))
+    # an error at the start point is still bad input, raised as before
+    with pytest.raises(EvaluationError, match="start point"):
+        solve_mcp(failing_on_call(1, ValueError), J_ok, 0.0, np.inf, np.zeros(N))
 
 
 def test_domain_error_at_a_new_start_point_is_a_status_not_an_exception():
