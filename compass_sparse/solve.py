@@ -36,6 +36,9 @@ __all__ = ["solve_mcp", "solve_lcp", "MCPSolver"]
 DENSE_BASIS_MAX_N = 300
 """Up to this dimension the dense basis is used (0: always the sparse manager)."""
 
+UPDATE_LIMIT_FLOOR = 50
+"""factorization_update_limit is capped at max(n, this) (the bases preallocate the updates)."""
+
 
 def _manager_factory(opt: Options, deadline=None):
     """Bases for the pivotal paths; the sparse manager gets the solve's deadline, so that a
@@ -44,17 +47,19 @@ def _manager_factory(opt: Options, deadline=None):
         n = M.shape[0]
         from . import dense_path
 
+        # Both bases preallocate room for their updates; past max(n, 50) updates applying
+        # them costs more than a fresh factorization, so a larger limit is capped there.
+        limit = min(opt.factorization_update_limit, max(n, UPDATE_LIMIT_FLOOR))
         # The compiled engine writes no per-pivot log: verbosity >= 3 keeps the Python loop.
         if n <= dense_path.DENSE_ENGINE_MAX_N and opt.verbosity < 3:
-            return dense_path.DensePathEngine(M, opt)
+            return dense_path.DensePathEngine(M, opt, update_limit=limit)
         if n <= DENSE_BASIS_MAX_N:
             from .basis.dense import DenseBasis
 
             return DenseBasis(M)
         from .basis import BasisManager, BasisOptions
 
-        return BasisManager(M, options=BasisOptions(update_limit=opt.factorization_update_limit,
-                                                    deadline=deadline))
+        return BasisManager(M, options=BasisOptions(update_limit=limit, deadline=deadline))
 
     return make
 
