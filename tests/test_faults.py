@@ -220,3 +220,24 @@ def test_time_limit_holds_through_the_crash_searches(clock):
                   options={"time_limit": 0.5, "restart_limit": 10 ** 6,
                            "crash_minimum_dimension": 1, "crash_iteration_limit": 200})
     _assert_within_limit(r, clock, start, 0.5)
+
+
+@pytest.mark.parametrize("where", ["F", "J"])
+def test_wrong_shape_from_F_or_J_after_the_start_is_a_shape_error_naming_it(where):
+    # the README's bad-input table: a wrong shape is a bug in the user's function, raised
+    # (not taken for a domain error that would hide it), at any call
+    from compass_sparse.exceptions import ShapeError
+
+    calls = {"i": 0}
+
+    def F(x):
+        calls["i"] += where == "F"
+        return np.zeros(N + 1) if calls["i"] == 3 else F_ok(x)
+
+    def J(x):
+        calls["i"] += where == "J"
+        return sp.identity(N + 1, format="csc") if calls["i"] == 3 else J_ok(x)
+
+    with pytest.raises(ShapeError, match=r"F\(x\) returned shape" if where == "F"
+                       else "Jacobian has shape"):
+        solve_mcp(F, J, 0.0, np.inf, np.zeros(N))
