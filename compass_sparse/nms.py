@@ -374,7 +374,8 @@ class NMSSolver:
         lb, ub = self.lb, self.ub
         cur = start if isinstance(start, Point) else self._point(start)
         if cur is None:
-            return "domain error at the start point"
+            # only a restart's drawn point arrives unevaluated: the user's start is fine
+            return "F or J undefined at the last restart's point (the start point was fine)"
         self._consider(cur.z, cur.f, cur.phi, cur.psi)
         x, _ = normal_map_at(cur.z, cur.f, lb, ub)
         # --- crash

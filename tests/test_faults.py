@@ -241,3 +241,21 @@ def test_wrong_shape_from_F_or_J_after_the_start_is_a_shape_error_naming_it(wher
     with pytest.raises(ShapeError, match=r"F\(x\) returned shape" if where == "F"
                        else "Jacobian has shape"):
         solve_mcp(F, J, 0.0, np.inf, np.zeros(N))
+
+
+def test_no_progress_message_does_not_blame_a_valid_start_point_for_a_restarts_domain_error():
+    # F is defined for x > -1 and positive there (no solution on a free box); x0 = 0 is
+    # fine, the restarts' drawn points are not: the message said "domain error at the
+    # start point"
+    def F(x):
+        if np.any(x <= -1):
+            raise ValueError("sqrt of a negative number")
+        return np.sqrt(1 + x) + 1.0
+
+    def J(x):
+        return sp.diags(0.5 / np.sqrt(1 + x)).tocsc()
+
+    r = solve_mcp(F, J, -np.inf, np.inf, np.zeros(2), options={"homotopy": "off"})
+    assert r.status is Status.NO_PROGRESS and r.domain_errors > 0
+    assert "at the start point" not in r.message and "restart" in r.message
+    assert np.all(np.isfinite(r.fun)) and np.all(r.x > -1)
