@@ -158,8 +158,10 @@ def _splus(r, mu):
     for r << 0 and no branch."""
     if mu <= 0.0:
         return np.maximum(r, 0.0), (r > 0).astype(float), np.zeros_like(r)
-    q = np.sqrt(r * r + 4.0 * mu * mu)
-    val = np.maximum(r, 0.0) + 2.0 * mu * mu / (q + np.abs(r))
+    # hypot and mu * (2 mu / ...) instead of mu^2: mu^2 underflows below 1e-154 (0/0 at
+    # r = 0) and overflows above 1e154, both reachable through homotopy_smoothing.
+    q = np.hypot(r, 2.0 * mu)
+    val = np.maximum(r, 0.0) + mu * (2.0 * mu / (q + np.abs(r)))
     return val, 0.5 * (1.0 + r / q), 2.0 * mu / q
 
 

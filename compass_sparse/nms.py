@@ -370,7 +370,8 @@ class NMSSolver:
         lb, ub = self.lb, self.ub
         cur = start if isinstance(start, Point) else self._point(start)
         if cur is None:
-            return "domain error at the start point"
+            # only a restart's drawn point arrives unevaluated (the user's start was evaluated)
+            return "F or J undefined at the last restart's point (not at the start point)"
         self._consider(cur.z, cur.f, cur.phi, cur.psi)
         x, _ = normal_map_at(cur.z, cur.f, lb, ub)
         # --- crash

@@ -125,7 +125,8 @@ class Options(OptionsMixin):
         "first ratio-test pass so that the largest pivot among near ties is chosen",
         lo=0.0)
     factorization_update_limit: int = _opt(
-        50, "Forrest–Tomlin updates before a fresh factorization", lo=1)
+        50, "Forrest–Tomlin updates before a fresh factorization (capped at max(n, 50))",
+        lo=1)
 
     # --- non-monotone stabilization (thesis §3.4) ---------------------------------------
     nms: bool = _opt(True, "non-monotone stabilization (False: a monotone line search: "

@@ -36,6 +36,9 @@ __all__ = ["solve_mcp", "solve_lcp", "MCPSolver"]
 DENSE_BASIS_MAX_N = 300
 """Up to this dimension the dense basis is used (0: always the sparse manager)."""
 
+UPDATE_LIMIT_FLOOR = 50
+"""factorization_update_limit is capped at max(n, this) (the bases preallocate the updates)."""
+
 
 def _manager_factory(opt: Options, deadline=None):
     """Bases for the pivotal paths; the sparse manager gets the solve's deadline, so that a
@@ -44,17 +47,19 @@ def _manager_factory(opt: Options, deadline=None):
         n = M.shape[0]
         from . import dense_path
 
+        # Both bases preallocate room for their updates; past max(n, 50) updates applying
+        # them costs more than a fresh factorization, so a larger limit is capped there.
+        limit = min(opt.factorization_update_limit, max(n, UPDATE_LIMIT_FLOOR))
         # The compiled engine writes no per-pivot log: verbosity >= 3 keeps the Python loop.
         if n <= dense_path.DENSE_ENGINE_MAX_N and opt.verbosity < 3:
-            return dense_path.DensePathEngine(M, opt)
+            return dense_path.DensePathEngine(M, opt, update_limit=limit)
         if n <= DENSE_BASIS_MAX_N:
             from .basis.dense import DenseBasis
 
             return DenseBasis(M)
         from .basis import BasisManager, BasisOptions
 
-        return BasisManager(M, options=BasisOptions(update_limit=opt.factorization_update_limit,
-                                                    deadline=deadline))
+        return BasisManager(M, options=BasisOptions(update_limit=limit, deadline=deadline))
 
     return make
 
@@ -106,13 +111,18 @@ def _check_keywords(kwargs):
     raise ProblemError("solve_mcp got unknown keyword(s): " + ", ".join(hints))
 
 
-def _as_problem(F, jac, lb, ub, x0, kwargs) -> MCP:
+def _as_problem(F, jac, lb, ub, x0, kwargs) -> tuple[MCP, bool]:
+    """The problem, and whether its start point is still to be checked."""
     _check_keywords(kwargs)
     if isinstance(F, MCP):
         if x0 is not None:
-            return F.with_start(x0)
-        return F
-    return MCP(F, jac, lb, ub, x0, **kwargs)
+            return F.with_start(x0), False
+        return F, False
+    # The start point is checked by the solve, where a Ctrl-C in the user's first F or J
+    # call still ends in a Result (a bad start still raises EvaluationError there).
+    kwargs = dict(kwargs)
+    check = bool(kwargs.pop("check", True))
+    return MCP(F, jac, lb, ub, x0, **kwargs, check=False), check
 
 
 def _judge_on(problem: MCP, z, f, opt: Options):
@@ -194,8 +204,8 @@ def solve_mcp(F, jac=None, lb=0.0, ub=np.inf, x0=None, *, options=None, callback
         # Built earlier: the data its functions read may have changed since the start
         # point was checked, so the values remembered then are not trusted.
         F.evaluator.forget()
-    problem = _as_problem(F, jac, lb, ub, x0, problem_kwargs)
-    return _solve_problem(problem, opt, callback=callback, basis=basis)
+    problem, check = _as_problem(F, jac, lb, ub, x0, problem_kwargs)
+    return _solve_problem(problem, opt, callback=callback, basis=basis, check=check)
 
 
 def _presolve_pass(problem, opt, f0, J0):
@@ -226,9 +236,12 @@ def _presolve_pass(problem, opt, f0, J0):
     return pre, st
 
 
-def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None) -> Result:
+def _solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None,
+                   check=False) -> Result:
     t0 = time.perf_counter()
     try:
+        if check:
+            problem.check_start()
         return _solve_evaluated(problem, opt, callback=callback, basis=basis)
     except KeyboardInterrupt:
         # Ctrl-C outside the major iterations (the start point, the preprocessor): the

@@ -167,3 +167,25 @@ def test_cli_demo_cge_checks_the_shocked_solution_on_the_shocked_model(capsys):
     out = capsys.readouterr().out
     m = re.search(r"recomputed\s+natural residual ([0-9.e+-]+)", out)
     assert m and float(m.group(1)) <= 1e-6, out
+
+
+def test_largest_factorization_update_limit_does_not_exhaust_memory(monkeypatch):
+    # factorization_update_limit accepts any integer >= 1, but both bases preallocate room
+    # for their updates: 1e9 asked the dense engine for a 298 GiB eta file (MemoryError)
+    # and the sparse manager for two 8 GB index arrays.  The limit is capped at max(n, 50).
+    from compass_sparse import generators as gen
+    from compass_sparse.basis import BasisManager
+
+    g = gen.thesis_family(40, 2, 1)
+    opt = Options(factorization_update_limit=10 ** 9)
+    r = solve_mcp(g.problem, options=opt)
+    assert r.status is Status.SOLVED
+    assert r.residual.natural <= opt.convergence_tolerance
+    # the sparse manager gets the same cap (asked of the factory, no 8 GB allocation here)
+    monkeypatch.setattr(solve_module, "DENSE_BASIS_MAX_N", 0)
+    import compass_sparse.dense_path as dense_path
+
+    monkeypatch.setattr(dense_path, "DENSE_ENGINE_MAX_N", 0)
+    bm = solve_module._manager_factory(Options(factorization_update_limit=10 ** 6))(
+        sp.identity(70, format="csc"))
+    assert isinstance(bm, BasisManager) and bm.options.update_limit == 70

@@ -14,6 +14,7 @@ import pytest
 import scipy.sparse as sp
 
 from compass_sparse import MCP, MCPSolver, PointStatus, Status, solve_lcp, solve_mcp
+from compass_sparse.exceptions import EvaluationError
 from compass_sparse.merit import fb_phi
 
 N = 12
@@ -62,6 +63,22 @@ def test_ctrl_c_at_the_first_evaluation_of_a_solve_returns_the_start_point():
     F = failing_on_call(1, KeyboardInterrupt)
     r = solve_mcp(MCP(F, J_ok, 0.0, np.inf, np.zeros(N), check=False))
     assert r.status is Status.USER_INTERRUPT and r.point_status is PointStatus.START_POINT
+
+
+@pytest.mark.parametrize("where", ["F", "J"])
+def test_ctrl_c_in_the_first_call_of_solve_mcp_from_functions_returns_the_start_point(where):
+    # solve_mcp builds the MCP itself: its start check is part of the solve, so Ctrl-C
+    # there is USER_INTERRUPT with x0, not a raw KeyboardInterrupt
+    def J_stop(x):
+        raise KeyboardInterrupt
+
+    F, J = (failing_on_call(1, KeyboardInterrupt), J_ok) if where == "F" else (F_ok, J_stop)
+    r = solve_mcp(F, J, 0.0, np.inf, np.full(N, 0.5))
+    assert r.status is Status.USER_INTERRUPT and r.point_status is PointStatus.START_POINT
+    assert np.array_equal(r.x, np.full(N, 0.5))
+    # an error at the start point is still bad input, raised as before
+    with pytest.raises(EvaluationError, match="start point"):
+        solve_mcp(failing_on_call(1, ValueError), J_ok, 0.0, np.inf, np.zeros(N))
 
 
 def test_domain_error_at_a_new_start_point_is_a_status_not_an_exception():
@@ -203,3 +220,43 @@ def test_time_limit_holds_through_the_crash_searches(clock):
                   options={"time_limit": 0.5, "restart_limit": 10 ** 6,
                            "crash_minimum_dimension": 1, "crash_iteration_limit": 200})
     _assert_within_limit(r, clock, start, 0.5)
+
+
+@pytest.mark.parametrize("where", ["F", "J"])
+def test_wrong_shape_from_F_or_J_after_the_start_is_a_shape_error_naming_it(where):
+    # the README's bad-input table: a wrong shape is a bug in the user's function, raised
+    # (not taken for a domain error that would hide it), at any call
+    from compass_sparse.exceptions import ShapeError
+
+    calls = {"i": 0}
+
+    def F(x):
+        calls["i"] += where == "F"
+        return np.zeros(N + 1) if calls["i"] == 3 else F_ok(x)
+
+    def J(x):
+        calls["i"] += where == "J"
+        return sp.identity(N + 1, format="csc") if calls["i"] == 3 else J_ok(x)
+
+    with pytest.raises(ShapeError, match=r"F\(x\) returned shape" if where == "F"
+                       else "Jacobian has shape"):
+        solve_mcp(F, J, 0.0, np.inf, np.zeros(N))
+
+
+def test_no_progress_message_does_not_blame_a_valid_start_point_for_a_restarts_domain_error():
+    # F is defined for x > -1 and positive there (no solution on a free box); x0 = 0 is
+    # fine, the restarts' drawn points are not: the message said "domain error at the
+    # start point"
+    def F(x):
+        if np.any(x <= -1):
+            raise ValueError("sqrt of a negative number")
+        return np.sqrt(1 + x) + 1.0
+
+    def J(x):
+        return sp.diags(0.5 / np.sqrt(1 + x)).tocsc()
+
+    r = solve_mcp(F, J, -np.inf, np.inf, np.zeros(2), options={"homotopy": "off"})
+    assert r.status is Status.NO_PROGRESS and r.domain_errors > 0
+    assert "domain error at the start point" not in r.message
+    assert "undefined at the last restart's point" in r.message
+    assert np.all(np.isfinite(r.fun)) and np.all(r.x > -1)

@@ -311,3 +311,21 @@ def test_a_non_finite_correction_shortens_the_step_instead_of_failing_the_solve(
     assert calls["n"] >= 3
     assert res.x.shape == (1,) and res.passes["homotopy"].ran
     assert res.success or res.status is Status.NO_PROGRESS
+
+
+@pytest.mark.parametrize("mu", [1e-300, 1e300])
+def test_extreme_homotopy_smoothing_does_not_turn_the_smoothed_projection_into_nan(mu):
+    # mu^2 underflowed to 0 below 1e-154 (0/0 where x sits on a bound) and overflowed above
+    # 1e154: the path then ended on NaN with numpy warnings.  Both ends of the option's
+    # range now give the same projection as a moderate mu would in the limit.
+    import warnings
+
+    lb, ub = np.array([0.0, -1.0, -np.inf]), np.array([np.inf, 1.0, 2.0])
+    x = np.array([0.0, 1.0, -3.0])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        p, dx, dmu = SmoothedNormalMap(lb, ub).project(x, mu)
+    assert np.all(np.isfinite(p)) and np.all(np.isfinite(dx)) and np.all(np.isfinite(dmu))
+    assert np.all((lb <= p) & (p <= ub))
+    if mu < 1:  # the smoothing vanishes: the projection itself
+        np.testing.assert_allclose(p, np.clip(x, lb, ub), atol=1e-12)
