@@ -22,6 +22,11 @@ column. A backend raises :class:`SingularFactorError` when the matrix is exactly
   Q's nonzero in column t and ``s = diag(R)``, pinned by a test against a dense solve.
   The symbolic analysis is kept per pattern: a refactorization of the same pattern
   (Newton steps, crash steps, refactorization after updates) is numeric only.
+  UMFPACK pivots by a relative threshold (0.001 on the diagonal under its symmetric
+  strategy) that kvxopt does not let us raise; on some bases it grew U to 1e19 for a
+  matrix of condition 1e3.  Every UMFPACK factorization is therefore checked by the
+  backward error of ``L U v`` against ``P R K Q v`` for one fixed vector v; above
+  :data:`UMFPACK_CHECK_TOL` the block is factored by SuperLU with partial pivoting.
 
 The ordering (and the symbolic analysis) is computed once per sparsity pattern and reused;
 ``last`` on a backend describes the latest factorization (:class:`FactorInfo`).
@@ -64,6 +69,13 @@ fill 2.0e6 / 2.2e6 / 4.2e6 (static n = 1e4) and 1.6e6 / 1.9e6 / 2.0e6 (dynamic).
 accuracy threshold pivoting gives up on ill-conditioned bases (forward errors 30x above
 partial pivoting at cond 1e9) is won back by the refinement step of the periodic residual
 checks (:meth:`BasisManager._refine`, and the BTRAN check)."""
+
+UMFPACK_CHECK_TOL = 1e-9
+"""Relative backward error ``||P R K Q v - L U v|| / (||R K|| ||v||)`` (inf-norms) above
+which a UMFPACK factorization is rejected for SuperLU with partial pivoting.  A stable
+factorization scores 1e-16..1e-13 (random and CGE blocks); the rejected ones (element
+growth) scored 1e-3 and more.  1e-9 leaves the residual checks of the basis manager
+(1e-10 on solves, with refinement) room."""
 
 AUTO_SYMMETRIC_MIN_N = 400
 """``backend="auto"``: blocks of at least this order are factored by SuperLU in a
@@ -290,6 +302,8 @@ class UmfpackBackend:
 
     def __init__(self, budget=None, cache_size=4):
         self.budget = budget
+        self._fallback = SuperLUBackend("colamd", budget=budget)
+        self.unstable = 0
         self._symbolic = {}
         self._cache_size = cache_size
         self.last = FactorInfo(backend=self.name)
@@ -341,7 +355,40 @@ class UmfpackBackend:
             raise SingularFactorError("UMFPACK: zero pivot")
         info.nnz_lu = int(L.nnz + U.nnz)
         info.time_factor = time.perf_counter() - t1
-        return LUFactors(L, U, row_order, col_order, s)
+        fac = LUFactors(L, U, row_order, col_order, s)
+        if n and factor_backward_error(K, fac) > UMFPACK_CHECK_TOL:
+            self.unstable += 1
+            log.debug("UMFPACK factorization of a %d x %d block unstable; SuperLU instead", n, n)
+            try:
+                return self._fallback.factor(K, strict=True)
+            finally:
+                self._fallback.last.time_factor += info.time_factor
+                self.last = self._fallback.last
+        return fac
+
+
+def factor_backward_error(K, fac) -> float:
+    """``||P S K Q v - L U v||_inf / (||S K||_inf ||v||_inf)`` for one fixed vector v of
+    entries in [1, 2) with alternating signs (S the row scaling, P and Q the orders of
+    ``fac``): one product with K, L and U, a cheap check that the factors are sound."""
+    n = K.shape[0]
+    v = (1.0 + (np.arange(n) % 7) / 7.0) * np.where(np.arange(n) % 2, -1.0, 1.0)
+    x = np.empty(n)
+    x[fac.col_order] = v                      # Q v, in K's column numbering
+    Kx = K @ x
+    SK_norm = np.asarray(abs(K).sum(axis=1)).ravel()
+    if fac.row_scale is not None:
+        Kx = Kx * fac.row_scale
+        SK_norm = SK_norm * fac.row_scale
+    lhs = Kx[fac.row_order]
+    Uv = fac.U @ v
+    d = fac.L.diagonal()
+    Lv = fac.L @ Uv + (1.0 - d) * Uv     # L is unit triangular, its diagonal stored or not
+    den = float(SK_norm.max()) * float(np.abs(v).max())
+    res = float(np.abs(lhs - Lv).max())
+    if not np.isfinite(res):
+        return float("inf")
+    return res / den if den > 0 else res
 
 
 _ENV = "COMPASS_SPARSE_LU"

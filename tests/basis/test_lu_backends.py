@@ -245,3 +245,53 @@ def test_pattern_key_ignores_stored_zeros_and_tells_patterns_apart():
     assert ordmod.pattern_key(A) != ordmod.pattern_key(C)
     E = sp.csc_matrix(([1.0], ([0], [0])), shape=(30, 30))   # empty columns at the end
     assert ordmod.pattern_key(E) != ordmod.pattern_key(sp.csc_matrix(sp.eye(30)))
+
+
+def test_umfpack_element_growth_on_banded_p_matrix_basis_does_not_end_path_with_ray(
+        monkeypatch):
+    """A refactorization on the path of a banded P-matrix LCP (n = 300) met a block of
+    condition 1e3 on which UMFPACK's threshold pivoting grew U to 1e19: the wrong factors
+    ended the path with a ray ("t decreased to 0").  Such factors are now rejected by
+    their backward error and the block factored with partial pivoting."""
+    import compass_sparse.generators as gen
+    from compass_sparse import Options
+    from compass_sparse.basis.backends import UMFPACK_CHECK_TOL, factor_backward_error
+    from compass_sparse.basis.dense import DenseBasis
+    from compass_sparse.path import LinearCode, PivotalPath
+
+    monkeypatch.setenv("COMPASS_SPARSE_LU", "umfpack")
+    blocks = []
+    factor = UmfpackBackend.factor
+
+    def recording_factor(self, K, strict=False):
+        blocks.append(sp.csc_matrix(K, copy=True))
+        return factor(self, K, strict)
+
+    monkeypatch.setattr(UmfpackBackend, "factor", recording_factor)
+    M, q, lb, ub = gen.p_matrix_lcp(300, "banded", 4, "box").lcp
+    z0 = np.clip(np.zeros(lb.size), lb, ub)
+    zs = []
+    for manager in (BasisManager, DenseBasis):
+        res = PivotalPath(M, q, lb, ub, manager(M), Options()).run(z0)
+        assert res.code is LinearCode.SOLVED, res.message
+        zs.append(res.z)
+    assert np.abs(zs[0] - zs[1]).max() <= 1e-8 * (1.0 + np.abs(zs[1]).max())
+    assert len(blocks) >= 2
+    for K in list(blocks):         # every block's factors solve like a dense solve
+        f = factor(UmfpackBackend(), K)
+        assert factor_backward_error(K, f) <= UMFPACK_CHECK_TOL
+        check_factors(K, f)
+
+
+def test_factor_backward_error_flags_inconsistent_factors():
+    """The check behind the UMFPACK fallback: sound factors score at rounding level,
+    factors with one perturbed U entry score far above :data:`UMFPACK_CHECK_TOL`."""
+    from compass_sparse.basis.backends import UMFPACK_CHECK_TOL, factor_backward_error
+
+    K = badly_scaled_sparse(80, np.random.default_rng(3))
+    f = UmfpackBackend().factor(K)
+    assert factor_backward_error(K, f) <= 1e-13
+    f.U = f.U.tolil()
+    f.U[5, 5] *= 1.0 + 1e-6
+    f.U = f.U.tocsc()
+    assert factor_backward_error(K, f) > UMFPACK_CHECK_TOL
