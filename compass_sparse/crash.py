@@ -31,6 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .basis.backends import SingularFactorError, solve_sparse
+from .exceptions import FactorBudgetError
 from .merit import fb_phi, normal_map_at, project
 
 __all__ = ["CrashResult", "crash"]
@@ -52,25 +53,32 @@ class CrashResult:
     log: list
 
 
-def _solve_reduced(Jii, rhs, perturb, eps0):
-    """Solve (J_II + eps I) d = rhs with eps = 0 first, then growing when singular."""
-    eps = 0.0
-    import scipy.sparse.linalg as spla  # here, not at import: it costs ~0.3 s
+def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None):
+    """Solve (J_II + eps I) d = rhs with eps = 0 first, then growing when singular.
 
+    Returns (d or None, eps, factorizations, why): ``why`` is None on success, else the
+    crash's stop reason.  Each factorization is atomic, so the deadline is checked before
+    every attempt and handed to the factorization's budget (one whose estimate does not
+    fit in the time left is not started)."""
+    eps = 0.0
     nf = 0
     for attempt in range(6):
+        if deadline is not None and time.perf_counter() > deadline:
+            return None, eps, nf, "time limit"
         A = Jii if eps == 0.0 else (Jii + eps * sp.identity(Jii.shape[0], format="csc"))
         try:
             nf += 1
-            d = solve_sparse(A, rhs)
+            d = solve_sparse(A, rhs, deadline=deadline)
             if np.all(np.isfinite(d)):
-                return d, eps, nf
+                return d, eps, nf, None
         except SingularFactorError:  # exactly singular
             pass
+        except FactorBudgetError as exc:  # not started: no time or memory for it
+            return None, eps, nf - 1, f"{exc.kind} limit"
         if not perturb:
-            return None, eps, nf
+            break
         eps = eps0 if eps == 0.0 else eps * 10.0
-    return None, eps, nf
+    return None, eps, nf, "singular reduced Jacobian"
 
 
 def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=None,
@@ -149,11 +157,11 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
             if act.size:
                 rhs = rhs - Jc[:, act] @ d[act]
             Jii = Jc[:, inact]
-            di, eps, nf = _solve_reduced(Jii.tocsc(), rhs, opt.crash_perturb,
-                                         eps_scale * max(1.0, nm_norm))
+            di, eps, nf, why = _solve_reduced(Jii.tocsc(), rhs, opt.crash_perturb,
+                                              eps_scale * max(1.0, nm_norm), deadline)
             nfact += nf
             if di is None:
-                reason = "singular reduced Jacobian"
+                reason = why
                 it -= 1
                 break
             d[inact] = di

@@ -222,6 +222,33 @@ def test_time_limit_holds_through_the_crash_searches(clock):
     _assert_within_limit(r, clock, start, 0.5)
 
 
+def test_time_limit_holds_through_the_crash_factorizations(clock, monkeypatch):
+    # The crash retried up to six factorizations of a singular reduced Jacobian (growing
+    # shifts) without looking at the clock: with each factorization costing 0.3 s, a 0.5 s
+    # limit ran to 1.8 s.  Now the deadline is checked before every factorization, which is
+    # atomic: the overshoot is at most one of them (plus one evaluation).
+    import compass_sparse.crash as crash_module
+    from compass_sparse.basis.backends import SingularFactorError
+
+    FACTOR = 0.3
+    calls = {"n": 0}
+
+    def slow_singular(A, b, deadline=None):
+        calls["n"] += 1
+        clock.now += FACTOR
+        raise SingularFactorError("singular (simulated)")
+
+    monkeypatch.setattr(crash_module, "solve_sparse", slow_singular)
+    F = _costly(lambda x: x - 1.0 + 0.01 * (_B @ x), clock)
+    J = lambda x: sp.csc_matrix(np.eye(N) + 0.01 * _B)  # noqa: E731
+    start = clock.now
+    r = solve_mcp(F, J, -np.inf, np.inf, np.zeros(N),
+                  options={"time_limit": 0.5, "crash_minimum_dimension": 1})
+    assert r.status is Status.TIME_LIMIT or "time limit" in r.message, r.message
+    assert calls["n"] <= 2, calls
+    assert clock.now - start <= 0.5 + FACTOR + COST + 1e-9, clock.now - start
+
+
 @pytest.mark.parametrize("where", ["F", "J"])
 def test_wrong_shape_from_F_or_J_after_the_start_is_a_shape_error_naming_it(where):
     # the README's bad-input table: a wrong shape is a bug in the user's function, raised

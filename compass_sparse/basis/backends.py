@@ -432,11 +432,13 @@ class AutoBackend:
             self.last = b.last
 
 
-def solve_sparse(A, b):
+def solve_sparse(A, b, deadline=None):
     """Solve A x = b (A square sparse) by one LU in the automatic ordering (or the
     environment's choice, as for the basis); raises :class:`SingularFactorError` when A is
-    exactly singular.  For the crash, whose reduced Jacobians are large CGE blocks too."""
-    b_ = make_backend()
+    exactly singular, and :class:`FactorBudgetError` when the factorization's estimate does
+    not fit in the time left before ``deadline`` (a ``time.perf_counter()`` value).  For the
+    crash, whose reduced Jacobians are large CGE blocks too."""
+    b_ = make_backend(budget=FactorBudget(deadline=deadline) if deadline is not None else None)
     if isinstance(b_, AutoBackend):
         b_ = b_.small if A.shape[0] < AUTO_SYMMETRIC_MIN_N else b_.large
     if isinstance(b_, SuperLUBackend):
