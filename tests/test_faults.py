@@ -287,3 +287,23 @@ def test_no_progress_message_does_not_blame_a_valid_start_point_for_a_restarts_d
     assert "domain error at the start point" not in r.message
     assert "undefined at the last restart's point" in r.message
     assert np.all(np.isfinite(r.fun)) and np.all(r.x > -1)
+
+
+def test_crash_solves_on_small_badly_scaled_cge_make_no_illegal_blas_calls(capfd):
+    # SuperLU's dense supernode kernels called BLAS with an illegal leading dimension on
+    # the crash's small reduced Jacobians of this badly row-scaled CGE model ("On entry to
+    # DTRSV parameter number 6 had an illegal value" on stdout, a suspect solve); small
+    # systems are now factored densely.
+    from compass_sparse.generators.cge import static_cge
+
+    m = static_cge(regions=1, sectors=8, factors=2, households=1, taxes=True,
+                   seed=11).with_shock(productivity=0.5)
+    P = m.problem
+    s = 1e-6 ** np.random.default_rng(0).uniform(-1, 1, P.n)
+    r = solve_mcp(lambda z: s * P.F(z), lambda z: sp.diags(s) @ P.evaluator.J(z), P.lb, P.ub,
+                  P.x0, options={"scaling": False})
+    out, err = capfd.readouterr()
+    assert "illegal value" not in out + err
+    assert r.x.shape == (P.n,) and np.all(np.isfinite(r.x))
+    if r.success:
+        assert r.residual.natural <= 1e-6

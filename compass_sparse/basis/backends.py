@@ -432,12 +432,37 @@ class AutoBackend:
             self.last = b.last
 
 
+DENSE_SOLVE_MAX_N = 200
+"""Up to this order :func:`solve_sparse` factors densely (LAPACK getrf): cheaper than a
+sparse LU there, and SuperLU's dense supernode kernels were seen to call BLAS with an
+illegal leading dimension on small finite blocks (the "DTRSV parameter number 6" message,
+with a suspect solve)."""
+
+
+def _dense_solve(A, b):
+    import scipy.linalg as sla  # lazy: import cost
+
+    from .._blas import single_threaded_blas
+
+    import warnings
+
+    D = A.toarray() if sp.issparse(A) else np.asarray(A, dtype=np.float64)
+    with single_threaded_blas(), warnings.catch_warnings():
+        warnings.simplefilter("ignore", sla.LinAlgWarning)  # singularity: checked below
+        lu, piv = sla.lu_factor(D, check_finite=False)
+        if D.shape[0] and np.any(np.diag(lu) == 0.0):
+            raise SingularFactorError("exactly singular (a zero pivot in the dense LU)")
+        return sla.lu_solve((lu, piv), np.asarray(b, dtype=np.float64), check_finite=False)
+
+
 def solve_sparse(A, b, deadline=None):
     """Solve A x = b (A square sparse) by one LU in the automatic ordering (or the
     environment's choice, as for the basis); raises :class:`SingularFactorError` when A is
     exactly singular, and :class:`FactorBudgetError` when the factorization's estimate does
     not fit in the time left before ``deadline`` (a ``time.perf_counter()`` value).  For the
     crash, whose reduced Jacobians are large CGE blocks too."""
+    if A.shape[0] <= DENSE_SOLVE_MAX_N:
+        return _dense_solve(A, b)
     b_ = make_backend(budget=FactorBudget(deadline=deadline) if deadline is not None else None)
     if isinstance(b_, AutoBackend):
         b_ = b_.small if A.shape[0] < AUTO_SYMMETRIC_MIN_N else b_.large
