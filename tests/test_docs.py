@@ -242,7 +242,7 @@ PAGES_WITH_CODE = [p for p in PAGES if _code_blocks(p)]
 def test_every_guide_page_has_a_tested_example():
     for page in ("getting_started.rst", "jacobian.rst", "guides/cge.rst", "guides/lcp.rst",
                  "guides/warm_start.rst", "guides/modelling_languages.rst",
-                 "guides/batches.rst", "trust.rst"):
+                 "guides/batches.rst", "trust.rst", "guides/hard_problems.rst"):
         assert page in PAGES_WITH_CODE
 
 
