@@ -83,3 +83,24 @@ def fb_diagonals_kernel(z, f, lb, ub, da, db):
         else:
             da[i] = 0.0
             db[i] = -1.0
+
+
+@njit(cache=True)
+def csc_abs_maxima(indptr, indices, data, rows, cols, diag):
+    """Of a canonical CSC matrix A: rows[i] = max_j |A_ij|, cols[j] = max_i |A_ij| and
+    diag[j] = A_jj (0 where not stored), in one pass over the stored entries (a NaN entry
+    makes its row and column maxima NaN, as np.maximum does).  The caller zeroes rows."""
+    for j in range(cols.shape[0]):
+        c = 0.0
+        d = 0.0
+        for k in range(indptr[j], indptr[j + 1]):
+            i = indices[k]
+            a = abs(data[k])
+            if a > c or a != a:
+                c = a
+            if a > rows[i] or a != a:
+                rows[i] = a
+            if i == j:
+                d = data[k]
+        cols[j] = c
+        diag[j] = d

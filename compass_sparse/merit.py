@@ -239,15 +239,18 @@ class ResidualReport:
         )
 
 
-def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5) -> ResidualReport:
+def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5,
+                    phi=None) -> ResidualReport:
     """All residual measures at z with F values f, naming the k worst rows.
 
-    ``names`` is a callable i -> str or a sequence of row names.
+    ``names`` is a callable i -> str or a sequence of row names; ``phi`` is
+    fb_phi(z, f, lb, ub) when the caller has it.
     """
     z = np.asarray(z, dtype=float)
     f = np.asarray(f, dtype=float)
     lb, ub = _broadcast_box(lb, ub, z)
-    phi = fb_phi(z, f, lb, ub)
+    if phi is None:
+        phi = fb_phi(z, f, lb, ub)
     mm = np.abs(min_map(z, f, lb, ub))
     nm = normal_map_at(z, f, lb, ub)[1]
     aphi = np.abs(phi)
@@ -260,12 +263,13 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5) -> ResidualRe
         label = names
     else:
         label = lambda i: str(names[i])  # noqa: E731
-    worst = [(label(int(i)), float(aphi[i]), float(mm[i])) for i in idx]
+    worst = [(label(i), float(aphi[i]), float(mm[i])) for i in idx.tolist()]
+    empty = not z.size
     return ResidualReport(
         fb_norm=_norm2(phi),
-        fb_inf=float(aphi.max()) if z.size else 0.0,
-        natural=float(mm.max()) if z.size else 0.0,
-        normal_map_inf=float(np.max(np.abs(nm))) if z.size else 0.0,
+        fb_inf=0.0 if empty else float(aphi.max()),
+        natural=0.0 if empty else float(mm.max()),
+        normal_map_inf=0.0 if empty else float(np.abs(nm).max()),
         merit=fb_psi(phi),
         worst=worst,
         worst_index=int(idx[0]) if k > 0 else -1,
@@ -274,10 +278,11 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5) -> ResidualRe
 
 def _norm2(v) -> float:
     """||v||_2 without underflow or overflow of the squares."""
-    m = float(np.max(np.abs(v))) if v.size else 0.0
+    m = float(np.abs(v).max()) if v.size else 0.0
     if m == 0.0 or not np.isfinite(m):
         return m
-    return m * float(np.sqrt(np.dot(v / m, v / m)))
+    s = v / m
+    return m * float(np.sqrt(np.dot(s, s)))
 
 
 def normal_map_at(z, f, lb, ub):

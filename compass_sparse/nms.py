@@ -111,6 +111,9 @@ class Outcome:
     updates: int = 0
     basis: WarmBasis | None = None
     passes: dict = field(default_factory=dict)
+    #: the acceptance verdict of ``best`` on the user's problem when the solve stopped
+    #: because best was judged a solution (None otherwise)
+    verdict: object = None
 
 
 class Linearizer:
@@ -231,8 +234,17 @@ class NMSSolver:
         self.linearizer = None
         self.bm = None
         self.basis: WarmBasis | None = None
-        self.rng = np.random.default_rng(options.seed)
+        self._rng = None
+        self.verdict = None  # set when a point is judged a solution
         self.flat_rejections = 0
+
+    @property
+    def rng(self):
+        """The random generator of the restarts from new points (made when first needed:
+        most solves never restart, and making one costs ~20 us)."""
+        if self._rng is None:
+            self._rng = np.random.default_rng(self.opt0.seed)
+        return self._rng
 
     # ------------------------------------------------------------------ bookkeeping
     def _past_deadline(self) -> bool:
@@ -244,10 +256,11 @@ class NMSSolver:
         holds to within one evaluation."""
         if self.best is None or psi < self.best.psi:
             self.best = Point(z.copy(), f.copy(), phi.copy(), psi)
-        if self.acceptance.small(z, f):
-            v = self.acceptance.judge(z, f, jac=lambda y: self.ev.jac(y, f))
+        if self.acceptance.small(z, f, phi):
+            v = self.acceptance.judge(z, f, jac=lambda y: self.ev.jac(y, f), phi=phi)
             if v.solved:
                 self.best = Point(z.copy(), f.copy(), phi.copy(), psi)
+                self.verdict = v
                 raise _Stop(Status.SOLVED, "solution found")
             if v.small_residual and v.flat_row >= 0:
                 # A flat tail: keep going (a genuine solution may still be reached), but
@@ -597,6 +610,7 @@ class NMSSolver:
             + self.passes.get("homotopy", PassStats()).factorizations,
             updates=bm.stats.updates if bm is not None else 0,
             basis=self.basis, passes=self.passes,
+            verdict=self.verdict if status is Status.SOLVED else None,
         )
 
     def _homotopy(self, start):

@@ -286,3 +286,44 @@ def test_options_from_equal_dicts_shared_but_true_and_one_stay_apart():
     with pytest.raises(OptionError):
         Options.coerce({"time_limit": float("nan")})
     assert Options.coerce({"time_limit": float("inf")}).time_limit == float("inf")
+
+
+@pytest.mark.parametrize("n,density", [(1, 1.0), (5, 0.6), (40, 0.1)])
+def test_csc_abs_maxima_matches_array_formulas(n, density):
+    """Row and column max-norms and the diagonal of a canonical CSC in one compiled pass
+    agree with numpy's (a NaN entry poisons its row and column, as np.maximum does)."""
+    from compass_sparse._merit_kernels import csc_abs_maxima
+
+    A = sp.random(n, n, density=density, format="csc", random_state=n) - 0.5 * sp.random(
+        n, n, density=density, format="csc", random_state=n + 1)
+    A = sp.csc_matrix(A)
+    A.sum_duplicates()
+    if A.nnz and n > 1:
+        A.data[A.nnz // 2] = np.nan
+    rows, cols, diag = np.zeros(n), np.empty(n), np.empty(n)
+    csc_abs_maxima(A.indptr, A.indices, A.data, rows, cols, diag)
+    dense = np.abs(A.toarray())  # absent entries are 0, below every |stored| but NaN
+    with np.errstate(invalid="ignore"):
+        assert np.array_equal(rows, np.max(dense, axis=1), equal_nan=True)
+        assert np.array_equal(cols, np.max(dense, axis=0), equal_nan=True)
+    assert np.array_equal(diag, A.diagonal(), equal_nan=True)
+
+
+def test_verdict_shared_by_the_solver_and_the_result_agrees_with_a_fresh_judgement():
+    """The acceptance verdict that stops the solve is reused by the Result (not taken
+    twice); on every known problem it is the verdict a fresh judgement of the returned
+    point gives on the user's problem."""
+    import known_problems as kp
+
+    from compass_sparse import MCP, solve_mcp
+    from compass_sparse.acceptance import judge
+
+    makers = dict(kp.ALL_SOLVABLE)
+    makers.update(sqrt_ncp=kp.sqrt_ncp, billups=kp.billups)
+    for name, make in makers.items():
+        p = make()
+        res = solve_mcp(MCP(p.F, p.J, p.lb, p.ub, p.x0))
+        f = np.asarray(p.F(res.x), dtype=float)
+        v = judge(res.x, f, res.lb, res.ub, res.tolerance, jac=lambda y: sp.csc_matrix(p.J(y)))
+        assert v.solved == res.success, name
+        assert res.success, name
