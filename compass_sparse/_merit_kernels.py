@@ -104,3 +104,25 @@ def csc_abs_maxima(indptr, indices, data, rows, cols, diag):
                 d = data[k]
         cols[j] = c
         diag[j] = d
+
+
+@njit(cache=True)
+def normal_map_kernel(z, f, lb, ub, x, nm):
+    """merit.normal_map_at one element at a time: the slack w absorbed at a lower bound,
+    v at an upper one (both at a fixed variable); x = z - w + v, nm = f - w + v."""
+    for i in range(z.shape[0]):
+        zi, fi, li, ui = z[i], f[i], lb[i], ub[i]
+        # max(+-f, 0) exactly as np.maximum: the first argument when >= (so -0.0 stays)
+        # or NaN
+        fp = fi if (fi >= 0.0 or fi != fi) else 0.0
+        fm = -fi if (-fi >= 0.0 or fi != fi) else 0.0
+        w = 0.0
+        v = 0.0
+        if li == ui:
+            w, v = fp, fm
+        elif zi <= li:
+            w = fp
+        elif zi >= ui:
+            v = fm
+        x[i] = zi - w + v
+        nm[i] = fi - w + v

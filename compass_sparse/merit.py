@@ -290,6 +290,20 @@ def normal_map_at(z, f, lb, ub):
     F_B(x) is F minus the part of F that the normal cone of the box at z absorbs (thesis
     (2.5.8)-(2.5.9)): at a lower bound x_i = z_i - max(F_i, 0), at an upper bound
     x_i = z_i + max(-F_i, 0), a fixed variable absorbs all of F_i."""
+    if (isinstance(z, np.ndarray) and isinstance(f, np.ndarray) and z.ndim == 1
+            and f.shape == z.shape and z.dtype == float and f.dtype == float):
+        lb, ub = _broadcast_box(lb, ub, z)
+        from ._merit_kernels import normal_map_kernel
+
+        x = np.empty_like(z)
+        nm = np.empty_like(z)
+        normal_map_kernel(z, f, lb, ub, x, nm)
+        return x, nm
+    return normal_map_at_arrays(z, f, lb, ub)
+
+
+def normal_map_at_arrays(z, f, lb, ub):
+    """normal_map_at with array operations (the reference of the compiled kernel)."""
     at_l = z <= lb
     at_u = (z >= ub) & ~at_l
     w = np.where(at_l, np.maximum(f, 0.0), 0.0)  # absorbed at the lower bound

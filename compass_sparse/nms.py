@@ -121,12 +121,22 @@ class Linearizer:
 
     def __init__(self, J: sp.csc_matrix):
         n = J.shape[0]
+        self.n = n
+        self.nnz_J = J.nnz
+        key_D = np.arange(n, dtype=np.int64) * (n + 1)
+        if J.nnz == n * n:
+            # A full pattern (a dense Jacobian) holds the diagonal: M has J's pattern.
+            self._same_pattern(J, key_D)
+            return
         # Structural union of pattern(J) and the diagonal, as sorted keys col * n + row
         # (values of J could cancel against the identity and vanish); built with array
         # operations, no sparse arithmetic: small problems build one per solve.
         col = np.repeat(np.arange(n, dtype=np.int64), np.diff(J.indptr))
         key_J = col * n + J.indices
-        key_D = np.arange(n, dtype=np.int64) * (n + 1)
+        pos_D = np.searchsorted(key_J, key_D)
+        if key_J.size and (pos_D < key_J.size).all() and (key_J[pos_D] == key_D).all():
+            self._same_pattern(J, key_D, pos_D)  # the diagonal is stored already
+            return
         keys = np.union1d(key_J, key_D)
         indices = (keys % n).astype(np.int32)
         indptr = np.searchsorted(keys, np.arange(n + 1, dtype=np.int64) * n).astype(np.int32)
@@ -134,8 +144,15 @@ class Linearizer:
         # position of each J entry and each diagonal entry inside M's pattern
         self.pos_J = np.searchsorted(keys, key_J)
         self.pos_D = np.searchsorted(keys, key_D)
-        self.n = n
-        self.nnz_J = J.nnz
+
+    def _same_pattern(self, J, key_D, pos_D=None):
+        """M on J's own (canonical) pattern; ``pos_D``: the diagonal's positions in it
+        (on a full pattern the diagonal of column j is entry j * (n + 1))."""
+        n = self.n
+        self.M = trusted_csc(np.zeros(J.nnz), J.indices.astype(np.int32),
+                             J.indptr.astype(np.int32), (n, n))
+        self.pos_J = np.arange(J.nnz)
+        self.pos_D = key_D if pos_D is None else pos_D
 
     def __call__(self, J, eps: float) -> sp.csc_matrix:
         data = np.zeros_like(self.M.data)

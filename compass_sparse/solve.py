@@ -222,8 +222,8 @@ def _presolve_pass(problem, opt, f0, J0):
         return None, st
     # Every reduction but fixing l = u needs a row whose entries are all declared
     # constant; without one the pass would only cost time (17 s at n = 1e6, measured).
-    has_fixed = bool(np.any(problem.lb == problem.ub))
-    P = problem.pattern
+    has_fixed = bool((problem.lb == problem.ub).any())
+    P = J0 if J0 is not None else problem.pattern  # J0 is stored on the pattern
     mask = problem.constant_mask
     nonconst_rows = P.indices if mask is None else P.indices[~mask]
     linear_rows = int(np.count_nonzero(np.bincount(nonconst_rows, minlength=problem.n) == 0))
