@@ -126,3 +126,25 @@ def normal_map_kernel(z, f, lb, ub, x, nm):
             v = fm
         x[i] = zi - w + v
         nm[i] = fi - w + v
+
+
+@njit(cache=True)
+def flat_step_kernel(z, phi, da, db, indptr, indices, data, row_max, col_max, diag):
+    """The scale test of :mod:`compass_sparse.acceptance` on a canonical CSC J: over the
+    rows with Phi_i != 0, the largest d_i / (1 + |z_i|) with d_i = |Phi_i| / ||H_i||_inf,
+    H = diag(da) + diag(db) J (d_i = inf where H_i = 0).  Returns (row, d_row, ratio), row
+    -1 when Phi = 0; the first row attains a tie.  ``row_max`` (zeroed), ``col_max`` and
+    ``diag`` are work areas of length n."""
+    csc_abs_maxima(indptr, indices, data, row_max, col_max, diag)
+    best, best_d, best_ratio = -1, 0.0, -1.0
+    for i in range(z.shape[0]):
+        if phi[i] == 0.0:
+            continue
+        h1 = abs(db[i]) * row_max[i]
+        h2 = abs(da[i] + db[i] * diag[i])
+        h = h1 if (h1 >= h2 or h1 != h1) else h2  # np.maximum
+        d = abs(phi[i]) / h if h > 0.0 else np.inf
+        ratio = d / (1.0 + abs(z[i]))
+        if best < 0 or ratio > best_ratio:
+            best, best_d, best_ratio = i, d, ratio
+    return best, best_d, best_ratio

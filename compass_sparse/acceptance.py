@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ._merit_kernels import csc_abs_maxima
+from ._merit_kernels import flat_step_kernel
 from .merit import fb_jacobian_diagonals, fb_phi, min_map
 
 __all__ = ["FLAT_STEP_RTOL", "Verdict", "judge", "residuals_small", "Acceptance"]
@@ -81,24 +81,36 @@ def judge(z, f, lb, ub, tol, jac=None, phi=None) -> Verdict:
 
 
 def _scale_test(z, f, lb, ub, phi, J) -> Verdict:
-    """Test (2) at a point that passed test (1), with J = J(z)."""
+    """Test (2) at a point that passed test (1), with J = J(z): ||H_i||_inf over the row
+    is max(|db_i| max_j |J_ij|, |da_i + db_i J_ii|), read off the stored entries of the
+    canonical CSC in one compiled pass (no sparse matrix built per solve)."""
     da, db = fb_jacobian_diagonals(z, f, lb, ub)
-    # ||H_i||_inf over the row: |da_i + db_i J_ii| on the diagonal, |db_i J_ij| elsewhere;
-    # read off the stored entries of the canonical CSC in one compiled pass (no sparse
-    # matrix built per solve)
     if not (sp.issparse(J) and J.format == "csc"):
         J = sp.csc_matrix(J)
     if not J.has_canonical_format:
         J = J.copy()
         J.sum_duplicates()
     n = z.size
-    row_max, col_max, diag = np.zeros(n), np.empty(n), np.empty(n)
-    csc_abs_maxima(J.indptr, J.indices, J.data, row_max, col_max, diag)
+    row, d, ratio = flat_step_kernel(z, phi, da, db, J.indptr, J.indices, J.data,
+                                     np.zeros(n), np.empty(n), np.empty(n))
+    if row < 0 or ratio <= FLAT_STEP_RTOL:
+        return Verdict(True, True)
+    return Verdict(False, True, flat_row=int(row), step=float(d))
+
+
+def _scale_test_arrays(z, f, lb, ub, phi, J) -> Verdict:
+    """_scale_test with array operations (the reference of the compiled kernel)."""
+    from .merit import fb_jacobian_diagonals_arrays
+
+    da, db = fb_jacobian_diagonals_arrays(z, f, lb, ub)
+    J = sp.csc_matrix(J)
     rows = np.flatnonzero(phi)
-    h = np.maximum(np.abs(db) * row_max, np.abs(da + db * diag))[rows]
-    positive = h > 0
-    d = np.full(rows.size, np.inf)
-    d[positive] = np.abs(phi[rows][positive]) / h[positive]
+    if rows.size == 0:
+        return Verdict(True, True)
+    row_max = np.asarray(abs(J).max(axis=1).todense()).ravel()
+    h = np.maximum(np.abs(db) * row_max, np.abs(da + db * J.diagonal()))[rows]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        d = np.where(h > 0, np.abs(phi[rows]) / h, np.inf)
     ratio = d / (1.0 + np.abs(z[rows]))
     k = int(np.argmax(ratio))
     if ratio[k] <= FLAT_STEP_RTOL:
