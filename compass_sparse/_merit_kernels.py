@@ -148,3 +148,54 @@ def flat_step_kernel(z, phi, da, db, indptr, indices, data, row_max, col_max, di
         if best < 0 or ratio > best_ratio:
             best, best_d, best_ratio = i, d, ratio
     return best, best_d, best_ratio
+
+
+@njit(cache=True)
+def residual_maxima_kernel(z, f, lb, ub, phi, mm):
+    """The maxima of merit.residual_report in one pass: mm = |z - pi(z - F)| (as
+    merit.min_map, the median form), and (max |Phi|, max mm, max |F_B|), NaN propagating
+    as np.max does."""
+    fb_inf = 0.0
+    natural = 0.0
+    nm_inf = 0.0
+    for i in range(z.shape[0]):
+        zi, fi, li, ui = z[i], f[i], lb[i], ub[i]
+        lo = zi - ub[i]
+        hi = zi - li
+        m = fi if (fi >= lo or fi != fi) else lo  # np.maximum(f, z - u)
+        m = m if (m <= hi or m != m) else hi  # np.minimum(., z - l)
+        a = abs(m)
+        mm[i] = a
+        if a > natural or a != a:
+            natural = a
+        p = abs(phi[i])
+        if p > fb_inf or p != p:
+            fb_inf = p
+        fp = fi if (fi >= 0.0 or fi != fi) else 0.0
+        fm = -fi if (-fi >= 0.0 or fi != fi) else 0.0
+        w = 0.0
+        v = 0.0
+        if li == ui:
+            w, v = fp, fm
+        elif zi <= li:
+            w = fp
+        elif zi >= ui:
+            v = fm
+        r = abs(fi - w + v)
+        if r > nm_inf or r != r:
+            nm_inf = r
+    return fb_inf, natural, nm_inf
+
+
+@njit(cache=True)
+def positive_spread(v):
+    """max / min of the positive entries of v (1 when there are none)."""
+    lo = np.inf
+    hi = 0.0
+    for x in v:
+        if x > 0.0:
+            if x < lo:
+                lo = x
+            if x > hi:
+                hi = x
+    return hi / lo if hi > 0.0 else 1.0

@@ -251,9 +251,19 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5,
     lb, ub = _broadcast_box(lb, ub, z)
     if phi is None:
         phi = fb_phi(z, f, lb, ub)
-    mm = np.abs(min_map(z, f, lb, ub))
-    nm = normal_map_at(z, f, lb, ub)[1]
     aphi = np.abs(phi)
+    if z.ndim == 1 and f.shape == z.shape:
+        from ._merit_kernels import residual_maxima_kernel
+
+        mm = np.empty_like(z)
+        fb_inf, natural, nm_inf = residual_maxima_kernel(
+            np.ascontiguousarray(z), np.ascontiguousarray(f), np.ascontiguousarray(lb),
+            np.ascontiguousarray(ub), np.ascontiguousarray(phi), mm)
+    else:
+        mm = np.abs(min_map(z, f, lb, ub))
+        nm = normal_map_at_arrays(z, f, lb, ub)[1]
+        fb_inf, natural, nm_inf = (float(np.max(aphi)), float(np.max(mm)),
+                                   float(np.max(np.abs(nm)))) if z.size else (0.0, 0.0, 0.0)
     k = min(k_worst, z.size)
     idx = np.argpartition(-aphi, k - 1)[:k] if k > 0 else np.array([], dtype=int)
     idx = idx[np.argsort(-aphi[idx])]
@@ -264,21 +274,24 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5,
     else:
         label = lambda i: str(names[i])  # noqa: E731
     worst = [(label(i), float(aphi[i]), float(mm[i])) for i in idx.tolist()]
-    empty = not z.size
     return ResidualReport(
-        fb_norm=_norm2(phi),
-        fb_inf=0.0 if empty else float(aphi.max()),
-        natural=0.0 if empty else float(mm.max()),
-        normal_map_inf=0.0 if empty else float(np.abs(nm).max()),
+        fb_norm=_norm2(phi, fb_inf),
+        fb_inf=float(fb_inf),
+        natural=float(natural),
+        normal_map_inf=float(nm_inf),
         merit=fb_psi(phi),
         worst=worst,
         worst_index=int(idx[0]) if k > 0 else -1,
     )
 
 
-def _norm2(v) -> float:
-    """||v||_2 without underflow or overflow of the squares."""
-    m = float(np.abs(v).max()) if v.size else 0.0
+def _norm2(v, inf_norm=None) -> float:
+    """||v||_2 without underflow or overflow of the squares (``inf_norm``: ||v||_inf when
+    known)."""
+    if inf_norm is not None:
+        m = float(inf_norm)
+    else:
+        m = float(np.abs(v).max()) if v.size else 0.0
     if m == 0.0 or not np.isfinite(m):
         return m
     s = v / m

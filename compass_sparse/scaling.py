@@ -106,8 +106,9 @@ def _maxnorms(A: sp.csc_matrix, row=None, col=None):
 
 
 def _spread(v) -> float:
-    v = v[v > 0]
-    return float(v.max() / v.min()) if v.size else 1.0
+    from ._merit_kernels import positive_spread
+
+    return float(positive_spread(v))
 
 
 def spread(J) -> float:

@@ -408,3 +408,33 @@ def test_compiled_scale_test_gives_the_array_formula_verdict(seed):
     assert (got.solved, got.flat_row) == (ref.solved, ref.flat_row)
     assert got.step == ref.step or np.isclose(got.step, ref.step, rtol=1e-15)
     assert got.solved == (seed % 2 == 0)  # both verdicts occur
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_residual_report_maxima_match_array_formulas_across_magnitudes(seed):
+    """The compiled maxima of the residual report (||Phi||_inf, the natural residual, the
+    normal-map residual and every row's |min-map|) are those of the array formulas, NaN
+    and infinite entries included; the scaled 2-norm is unchanged."""
+    z, f, lb, ub = _stress_point(seed, at_bounds=0.3)
+    for sl in (slice(10, None), slice(None)):  # finite F values; with inf and NaN
+        zz, ff, ll, uu = z[sl], f[sl], lb[sl], ub[sl]
+        with np.errstate(all="ignore"):
+            rep = merit.residual_report(zz, ff, ll, uu)
+            phi = merit.fb_phi(zz, ff, ll, uu)
+            mm = np.abs(merit.min_map(zz, ff, ll, uu))
+            nm = merit.normal_map_at_arrays(zz, ff, ll, uu)[1]
+        np.testing.assert_array_equal(rep.fb_inf, np.max(np.abs(phi)))
+        np.testing.assert_array_equal(rep.natural, np.max(mm))
+        np.testing.assert_array_equal(rep.normal_map_inf, np.max(np.abs(nm)))
+        for name, a, m in rep.worst:  # rows named F[i]
+            i = int(name[2:-1])
+            np.testing.assert_array_equal([a, m], [abs(phi[i]), mm[i]])
+    rep = merit.residual_report(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0))
+    assert (rep.fb_norm, rep.fb_inf, rep.natural, rep.worst) == (0.0, 0.0, 0.0, [])
+
+
+def test_spread_of_positive_entries():
+    from compass_sparse import scaling
+
+    assert scaling._spread(np.array([0.0, 4.0, np.nan, 0.5, -3.0])) == 8.0
+    assert scaling._spread(np.array([0.0, -1.0])) == 1.0
