@@ -199,3 +199,13 @@ def positive_spread(v):
             if x > hi:
                 hi = x
     return hi / lo if hi > 0.0 else 1.0
+
+
+@njit(cache=True)
+def csc_matvec(indptr, indices, data, x, out):
+    """out = A x for A in CSC form, column by column (scipy's csc_matvec order)."""
+    out[:] = 0.0
+    for j in range(x.shape[0]):
+        xj = x[j]
+        for k in range(indptr[j], indptr[j + 1]):
+            out[indices[k]] += data[k] * xj

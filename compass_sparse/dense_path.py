@@ -42,6 +42,10 @@ PIVOT_CHUNK = 1000
 
 _NAMES = "zwvatS"
 
+_CODES = {K.SOLVED: "S", K.RAY: "R", K.CYCLE: "C", K.MINOR_LIMIT: "I", K.SINGULAR: "N",
+          K.TOLERANCE: "T", K.ERROR: "E"}
+"""The kernels' path codes as the letters of :class:`compass_sparse.path.LinearCode`."""
+
 
 class DensePathEngine:
     """Runs pivotal paths of a linear MCP with matrix M (n x n) in compiled code.
@@ -157,10 +161,7 @@ class DensePathEngine:
         if fstate[K.F_BEST_T] > 0.0:
             st.best = (float(fstate[K.F_BEST_T]), self.best_x.copy())
         self._account(istate)
-        codes = {K.SOLVED: LinearCode.SOLVED, K.RAY: LinearCode.RAY, K.CYCLE: LinearCode.CYCLE,
-                 K.MINOR_LIMIT: LinearCode.MINOR_LIMIT, K.SINGULAR: LinearCode.SINGULAR,
-                 K.TOLERANCE: LinearCode.TOLERANCE, K.ERROR: LinearCode.ERROR}
-        return codes[int(code)], self._message(msg, istate, fstate, path)
+        return LinearCode(_CODES[int(code)]), self._message(msg, istate, fstate, path)
 
     def _account(self, istate):
         self.stats.factorizations += int(istate[K.I_NFAC])

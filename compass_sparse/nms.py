@@ -48,6 +48,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._csc import trusted_csc
+from ._merit_kernels import csc_matvec
 from .acceptance import Acceptance
 from .crash import crash
 from .exceptions import FactorBudgetError
@@ -343,7 +344,9 @@ class NMSSolver:
         if self.linearizer is None or self.linearizer.nnz_J != J.nnz:
             self.linearizer = Linearizer(J)  # first J, or an undeclared pattern grew
         M = self.linearizer(J, eps)
-        q = cur.f - M @ cur.z
+        Mz = np.empty(self.n)
+        csc_matvec(M.indptr, M.indices, M.data, cur.z, Mz)  # M @ z without scipy's dispatch
+        q = cur.f - Mz
         if self.bm is None:
             self.bm = self.manager_factory(M)
         else:

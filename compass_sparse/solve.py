@@ -92,14 +92,14 @@ _PROBLEM_KEYWORDS = ("n", "jac_sparsity", "var_names", "eqn_names", "constant_ja
 def _check_keywords(kwargs):
     """Unknown keywords of solve_mcp: a ProblemError with a hint (an option given as a
     keyword belongs in ``options=``)."""
+    if not kwargs or set(kwargs).issubset(_PROBLEM_KEYWORDS):
+        return
     import dataclasses
     import difflib
 
     from .exceptions import ProblemError
 
     unknown = sorted(set(kwargs) - set(_PROBLEM_KEYWORDS))
-    if not unknown:
-        return
     option_names = {f.name for f in dataclasses.fields(Options)}
     hints = []
     for u in unknown:
