@@ -63,14 +63,15 @@ def residuals_small(z, f, lb, ub, tol, phi=None) -> bool:
     return bool((np.abs(mm) <= tol).all())
 
 
-def judge(z, f, lb, ub, tol, jac=None, phi=None) -> Verdict:
+def judge(z, f, lb, ub, tol, jac=None, phi=None, small=False) -> Verdict:
     """Both tests.  ``jac(z)`` returns J(z) (sparse) or None when it cannot be evaluated;
-    without a Jacobian only test (1) is applied.  ``phi``: fb_phi(z, f) when known."""
+    without a Jacobian only test (1) is applied.  ``phi``: fb_phi(z, f) when known;
+    ``small``: test (1) is known to pass (the caller has just applied it)."""
     z = np.asarray(z, dtype=float)
     f = np.asarray(f, dtype=float)
     if phi is None:
         phi = fb_phi(z, f, lb, ub)
-    if not residuals_small(z, f, lb, ub, tol, phi):
+    if not (small or residuals_small(z, f, lb, ub, tol, phi)):
         return Verdict(False, False)
     if jac is None or not phi.any():
         return Verdict(True, True)
@@ -140,12 +141,12 @@ class Acceptance:
         return residuals_small(zu, fu, self.lb, self.ub, self.tol,
                                phi if self.row is None else None)
 
-    def judge(self, z, f, jac=None, phi=None) -> Verdict:
+    def judge(self, z, f, jac=None, phi=None, small=False) -> Verdict:
         """Both tests; ``jac(z)`` evaluates the Jacobian of the problem being solved at z;
-        ``phi`` as in :meth:`small`."""
+        ``phi`` as in :meth:`small`; ``small``: :meth:`small` has just passed at z."""
         zu, fu = self.user_point(z, f)
         if self.row is None:
-            return judge(zu, fu, self.lb, self.ub, self.tol, jac=jac, phi=phi)
+            return judge(zu, fu, self.lb, self.ub, self.tol, jac=jac, phi=phi, small=small)
 
         def user_jac(_):
             J = jac(z)
@@ -154,4 +155,4 @@ class Acceptance:
             return sp.diags(1.0 / self.row) @ J @ sp.diags(1.0 / self.col)
 
         return judge(zu, fu, self.lb, self.ub, self.tol,
-                     jac=None if jac is None else user_jac)
+                     jac=None if jac is None else user_jac, small=small)

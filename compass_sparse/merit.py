@@ -32,6 +32,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from ._merit_kernels import (csc_rmatvec, fb_diagonals_kernel, fb_phi_kernel,
+                             normal_map_kernel, residual_maxima_kernel)
+
 __all__ = [
     "fischer",
     "fb_phi",
@@ -99,8 +102,6 @@ def fb_phi(z, f, lb, ub):
     f = np.asarray(f, dtype=float)
     lb, ub = _broadcast_box(lb, ub, z)
     if z.ndim == 1 and f.shape == z.shape:
-        from ._merit_kernels import fb_phi_kernel
-
         phi = np.empty_like(z)
         fb_phi_kernel(np.ascontiguousarray(z), np.ascontiguousarray(f),
                       np.ascontiguousarray(lb), np.ascontiguousarray(ub), phi)
@@ -137,8 +138,6 @@ def fb_jacobian_diagonals(z, f, lb, ub):
     f = np.asarray(f, dtype=float)
     lb, ub = _broadcast_box(lb, ub, z)
     if z.ndim == 1 and f.shape == z.shape:
-        from ._merit_kernels import fb_diagonals_kernel
-
         da = np.empty_like(z)
         db = np.empty_like(z)
         fb_diagonals_kernel(np.ascontiguousarray(z), np.ascontiguousarray(f),
@@ -178,8 +177,6 @@ def fb_gradient(z, f, J, lb, ub, phi=None):
     da, db = fb_jacobian_diagonals(z, f, lb, ub)
     u = db * phi
     if sp.issparse(J) and J.format == "csc":
-        from ._merit_kernels import csc_rmatvec
-
         jtu = np.empty(J.shape[1])
         csc_rmatvec(J.indptr, J.indices, J.data, u, jtu)  # J^T u without building J^T
         return da * phi + jtu
@@ -253,8 +250,6 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5,
         phi = fb_phi(z, f, lb, ub)
     aphi = np.abs(phi)
     if z.ndim == 1 and f.shape == z.shape:
-        from ._merit_kernels import residual_maxima_kernel
-
         mm = np.empty_like(z)
         fb_inf, natural, nm_inf = residual_maxima_kernel(
             np.ascontiguousarray(z), np.ascontiguousarray(f), np.ascontiguousarray(lb),
@@ -306,8 +301,6 @@ def normal_map_at(z, f, lb, ub):
     if (isinstance(z, np.ndarray) and isinstance(f, np.ndarray) and z.ndim == 1
             and f.shape == z.shape and z.dtype == float and f.dtype == float):
         lb, ub = _broadcast_box(lb, ub, z)
-        from ._merit_kernels import normal_map_kernel
-
         x = np.empty_like(z)
         nm = np.empty_like(z)
         normal_map_kernel(z, f, lb, ub, x, nm)

@@ -275,7 +275,8 @@ class NMSSolver:
         if self.best is None or psi < self.best.psi:
             self.best = Point(z.copy(), f.copy(), phi.copy(), psi)
         if self.acceptance.small(z, f, phi):
-            v = self.acceptance.judge(z, f, jac=lambda y: self.ev.jac(y, f), phi=phi)
+            v = self.acceptance.judge(z, f, jac=lambda y: self.ev.jac(y, f), phi=phi,
+                                      small=True)
             if v.solved:
                 self.best = Point(z.copy(), f.copy(), phi.copy(), psi)
                 self.verdict = v
