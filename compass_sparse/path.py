@@ -255,13 +255,13 @@ class PivotalPath:
                 # dropped for the all-slack basis below.
                 inward = ((z <= lb) & (w == 0) & (r < 0)) | ((z >= ub) & (v == 0) & (r > 0))
                 inward &= lb < ub
-                if np.any(inward):
+                if inward.any():
                     slack_basis = basic.copy()
                     basic[inward] = VAR_Z
         self.st.r = r
         self.st.zval = z.copy()  # values of z (basic or not); basic ones refreshed from xb
         st0 = self._stats0()
-        if not np.any(r):
+        if not r.any():
             # Already a solution of the linear problem: nothing to pivot.
             res = PathResult(LinearCode.SOLVED, z, w, v, 1.0, basis=WarmBasis(basic.copy()),
                              ray_start=ray_start)
@@ -610,7 +610,8 @@ class PivotalPath:
             code, z, w, v, float(t if code is not LinearCode.SOLVED else 1.0),
             pivots=self.st.pivots,
             factorizations=s.factorizations - st0[0], updates=s.updates - st0[1],
-            artificials=int(np.sum(self.st.sk == VAR_A)) if self.st.sk is not None else 0,
+            artificials=(int(np.count_nonzero(self.st.sk == VAR_A))
+                         if self.st.sk is not None else 0),
             breakpoints=self.st.breakpoints,
             basis=WarmBasis(basic), ray_start=ray_start, message=msg,
         )
