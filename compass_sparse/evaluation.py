@@ -79,14 +79,17 @@ def _keys(A: sp.csc_matrix) -> np.ndarray:
 def canonical_csc(J, n: int) -> sp.csc_matrix:
     """J as a canonical (sorted, duplicate-free) float CSC copy; a dense array keeps its
     full pattern (its zeros stay stored)."""
-    if np.iscomplexobj(J.data if sp.issparse(J) else J):
+    sparse = sp.issparse(J)
+    if not sparse:
+        J = np.asarray(J)
+    if (J.data if sparse else J).dtype.kind == "c":
         raise EvaluationError("the Jacobian has complex entries; J must be real")
-    if sp.issparse(J):
+    if sparse:
         if J.shape != (n, n):
             raise ShapeError(f"the Jacobian has shape {J.shape}, expected ({n}, {n})")
         C = sp.csc_matrix(J, dtype=float, copy=True)
     else:
-        A = np.asarray(J, dtype=float)
+        A = J.astype(float, copy=False)
         if A.shape != (n, n):
             raise ShapeError(f"the Jacobian has shape {A.shape}, expected ({n}, {n})")
         # The full pattern, built once per n (a small problem with a dense Jacobian
@@ -226,6 +229,8 @@ class Evaluator:
             self._set_pattern(C)
             return C
         P = self._pattern
+        if C.nnz == P.nnz == self.n * self.n:
+            return C  # two canonical full patterns are the same pattern
         if (C.indptr.shape == P.indptr.shape and C.indices.shape == P.indices.shape
                 and np.array_equal(C.indptr, P.indptr) and np.array_equal(C.indices, P.indices)):
             return C
@@ -299,9 +304,10 @@ class Evaluator:
             f, J = out
         else:
             f, J = out, None
-        if np.iscomplexobj(f):
+        f = np.asarray(f)
+        if f.dtype.kind == "c":
             raise EvaluationError("F(x) returned complex values; F must be real")
-        f = np.asarray(f, dtype=float)
+        f = f.astype(float, copy=False)
         if f.shape != (self.n,):
             if f.size == self.n:
                 f = f.reshape(self.n)
