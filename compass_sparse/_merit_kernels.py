@@ -1,4 +1,6 @@
-"""Compiled Fischer–Burmeister vector and J^T u for :mod:`compass_sparse.merit`.
+"""Compiled Fischer–Burmeister vector and J^T u for :mod:`compass_sparse.merit`, and the
+small CSC helpers of a small problem's per-iteration work (M z, row and column maxima,
+the dense copy of M for the compiled path engine).
 
 Same formulas as merit.fischer / merit.fb_phi, one element at a time: the arguments of
 phi(a, b) = sqrt(a^2 + b^2) - a - b are scaled by the power of two of max(|a|, |b|) (exact)
@@ -209,3 +211,12 @@ def csc_matvec(indptr, indices, data, x, out):
         xj = x[j]
         for k in range(indptr[j], indptr[j + 1]):
             out[indices[k]] += data[k] * xj
+
+
+@njit(cache=True)
+def csc_to_dense(indptr, indices, data, out):
+    """out[:, :] = A for A in CSC form (duplicate entries summed), in place."""
+    out[:, :] = 0.0
+    for j in range(out.shape[1]):
+        for k in range(indptr[j], indptr[j + 1]):
+            out[indices[k], j] += data[k]

@@ -30,6 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _dense_path_kernels as K
+from ._merit_kernels import csc_to_dense
 from .basis.types import BasisStats
 
 __all__ = ["DENSE_ENGINE_MAX_N", "DensePathEngine"]
@@ -81,9 +82,17 @@ class DensePathEngine:
         self.r = np.zeros(n)
 
     def set_matrix(self, M):
-        A = M.toarray() if sp.issparse(M) else np.asarray(M, dtype=float)
-        self.M = np.asfortranarray(A, dtype=float)
-        self.n = self.M.shape[0]
+        """M (sparse or dense) into the engine's dense column-major copy, which is
+        allocated once per order and refilled by every later linearization."""
+        n = M.shape[0]
+        A = getattr(self, "M", None)
+        if A is None or A.shape != (n, n):
+            A = self.M = np.zeros((n, n), order="F")
+        if sp.issparse(M) and M.format == "csc":
+            csc_to_dense(M.indptr, M.indices, M.data, A)
+        else:
+            A[...] = M.toarray() if sp.issparse(M) else np.asarray(M, dtype=float)
+        self.n = n
 
     def set_dense_column(self, r):
         self.r = np.ascontiguousarray(r, dtype=float)

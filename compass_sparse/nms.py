@@ -152,12 +152,15 @@ class Linearizer:
         n = self.n
         self.M = trusted_csc(np.zeros(J.nnz), J.indices.astype(np.int32),
                              J.indptr.astype(np.int32), (n, n))
-        self.pos_J = np.arange(J.nnz)
+        self.pos_J = None  # J's entries are M's, in the same order
         self.pos_D = key_D if pos_D is None else pos_D
 
     def __call__(self, J, eps: float) -> sp.csc_matrix:
-        data = np.zeros_like(self.M.data)
-        data[self.pos_J] = J.data  # canonical pattern: positions are distinct
+        if self.pos_J is None:
+            data = J.data.copy()
+        else:
+            data = np.zeros_like(self.M.data)
+            data[self.pos_J] = J.data  # canonical pattern: positions are distinct
         if eps:
             data[self.pos_D] += eps
         return trusted_csc(data, self.M.indices, self.M.indptr, self.M.shape)

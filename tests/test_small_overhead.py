@@ -453,3 +453,29 @@ def test_csc_matvec_is_scipy_product_bitwise(n, density):
     out = np.full(n, np.nan)
     csc_matvec(A.indptr, A.indices, A.data, x, out)
     assert np.array_equal(out, A @ x)
+
+
+def test_dense_engine_refills_its_matrix_in_place_from_each_linearization():
+    """The engine's dense copy of M is allocated once per order and refilled by every
+    set_matrix: CSC (duplicates summed, unsorted indices), other sparse formats and dense
+    input give M exactly; a new order gets a new array."""
+    from compass_sparse.dense_path import DensePathEngine
+
+    rng = np.random.default_rng(4)
+    A = sp.random(6, 6, density=0.5, format="csc", random_state=4)
+    eng = DensePathEngine(A)
+    buf = eng.M
+    np.testing.assert_array_equal(eng.M, A.toarray())
+    dup = sp.csc_matrix((np.array([1.0, 2.0, 3.0]), np.array([4, 1, 4]),
+                         np.array([0, 3, 3, 3, 3, 3, 3])), shape=(6, 6))
+    eng.set_matrix(dup)
+    assert eng.M is buf and eng.M.flags.f_contiguous
+    np.testing.assert_array_equal(eng.M, dup.toarray())
+    D = rng.standard_normal((6, 6))
+    for M in (sp.csr_matrix(D), D):
+        eng.set_matrix(M)
+        assert eng.M is buf
+        np.testing.assert_array_equal(eng.M, D)
+    eng.set_matrix(sp.identity(3, format="csc"))
+    assert eng.M.shape == (3, 3) and eng.n == 3
+    np.testing.assert_array_equal(eng.M, np.eye(3))
