@@ -64,12 +64,19 @@ def _manager_factory(opt: Options, deadline=None):
     return make
 
 
+BLAS_LIMIT_MIN_N = 16
+"""Below this dimension the BLAS thread count is left alone: the dense kernels of such a
+problem have at most 256 entries, and OpenBLAS runs every LU or matrix-vector product of
+fewer than 10^4 entries on one thread by itself (setting and restoring the count cost
+~10 us, a few percent of a whole solve of a 2-variable problem)."""
+
+
 def _blas_threads(n: int):
     """Single-threaded BLAS for small problems (their dense kernels are tiny; see
     :mod:`compass_sparse._blas`)."""
     import contextlib
 
-    if n > DENSE_BASIS_MAX_N:
+    if n > DENSE_BASIS_MAX_N or n < BLAS_LIMIT_MIN_N:
         return contextlib.nullcontext()
     return single_threaded_blas()
 

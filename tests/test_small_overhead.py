@@ -133,7 +133,7 @@ def test_blas_limit_reuses_one_controller():
     from compass_sparse import _blas
     from compass_sparse import solve as S
 
-    with S._blas_threads(10):
+    with S._blas_threads(50):
         pass
     first = list(_blas._CONTROLLER)
     with _blas.single_threaded_blas():
