@@ -108,24 +108,29 @@ def csc_abs_maxima(indptr, indices, data, rows, cols, diag):
         diag[j] = d
 
 
+@njit(cache=True, inline="always")
+def _absorbed(zi, fi, li, ui):
+    """(w, v) of merit.normal_map_at for one index: the part of F absorbed by the normal
+    cone at a lower bound (w) or an upper one (v), both at a fixed variable."""
+    # max(+-f, 0) exactly as np.maximum: the first argument when >= (so -0.0 stays) or NaN
+    fp = fi if (fi >= 0.0 or fi != fi) else 0.0
+    fm = -fi if (-fi >= 0.0 or fi != fi) else 0.0
+    if li == ui:
+        return fp, fm
+    if zi <= li:
+        return fp, 0.0
+    if zi >= ui:
+        return 0.0, fm
+    return 0.0, 0.0
+
+
 @njit(cache=True)
 def normal_map_kernel(z, f, lb, ub, x, nm):
     """merit.normal_map_at one element at a time: the slack w absorbed at a lower bound,
     v at an upper one (both at a fixed variable); x = z - w + v, nm = f - w + v."""
     for i in range(z.shape[0]):
-        zi, fi, li, ui = z[i], f[i], lb[i], ub[i]
-        # max(+-f, 0) exactly as np.maximum: the first argument when >= (so -0.0 stays)
-        # or NaN
-        fp = fi if (fi >= 0.0 or fi != fi) else 0.0
-        fm = -fi if (-fi >= 0.0 or fi != fi) else 0.0
-        w = 0.0
-        v = 0.0
-        if li == ui:
-            w, v = fp, fm
-        elif zi <= li:
-            w = fp
-        elif zi >= ui:
-            v = fm
+        zi, fi = z[i], f[i]
+        w, v = _absorbed(zi, fi, lb[i], ub[i])
         x[i] = zi - w + v
         nm[i] = fi - w + v
 
@@ -162,7 +167,7 @@ def residual_maxima_kernel(z, f, lb, ub, phi, mm):
     nm_inf = 0.0
     for i in range(z.shape[0]):
         zi, fi, li, ui = z[i], f[i], lb[i], ub[i]
-        lo = zi - ub[i]
+        lo = zi - ui
         hi = zi - li
         m = fi if (fi >= lo or fi != fi) else lo  # np.maximum(f, z - u)
         m = m if (m <= hi or m != m) else hi  # np.minimum(., z - l)
@@ -173,16 +178,7 @@ def residual_maxima_kernel(z, f, lb, ub, phi, mm):
         p = abs(phi[i])
         if p > fb_inf or p != p:
             fb_inf = p
-        fp = fi if (fi >= 0.0 or fi != fi) else 0.0
-        fm = -fi if (-fi >= 0.0 or fi != fi) else 0.0
-        w = 0.0
-        v = 0.0
-        if li == ui:
-            w, v = fp, fm
-        elif zi <= li:
-            w = fp
-        elif zi >= ui:
-            v = fm
+        w, v = _absorbed(zi, fi, li, ui)
         r = abs(fi - w + v)
         if r > nm_inf or r != r:
             nm_inf = r
