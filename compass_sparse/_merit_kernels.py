@@ -112,9 +112,10 @@ def csc_abs_maxima(indptr, indices, data, rows, cols, diag):
 def _absorbed(zi, fi, li, ui):
     """(w, v) of merit.normal_map_at for one index: the part of F absorbed by the normal
     cone at a lower bound (w) or an upper one (v), both at a fixed variable."""
-    # max(+-f, 0) exactly as np.maximum: the first argument when >= (so -0.0 stays) or NaN
-    fp = fi if (fi >= 0.0 or fi != fi) else 0.0
-    fm = -fi if (-fi >= 0.0 or fi != fi) else 0.0
+    # max(+-f, 0) exactly as np.maximum: the first argument when larger or NaN, else the
+    # second (so max(-0.0, 0.0) is 0.0)
+    fp = fi if (fi > 0.0 or fi != fi) else 0.0
+    fm = -fi if (-fi > 0.0 or fi != fi) else 0.0
     if li == ui:
         return fp, fm
     if zi <= li:
@@ -149,7 +150,7 @@ def flat_step_kernel(z, phi, da, db, indptr, indices, data, row_max, col_max, di
             continue
         h1 = abs(db[i]) * row_max[i]
         h2 = abs(da[i] + db[i] * diag[i])
-        h = h1 if (h1 >= h2 or h1 != h1) else h2  # np.maximum
+        h = h1 if (h1 > h2 or h1 != h1) else h2  # np.maximum
         d = abs(phi[i]) / h if h > 0.0 else np.inf
         ratio = d / (1.0 + abs(z[i]))
         if best < 0 or ratio > best_ratio:
@@ -169,8 +170,8 @@ def residual_maxima_kernel(z, f, lb, ub, phi, mm):
         zi, fi, li, ui = z[i], f[i], lb[i], ub[i]
         lo = zi - ui
         hi = zi - li
-        m = fi if (fi >= lo or fi != fi) else lo  # np.maximum(f, z - u)
-        m = m if (m <= hi or m != m) else hi  # np.minimum(., z - l)
+        m = fi if (fi > lo or fi != fi) else lo  # np.maximum(f, z - u)
+        m = m if (m < hi or m != m) else hi  # np.minimum(., z - l)
         a = abs(m)
         mm[i] = a
         if a > natural or a != a:

@@ -53,6 +53,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
+from ._slot_kernels import slot_basis, slot_point, slot_table
 from .basis import KIND_DENSE, KIND_M, KIND_UNIT, UpdateStatus
 from .exceptions import ShapeError, SingularBasisError
 
@@ -102,6 +103,12 @@ class PathResult:
     @property
     def x(self) -> np.ndarray:
         return self.z - self.w + self.v
+
+
+def _floats(n, *arrays) -> bool:
+    """All float64 vectors of length n (the compiled slot kernels' arguments)."""
+    return all(isinstance(a, np.ndarray) and a.dtype == np.float64 and a.shape == (n,)
+               for a in arrays)
 
 
 def components(x, lb, ub):
@@ -312,11 +319,17 @@ class PivotalPath:
     def _reset_slots(self, basic, z, w, v):
         """Slot table: slot i holds index i's basic variable at its value in (z, w, v)."""
         n = self.n
-        self.st.sk = basic.astype(np.int64)  # slot variable kind (VAR_*)
-        self.st.si = np.arange(n, dtype=np.int64)  # slot variable index
-        xb = np.where(basic == VAR_Z, z, np.where(basic == VAR_W, w, v))
-        xb = np.where(basic == VAR_S, w - v, xb)
-        self.st.xb = xb.astype(float)
+        if _floats(n, z, w, v):
+            self.st.sk = np.empty(n, dtype=np.int64)  # slot variable kind (VAR_*)
+            self.st.si = np.empty(n, dtype=np.int64)  # slot variable index
+            self.st.xb = np.empty(n)
+            slot_table(basic, z, w, v, self.st.sk, self.st.si, self.st.xb)
+        else:
+            self.st.sk = basic.astype(np.int64)
+            self.st.si = np.arange(n, dtype=np.int64)
+            xb = np.where(basic == VAR_Z, z, np.where(basic == VAR_W, w, v))
+            xb = np.where(basic == VAR_S, w - v, xb)
+            self.st.xb = xb.astype(float)
         self.st.zval = z.copy()
         self.st.art_sign = np.ones(n, dtype=np.int64)
         self.st.displaced = {}  # artificial row -> z index it displaced
@@ -563,6 +576,11 @@ class PivotalPath:
                 self.st.breakpoints.append((self.st.t, x))
 
     def _current_point(self):
+        if _floats(self.n, self.st.zval, self.st.xb, self.lb, self.ub):
+            z, w, v = np.empty(self.n), np.empty(self.n), np.empty(self.n)
+            slot_point(self.st.sk, self.st.si, self.st.xb, self.st.zval, self.lb, self.ub,
+                       z, w, v)
+            return z, w, v
         z = self.st.zval.copy()
         w = np.zeros(self.n)
         v = np.zeros(self.n)
@@ -601,7 +619,9 @@ class PivotalPath:
             w = np.zeros(self.n)
             v = np.zeros(self.n)
         basic = np.full(self.n, VAR_Z, dtype=np.int8)
-        if self.st.sk is not None:
+        if self.st.sk is not None and _floats(self.n, z, self.lb, self.ub):
+            slot_basis(z, self.lb, self.ub, self.st.sk, self.st.si, basic)
+        elif self.st.sk is not None:
             basic = default_basis(z, self.lb, self.ub)
             for kind in (VAR_Z, VAR_W, VAR_V, VAR_S):
                 m = self.st.sk == kind

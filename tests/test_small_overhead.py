@@ -345,6 +345,13 @@ def test_normal_map_kernel_matches_array_formula_bitwise_across_magnitudes(seed)
         assert np.array_equal(a, b, equal_nan=True)
         num = ~np.isnan(b)
         assert np.array_equal(np.signbit(a[num]), np.signbit(b[num]))
+    # signed zeros at bounds: np.maximum(-0.0, 0.0) is 0.0, and z - w + v keeps the sign
+    z0 = np.array([-0.0, 0.0, -0.0, 0.0, -0.0])
+    f0 = np.array([-0.0, -0.0, 0.0, 0.0, -0.0])
+    l0, u0 = np.array([0.0, 0.0, -0.0, 0.0, -1.0]), np.array([np.inf, 1.0, 0.0, 0.0, -0.0])
+    for a, b in zip(merit.normal_map_at(z0, f0, l0, u0),
+                    merit.normal_map_at_arrays(z0, f0, l0, u0)):
+        assert np.array_equal(a, b) and np.array_equal(np.signbit(a), np.signbit(b))
 
 
 @pytest.mark.parametrize("kind", ["full", "with diagonal", "without diagonal"])
