@@ -32,6 +32,7 @@ import scipy.sparse as sp
 from . import _dense_path_kernels as K
 from ._merit_kernels import csc_to_dense
 from .basis.types import BasisStats
+from .path import LinearCode
 
 __all__ = ["DENSE_ENGINE_MAX_N", "DensePathEngine"]
 
@@ -43,9 +44,10 @@ PIVOT_CHUNK = 1000
 
 _NAMES = "zwvatS"
 
-_CODES = {K.SOLVED: "S", K.RAY: "R", K.CYCLE: "C", K.MINOR_LIMIT: "I", K.SINGULAR: "N",
-          K.TOLERANCE: "T", K.ERROR: "E"}
-"""The kernels' path codes as the letters of :class:`compass_sparse.path.LinearCode`."""
+_CODES = {K.SOLVED: LinearCode.SOLVED, K.RAY: LinearCode.RAY, K.CYCLE: LinearCode.CYCLE,
+          K.MINOR_LIMIT: LinearCode.MINOR_LIMIT, K.SINGULAR: LinearCode.SINGULAR,
+          K.TOLERANCE: LinearCode.TOLERANCE, K.ERROR: LinearCode.ERROR}
+"""The kernels' path codes as :class:`compass_sparse.path.LinearCode`."""
 
 
 class DensePathEngine:
@@ -109,8 +111,6 @@ class DensePathEngine:
     def run_path(self, path, z, w, v, slack_basis):
         """Factor, pivot and check on ``path``'s slot table (set by PivotalPath.run).
         Leaves the path's fields as its own loop would and returns (LinearCode, message)."""
-        from .path import LinearCode
-
         lb = np.ascontiguousarray(path.lb, dtype=float)
         ub = np.ascontiguousarray(path.ub, dtype=float)
         path.lb, path.ub = lb, ub
@@ -170,7 +170,7 @@ class DensePathEngine:
         if fstate[K.F_BEST_T] > 0.0:
             st.best = (float(fstate[K.F_BEST_T]), self.best_x.copy())
         self._account(istate)
-        return LinearCode(_CODES[int(code)]), self._message(msg, istate, fstate, path)
+        return _CODES[int(code)], self._message(msg, istate, fstate, path)
 
     def _account(self, istate):
         self.stats.factorizations += int(istate[K.I_NFAC])
