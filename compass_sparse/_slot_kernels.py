@@ -86,3 +86,22 @@ def slot_table(basic, z, w, v, sk, si, xb):
             xb[i] = w[i] - v[i]
         else:
             xb[i] = v[i]
+
+
+@njit(cache=True)
+def start_basis(z, lb, ub, previous, use_previous, basic):
+    """path.default_basis into ``basic`` (int8): z basic strictly inside its bounds, the
+    slack at a bound unless ``previous`` (when ``use_previous``) had z basic there, the
+    free slack of a fixed variable."""
+    for i in range(z.shape[0]):
+        if lb[i] == ub[i]:
+            basic[i] = VAR_S
+        elif z[i] <= lb[i] or z[i] >= ub[i]:
+            if use_previous and previous[i] == VAR_Z:
+                basic[i] = VAR_Z
+            elif z[i] <= lb[i]:
+                basic[i] = VAR_W
+            else:
+                basic[i] = VAR_V
+        else:
+            basic[i] = VAR_Z

@@ -53,7 +53,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
-from ._slot_kernels import slot_basis, slot_point, slot_table
+from ._slot_kernels import slot_basis, slot_point, slot_table, start_basis
 from .basis import KIND_DENSE, KIND_M, KIND_UNIT, UpdateStatus
 from .exceptions import ShapeError, SingularBasisError
 
@@ -123,6 +123,14 @@ def default_basis(z, lb, ub, previous: WarmBasis | None = None) -> np.ndarray:
     Strictly inside its bounds z_i is basic; at a bound the slack is basic (the thesis
     prefers slack columns: fewer chances of a singular basis) unless the previous basis had
     z_i basic there (a degenerate but valid warm start that saves pivots)."""
+    if previous is not None and previous.basic.shape != z.shape:
+        raise ShapeError(f"warm basis of shape {previous.basic.shape} for a linear MCP "
+                         f"of {z.size} variables")
+    if _floats(z.size, z, lb, ub) and z.ndim == 1:
+        basic = np.empty(z.shape, dtype=np.int8)
+        prev = previous.basic if previous is not None else basic
+        start_basis(z, lb, ub, prev, previous is not None, basic)
+        return basic
     basic = np.full(z.shape, VAR_Z, dtype=np.int8)
     at_l = z <= lb
     at_u = (z >= ub) & ~at_l
@@ -130,9 +138,6 @@ def default_basis(z, lb, ub, previous: WarmBasis | None = None) -> np.ndarray:
     basic[at_l] = VAR_W
     basic[at_u] = VAR_V
     if previous is not None:
-        if previous.basic.shape != z.shape:
-            raise ShapeError(f"warm basis of shape {previous.basic.shape} for a linear MCP "
-                             f"of {z.size} variables")
         keep_z = (previous.basic == VAR_Z) & (at_l | at_u)
         basic[keep_z] = VAR_Z
     basic[fixed] = VAR_S
