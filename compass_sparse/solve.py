@@ -366,8 +366,9 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
     zb, fb = out.best.z, out.best.f
     if sc is not None:  # back to the user's units
         zb, fb = sc.col * zb, fb / sc.row
-    # The verdict that stopped the solve was taken on (zb, fb) and the user's problem
-    # unless the preprocessor or the scaling changed the problem: then it stands.
+    # The verdict that stopped the solve was taken on (zb, fb); when neither the
+    # preprocessor nor the scaling changed the problem, that is the user's problem and
+    # the verdict stands for the Result.
     verdict = out.verdict if pre is None and sc is None else None
     res = _finish(problem, pre, out.status, out.message, zb, opt, t0, passes,
                   start_z=problem.x0, verdict=verdict,
@@ -437,8 +438,6 @@ def _finish(problem, pre, status, message, z_red, opt, t0, passes, *, f_reduced=
             f = np.full(problem.n, np.nan)
     if "basis" in counts:
         counts["basis"] = _postsolve_basis(pre, counts["basis"], z, problem.lb, problem.ub)
-    if pre is not None:
-        counts.pop("verdict", None)  # taken on the reduced problem
     return _result(problem, status, message, z, f, opt, t0, start_z=start_z,
                    passes=passes, **counts)
 

@@ -486,3 +486,22 @@ def test_dense_engine_refills_its_matrix_in_place_from_each_linearization():
     eng.set_matrix(sp.identity(3, format="csc"))
     assert eng.M.shape == (3, 3) and eng.n == 3
     np.testing.assert_array_equal(eng.M, np.eye(3))
+
+
+def test_scaled_solve_judges_its_result_on_the_user_problem_again():
+    """When the scaling pass changed the problem the solver works on, its verdict (taken
+    on the scaled problem) is not handed to the Result: the Result's verdict is a fresh
+    judgement of the returned point on the user's problem, and agrees with one."""
+    from compass_sparse import MCP, solve_mcp
+    from compass_sparse.acceptance import judge
+
+    d = np.array([1e-5, 1.0, 1e5])
+    q = np.array([-1e-5, 2.0, -3e5])
+    F = lambda x: d * x + q  # noqa: E731
+    J = lambda x: sp.diags(d, format="csc")  # noqa: E731
+    res = solve_mcp(MCP(F, J, np.zeros(3), np.full(3, np.inf), np.ones(3)))
+    assert res.passes["scaling"].ran
+    assert res.success
+    v = judge(res.x, F(res.x), res.lb, res.ub, res.tolerance, jac=J)
+    assert v.solved
+    np.testing.assert_allclose(res.x, [1.0, 0.0, 3.0], atol=1e-6)
