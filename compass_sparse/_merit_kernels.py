@@ -1,4 +1,6 @@
-"""Compiled Fischer–Burmeister vector and J^T u for :mod:`compass_sparse.merit`.
+"""Compiled Fischer–Burmeister vector and J^T u for :mod:`compass_sparse.merit`, and the
+small CSC helpers of a small problem's per-iteration work (M z, row and column maxima,
+the dense copy of M for the compiled path engine).
 
 Same formulas as merit.fischer / merit.fb_phi, one element at a time: the arguments of
 phi(a, b) = sqrt(a^2 + b^2) - a - b are scaled by the power of two of max(|a|, |b|) (exact)
@@ -83,3 +85,135 @@ def fb_diagonals_kernel(z, f, lb, ub, da, db):
         else:
             da[i] = 0.0
             db[i] = -1.0
+
+
+@njit(cache=True)
+def csc_abs_maxima(indptr, indices, data, rows, cols, diag):
+    """Of a canonical CSC matrix A: rows[i] = max_j |A_ij|, cols[j] = max_i |A_ij| and
+    diag[j] = A_jj (0 where not stored), in one pass over the stored entries (a NaN entry
+    makes its row and column maxima NaN, as np.maximum does).  The caller zeroes rows."""
+    for j in range(cols.shape[0]):
+        c = 0.0
+        d = 0.0
+        for k in range(indptr[j], indptr[j + 1]):
+            i = indices[k]
+            a = abs(data[k])
+            if a > c or a != a:
+                c = a
+            if a > rows[i] or a != a:
+                rows[i] = a
+            if i == j:
+                d = data[k]
+        cols[j] = c
+        diag[j] = d
+
+
+@njit(cache=True, inline="always")
+def _absorbed(zi, fi, li, ui):
+    """(w, v) of merit.normal_map_at for one index: the part of F absorbed by the normal
+    cone at a lower bound (w) or an upper one (v), both at a fixed variable."""
+    # max(+-f, 0) exactly as np.maximum: the first argument when larger or NaN, else the
+    # second (so max(-0.0, 0.0) is 0.0)
+    fp = fi if (fi > 0.0 or fi != fi) else 0.0
+    fm = -fi if (-fi > 0.0 or fi != fi) else 0.0
+    if li == ui:
+        return fp, fm
+    if zi <= li:
+        return fp, 0.0
+    if zi >= ui:
+        return 0.0, fm
+    return 0.0, 0.0
+
+
+@njit(cache=True)
+def normal_map_kernel(z, f, lb, ub, x, nm):
+    """merit.normal_map_at one element at a time: the slack w absorbed at a lower bound,
+    v at an upper one (both at a fixed variable); x = z - w + v, nm = f - w + v."""
+    for i in range(z.shape[0]):
+        zi, fi = z[i], f[i]
+        w, v = _absorbed(zi, fi, lb[i], ub[i])
+        x[i] = zi - w + v
+        nm[i] = fi - w + v
+
+
+@njit(cache=True)
+def flat_step_kernel(z, phi, da, db, indptr, indices, data, row_max, col_max, diag):
+    """The scale test of :mod:`compass_sparse.acceptance` on a canonical CSC J: over the
+    rows with Phi_i != 0, the largest d_i / (1 + |z_i|) with d_i = |Phi_i| / ||H_i||_inf,
+    H = diag(da) + diag(db) J (d_i = inf where H_i = 0).  Returns (row, d_row, ratio), row
+    -1 when Phi = 0; the first row attains a tie.  ``row_max`` (zeroed), ``col_max`` and
+    ``diag`` are work areas of length n."""
+    csc_abs_maxima(indptr, indices, data, row_max, col_max, diag)
+    best, best_d, best_ratio = -1, 0.0, -1.0
+    for i in range(z.shape[0]):
+        if phi[i] == 0.0:
+            continue
+        h1 = abs(db[i]) * row_max[i]
+        h2 = abs(da[i] + db[i] * diag[i])
+        h = h1 if (h1 > h2 or h1 != h1) else h2  # np.maximum
+        d = abs(phi[i]) / h if h > 0.0 else np.inf
+        ratio = d / (1.0 + abs(z[i]))
+        if best < 0 or ratio > best_ratio:
+            best, best_d, best_ratio = i, d, ratio
+    return best, best_d, best_ratio
+
+
+@njit(cache=True)
+def residual_maxima_kernel(z, f, lb, ub, phi, mm):
+    """The maxima of merit.residual_report in one pass: mm = |z - pi(z - F)| (as
+    merit.min_map, the median form), and (max |Phi|, max mm, max |F_B|), NaN propagating
+    as np.max does."""
+    fb_inf = 0.0
+    natural = 0.0
+    nm_inf = 0.0
+    for i in range(z.shape[0]):
+        zi, fi, li, ui = z[i], f[i], lb[i], ub[i]
+        lo = zi - ui
+        hi = zi - li
+        m = fi if (fi > lo or fi != fi) else lo  # np.maximum(f, z - u)
+        m = m if (m < hi or m != m) else hi  # np.minimum(., z - l)
+        a = abs(m)
+        mm[i] = a
+        if a > natural or a != a:
+            natural = a
+        p = abs(phi[i])
+        if p > fb_inf or p != p:
+            fb_inf = p
+        w, v = _absorbed(zi, fi, li, ui)
+        r = abs(fi - w + v)
+        if r > nm_inf or r != r:
+            nm_inf = r
+    return fb_inf, natural, nm_inf
+
+
+@njit(cache=True)
+def positive_spread(v):
+    """max / min of the positive entries of v (1 when there are none)."""
+    lo = np.inf
+    hi = 0.0
+    for x in v:
+        if x > 0.0:
+            if x < lo:
+                lo = x
+            if x > hi:
+                hi = x
+    return hi / lo if hi > 0.0 else 1.0
+
+
+@njit(cache=True)
+def csc_matvec(indptr, indices, data, x, out):
+    """out = A x for A in CSC form, column by column (scipy's csc_matvec order)."""
+    out[:] = 0.0
+    for j in range(x.shape[0]):
+        xj = x[j]
+        for k in range(indptr[j], indptr[j + 1]):
+            out[indices[k]] += data[k] * xj
+
+
+@njit(cache=True)
+def csc_to_dense(indptr, indices, data, out):
+    """out[:, :] = A for A in CSC form (duplicate entries summed), in place."""
+    out[:, :] = 0.0
+    for j in range(out.shape[1]):
+        for k in range(indptr[j], indptr[j + 1]):
+            out[indices[k], j] += data[k]

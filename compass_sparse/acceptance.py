@@ -31,6 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from ._merit_kernels import flat_step_kernel
 from .merit import fb_jacobian_diagonals, fb_phi, min_map
 
 __all__ = ["FLAT_STEP_RTOL", "Verdict", "judge", "residuals_small", "Acceptance"]
@@ -56,40 +57,61 @@ def residuals_small(z, f, lb, ub, tol, phi=None) -> bool:
     """Test (1): both residuals at most tol (``phi``: fb_phi(z, f), when already known)."""
     if phi is None:
         phi = fb_phi(z, f, lb, ub)
-    if float(np.linalg.norm(phi)) > tol:
+    if float(np.sqrt(np.dot(phi, phi))) > tol:
         return False
     mm = min_map(z, f, lb, ub)
     return bool((np.abs(mm) <= tol).all())
 
 
-def judge(z, f, lb, ub, tol, jac=None) -> Verdict:
+def judge(z, f, lb, ub, tol, jac=None, phi=None, small=False) -> Verdict:
     """Both tests.  ``jac(z)`` returns J(z) (sparse) or None when it cannot be evaluated;
-    without a Jacobian only test (1) is applied."""
+    without a Jacobian only test (1) is applied.  ``phi``: fb_phi(z, f) when known;
+    ``small``: test (1) is known to pass (the caller has just applied it)."""
     z = np.asarray(z, dtype=float)
     f = np.asarray(f, dtype=float)
-    phi = fb_phi(z, f, lb, ub)
-    if not residuals_small(z, f, lb, ub, tol, phi):
+    if phi is None:
+        phi = fb_phi(z, f, lb, ub)
+    if not (small or residuals_small(z, f, lb, ub, tol, phi)):
         return Verdict(False, False)
-    rows = np.flatnonzero(phi != 0)
-    if rows.size == 0 or jac is None:
+    if jac is None or not phi.any():
         return Verdict(True, True)
     J = jac(z)
     if J is None:
         return Verdict(True, True)
+    return _scale_test(z, f, lb, ub, phi, J)
+
+
+def _scale_test(z, f, lb, ub, phi, J) -> Verdict:
+    """Test (2) at a point that passed test (1), with J = J(z): ||H_i||_inf over the row
+    is max(|db_i| max_j |J_ij|, |da_i + db_i J_ii|), read off the stored entries of the
+    canonical CSC in one compiled pass (no sparse matrix built per solve)."""
     da, db = fb_jacobian_diagonals(z, f, lb, ub)
-    # ||H_i||_inf over the row: |da_i + db_i J_ii| on the diagonal, |db_i J_ij| elsewhere;
-    # read off the stored entries of the canonical CSC (no sparse matrix built per solve)
     if not (sp.issparse(J) and J.format == "csc"):
         J = sp.csc_matrix(J)
     if not J.has_canonical_format:
         J = J.copy()
         J.sum_duplicates()
-    row_max = np.zeros(z.size)
-    np.maximum.at(row_max, J.indices, np.abs(J.data))
-    diag = J.diagonal()
-    h = np.maximum(np.abs(db) * row_max, np.abs(da + db * diag))
+    n = z.size
+    row, d, ratio = flat_step_kernel(z, phi, da, db, J.indptr, J.indices, J.data,
+                                     np.zeros(n), np.empty(n), np.empty(n))
+    if row < 0 or ratio <= FLAT_STEP_RTOL:
+        return Verdict(True, True)
+    return Verdict(False, True, flat_row=int(row), step=float(d))
+
+
+def _scale_test_arrays(z, f, lb, ub, phi, J) -> Verdict:
+    """_scale_test with array operations (the reference of the compiled kernel)."""
+    from .merit import fb_jacobian_diagonals_arrays
+
+    da, db = fb_jacobian_diagonals_arrays(z, f, lb, ub)
+    J = sp.csc_matrix(J)
+    rows = np.flatnonzero(phi)
+    if rows.size == 0:
+        return Verdict(True, True)
+    row_max = np.asarray(abs(J).max(axis=1).todense()).ravel()
+    h = np.maximum(np.abs(db) * row_max, np.abs(da + db * J.diagonal()))[rows]
     with np.errstate(divide="ignore", invalid="ignore"):
-        d = np.where(h[rows] > 0, np.abs(phi[rows]) / h[rows], np.inf)
+        d = np.where(h > 0, np.abs(phi[rows]) / h, np.inf)
     ratio = d / (1.0 + np.abs(z[rows]))
     k = int(np.argmax(ratio))
     if ratio[k] <= FLAT_STEP_RTOL:
@@ -112,21 +134,25 @@ class Acceptance:
             return z, f
         return self.col * z, f / self.row
 
-    def small(self, z, f) -> bool:
-        """Test (1) only (cheap: no Jacobian)."""
+    def small(self, z, f, phi=None) -> bool:
+        """Test (1) only (cheap: no Jacobian).  ``phi``: Phi(z) of the problem being
+        solved, when known (used only when that problem is the user's, unscaled)."""
         zu, fu = self.user_point(z, f)
-        return residuals_small(zu, fu, self.lb, self.ub, self.tol)
+        return residuals_small(zu, fu, self.lb, self.ub, self.tol,
+                               phi if self.row is None else None)
 
-    def judge(self, z, f, jac=None) -> Verdict:
-        """Both tests; ``jac(z)`` evaluates the Jacobian of the problem being solved at z."""
+    def judge(self, z, f, jac=None, phi=None, small=False) -> Verdict:
+        """Both tests; ``jac(z)`` evaluates the Jacobian of the problem being solved at z;
+        ``phi`` as in :meth:`small`; ``small``: :meth:`small` has just passed at z."""
         zu, fu = self.user_point(z, f)
-        if jac is None:
-            return judge(zu, fu, self.lb, self.ub, self.tol)
+        if self.row is None:
+            return judge(zu, fu, self.lb, self.ub, self.tol, jac=jac, phi=phi, small=small)
 
         def user_jac(_):
             J = jac(z)
-            if J is None or self.row is None:
+            if J is None:
                 return J
             return sp.diags(1.0 / self.row) @ J @ sp.diags(1.0 / self.col)
 
-        return judge(zu, fu, self.lb, self.ub, self.tol, jac=user_jac)
+        return judge(zu, fu, self.lb, self.ub, self.tol,
+                     jac=None if jac is None else user_jac, small=small)

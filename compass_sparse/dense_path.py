@@ -30,7 +30,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _dense_path_kernels as K
+from ._merit_kernels import csc_to_dense
 from .basis.types import BasisStats
+from .path import LinearCode
 
 __all__ = ["DENSE_ENGINE_MAX_N", "DensePathEngine"]
 
@@ -41,6 +43,11 @@ PIVOT_CHUNK = 1000
 """Pivots per compiled call: the time limit is checked between calls."""
 
 _NAMES = "zwvatS"
+
+_CODES = {K.SOLVED: LinearCode.SOLVED, K.RAY: LinearCode.RAY, K.CYCLE: LinearCode.CYCLE,
+          K.MINOR_LIMIT: LinearCode.MINOR_LIMIT, K.SINGULAR: LinearCode.SINGULAR,
+          K.TOLERANCE: LinearCode.TOLERANCE, K.ERROR: LinearCode.ERROR}
+"""The kernels' path codes as :class:`compass_sparse.path.LinearCode`."""
 
 
 class DensePathEngine:
@@ -77,9 +84,17 @@ class DensePathEngine:
         self.r = np.zeros(n)
 
     def set_matrix(self, M):
-        A = M.toarray() if sp.issparse(M) else np.asarray(M, dtype=float)
-        self.M = np.asfortranarray(A, dtype=float)
-        self.n = self.M.shape[0]
+        """M (sparse or dense) into the engine's dense column-major copy, which is
+        allocated once per order and refilled by every later linearization."""
+        n = M.shape[0]
+        A = getattr(self, "M", None)
+        if A is None or A.shape != (n, n):
+            A = self.M = np.zeros((n, n), order="F")
+        if sp.issparse(M) and M.format == "csc":
+            csc_to_dense(M.indptr, M.indices, M.data, A)
+        else:
+            A[...] = M.toarray() if sp.issparse(M) else np.asarray(M, dtype=float)
+        self.n = n
 
     def set_dense_column(self, r):
         self.r = np.ascontiguousarray(r, dtype=float)
@@ -96,8 +111,6 @@ class DensePathEngine:
     def run_path(self, path, z, w, v, slack_basis):
         """Factor, pivot and check on ``path``'s slot table (set by PivotalPath.run).
         Leaves the path's fields as its own loop would and returns (LinearCode, message)."""
-        from .path import LinearCode
-
         lb = np.ascontiguousarray(path.lb, dtype=float)
         ub = np.ascontiguousarray(path.ub, dtype=float)
         path.lb, path.ub = lb, ub
@@ -157,10 +170,7 @@ class DensePathEngine:
         if fstate[K.F_BEST_T] > 0.0:
             st.best = (float(fstate[K.F_BEST_T]), self.best_x.copy())
         self._account(istate)
-        codes = {K.SOLVED: LinearCode.SOLVED, K.RAY: LinearCode.RAY, K.CYCLE: LinearCode.CYCLE,
-                 K.MINOR_LIMIT: LinearCode.MINOR_LIMIT, K.SINGULAR: LinearCode.SINGULAR,
-                 K.TOLERANCE: LinearCode.TOLERANCE, K.ERROR: LinearCode.ERROR}
-        return codes[int(code)], self._message(msg, istate, fstate, path)
+        return _CODES[int(code)], self._message(msg, istate, fstate, path)
 
     def _account(self, istate):
         self.stats.factorizations += int(istate[K.I_NFAC])

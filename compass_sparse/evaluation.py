@@ -79,14 +79,17 @@ def _keys(A: sp.csc_matrix) -> np.ndarray:
 def canonical_csc(J, n: int) -> sp.csc_matrix:
     """J as a canonical (sorted, duplicate-free) float CSC copy; a dense array keeps its
     full pattern (its zeros stay stored)."""
-    if np.iscomplexobj(J.data if sp.issparse(J) else J):
+    sparse = sp.issparse(J)
+    if not sparse:
+        J = np.asarray(J)
+    if (J.data if sparse else J).dtype.kind == "c":
         raise EvaluationError("the Jacobian has complex entries; J must be real")
-    if sp.issparse(J):
+    if sparse:
         if J.shape != (n, n):
             raise ShapeError(f"the Jacobian has shape {J.shape}, expected ({n}, {n})")
         C = sp.csc_matrix(J, dtype=float, copy=True)
     else:
-        A = np.asarray(J, dtype=float)
+        A = J.astype(float, copy=False)
         if A.shape != (n, n):
             raise ShapeError(f"the Jacobian has shape {A.shape}, expected ({n}, {n})")
         # The full pattern, built once per n (a small problem with a dense Jacobian
@@ -110,39 +113,54 @@ def _default_var_label(j):
 
 class _Memo:
     """The last point and its value, plus one pinned point (the start point, asked for
-    again by the preprocessor, its reduced problem and every restart)."""
+    again by the preprocessor, its reduced problem and every restart).
 
-    __slots__ = ("x", "value", "px", "pvalue")
+    Points are compared by ``==`` elementwise (so -0.0 equals 0.0 and a point with a NaN
+    equals nothing), through a byte key made once per stored point: comparing the bytes
+    of x + 0.0 (which turns -0.0 into 0.0) costs a fraction of an elementwise comparison
+    for the short vectors of small problems, where the memo is asked several times per
+    evaluation."""
+
+    __slots__ = ("x", "value", "key", "px", "pvalue", "pkey")
 
     def __init__(self):
         self.clear()
 
     @staticmethod
-    def _same(a, x):
-        # (a == x).all() on the arrays themselves: np.array_equal's conversions and checks
-        # cost more than the comparison for the small vectors of a small problem
-        return a is not None and a.shape == x.shape and bool((a == x).all())
+    def _key(x):
+        """(shape, bytes) equal for two float arrays exactly when they are equal
+        elementwise; None for an array with a NaN (equal to nothing)."""
+        y = x + 0.0
+        if y.dtype != np.float64 or np.isnan(y).any():
+            return None
+        return x.shape, y.tobytes()
 
     def get(self, x):
-        if self._same(self.x, x):
+        if self.key is None and self.pkey is None:
+            return None
+        # no NaN test: the stored keys have none, so bytes with a NaN match neither
+        k = (x.shape, (x + 0.0).tobytes())
+        if k == self.key:
             return self.value
-        if self._same(self.px, x):
+        if k == self.pkey:
             return self.pvalue
         return None
 
     def put(self, x, value):
-        if self._same(self.px, x):
-            self.pvalue = value
         self.x = np.array(x, dtype=float, copy=True)
+        self.key = self._key(self.x)
         self.value = value
+        if self.key is not None and self.key == self.pkey:
+            self.pvalue = value
 
     def pin(self, x):
         """Keep the value at x (the last point) beyond the next evaluations."""
-        if self._same(self.x, x):
-            self.px, self.pvalue = self.x, self.value
+        k = self._key(np.asarray(x, dtype=float))
+        if k is not None and k == self.key:
+            self.px, self.pvalue, self.pkey = self.x, self.value, self.key
 
     def clear(self):
-        self.x = self.value = self.px = self.pvalue = None
+        self.x = self.value = self.px = self.pvalue = self.key = self.pkey = None
 
 
 class Evaluator:
@@ -211,6 +229,8 @@ class Evaluator:
             self._set_pattern(C)
             return C
         P = self._pattern
+        if C.nnz == P.nnz == self.n * self.n:
+            return C  # two canonical full patterns are the same pattern
         if (C.indptr.shape == P.indptr.shape and C.indices.shape == P.indices.shape
                 and np.array_equal(C.indptr, P.indptr) and np.array_equal(C.indices, P.indices)):
             return C
@@ -284,9 +304,10 @@ class Evaluator:
             f, J = out
         else:
             f, J = out, None
-        if np.iscomplexobj(f):
+        f = np.asarray(f)
+        if f.dtype.kind == "c":
             raise EvaluationError("F(x) returned complex values; F must be real")
-        f = np.asarray(f, dtype=float)
+        f = f.astype(float, copy=False)
         if f.shape != (self.n,):
             if f.size == self.n:
                 f = f.reshape(self.n)

@@ -32,6 +32,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from ._merit_kernels import (csc_rmatvec, fb_diagonals_kernel, fb_phi_kernel,
+                             normal_map_kernel, residual_maxima_kernel)
+
 __all__ = [
     "fischer",
     "fb_phi",
@@ -99,8 +102,6 @@ def fb_phi(z, f, lb, ub):
     f = np.asarray(f, dtype=float)
     lb, ub = _broadcast_box(lb, ub, z)
     if z.ndim == 1 and f.shape == z.shape:
-        from ._merit_kernels import fb_phi_kernel
-
         phi = np.empty_like(z)
         fb_phi_kernel(np.ascontiguousarray(z), np.ascontiguousarray(f),
                       np.ascontiguousarray(lb), np.ascontiguousarray(ub), phi)
@@ -137,8 +138,6 @@ def fb_jacobian_diagonals(z, f, lb, ub):
     f = np.asarray(f, dtype=float)
     lb, ub = _broadcast_box(lb, ub, z)
     if z.ndim == 1 and f.shape == z.shape:
-        from ._merit_kernels import fb_diagonals_kernel
-
         da = np.empty_like(z)
         db = np.empty_like(z)
         fb_diagonals_kernel(np.ascontiguousarray(z), np.ascontiguousarray(f),
@@ -178,8 +177,6 @@ def fb_gradient(z, f, J, lb, ub, phi=None):
     da, db = fb_jacobian_diagonals(z, f, lb, ub)
     u = db * phi
     if sp.issparse(J) and J.format == "csc":
-        from ._merit_kernels import csc_rmatvec
-
         jtu = np.empty(J.shape[1])
         csc_rmatvec(J.indptr, J.indices, J.data, u, jtu)  # J^T u without building J^T
         return da * phi + jtu
@@ -239,18 +236,29 @@ class ResidualReport:
         )
 
 
-def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5) -> ResidualReport:
+def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5,
+                    phi=None) -> ResidualReport:
     """All residual measures at z with F values f, naming the k worst rows.
 
-    ``names`` is a callable i -> str or a sequence of row names.
+    ``names`` is a callable i -> str or a sequence of row names; ``phi`` is
+    fb_phi(z, f, lb, ub) when the caller has it.
     """
     z = np.asarray(z, dtype=float)
     f = np.asarray(f, dtype=float)
     lb, ub = _broadcast_box(lb, ub, z)
-    phi = fb_phi(z, f, lb, ub)
-    mm = np.abs(min_map(z, f, lb, ub))
-    nm = normal_map_at(z, f, lb, ub)[1]
+    if phi is None:
+        phi = fb_phi(z, f, lb, ub)
     aphi = np.abs(phi)
+    if z.ndim == 1 and f.shape == z.shape:
+        mm = np.empty_like(z)
+        fb_inf, natural, nm_inf = residual_maxima_kernel(
+            np.ascontiguousarray(z), np.ascontiguousarray(f), np.ascontiguousarray(lb),
+            np.ascontiguousarray(ub), np.ascontiguousarray(phi), mm)
+    else:
+        mm = np.abs(min_map(z, f, lb, ub))
+        nm = normal_map_at_arrays(z, f, lb, ub)[1]
+        fb_inf, natural, nm_inf = (float(np.max(aphi)), float(np.max(mm)),
+                                   float(np.max(np.abs(nm)))) if z.size else (0.0, 0.0, 0.0)
     k = min(k_worst, z.size)
     idx = np.argpartition(-aphi, k - 1)[:k] if k > 0 else np.array([], dtype=int)
     idx = idx[np.argsort(-aphi[idx])]
@@ -260,24 +268,29 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5) -> ResidualRe
         label = names
     else:
         label = lambda i: str(names[i])  # noqa: E731
-    worst = [(label(int(i)), float(aphi[i]), float(mm[i])) for i in idx]
+    worst = [(label(i), float(aphi[i]), float(mm[i])) for i in idx.tolist()]
     return ResidualReport(
-        fb_norm=_norm2(phi),
-        fb_inf=float(aphi.max()) if z.size else 0.0,
-        natural=float(mm.max()) if z.size else 0.0,
-        normal_map_inf=float(np.max(np.abs(nm))) if z.size else 0.0,
+        fb_norm=_norm2(phi, fb_inf),
+        fb_inf=float(fb_inf),
+        natural=float(natural),
+        normal_map_inf=float(nm_inf),
         merit=fb_psi(phi),
         worst=worst,
         worst_index=int(idx[0]) if k > 0 else -1,
     )
 
 
-def _norm2(v) -> float:
-    """||v||_2 without underflow or overflow of the squares."""
-    m = float(np.max(np.abs(v))) if v.size else 0.0
+def _norm2(v, inf_norm=None) -> float:
+    """||v||_2 without underflow or overflow of the squares (``inf_norm``: ||v||_inf when
+    known)."""
+    if inf_norm is not None:
+        m = float(inf_norm)
+    else:
+        m = float(np.abs(v).max()) if v.size else 0.0
     if m == 0.0 or not np.isfinite(m):
         return m
-    return m * float(np.sqrt(np.dot(v / m, v / m)))
+    s = v / m
+    return m * float(np.sqrt(np.dot(s, s)))
 
 
 def normal_map_at(z, f, lb, ub):
@@ -285,6 +298,18 @@ def normal_map_at(z, f, lb, ub):
     F_B(x) is F minus the part of F that the normal cone of the box at z absorbs (thesis
     (2.5.8)-(2.5.9)): at a lower bound x_i = z_i - max(F_i, 0), at an upper bound
     x_i = z_i + max(-F_i, 0), a fixed variable absorbs all of F_i."""
+    if (isinstance(z, np.ndarray) and isinstance(f, np.ndarray) and z.ndim == 1
+            and f.shape == z.shape and z.dtype == float and f.dtype == float):
+        lb, ub = _broadcast_box(lb, ub, z)
+        x = np.empty_like(z)
+        nm = np.empty_like(z)
+        normal_map_kernel(z, f, lb, ub, x, nm)
+        return x, nm
+    return normal_map_at_arrays(z, f, lb, ub)
+
+
+def normal_map_at_arrays(z, f, lb, ub):
+    """normal_map_at with array operations (the reference of the compiled kernel)."""
     at_l = z <= lb
     at_u = (z >= ub) & ~at_l
     w = np.where(at_l, np.maximum(f, 0.0), 0.0)  # absorbed at the lower bound

@@ -48,6 +48,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._csc import trusted_csc
+from ._merit_kernels import csc_matvec
 from .acceptance import Acceptance
 from .crash import crash
 from .exceptions import FactorBudgetError
@@ -111,6 +112,9 @@ class Outcome:
     updates: int = 0
     basis: WarmBasis | None = None
     passes: dict = field(default_factory=dict)
+    #: the acceptance verdict of ``best`` on the user's problem when the solve stopped
+    #: because best was judged a solution (None otherwise)
+    verdict: object = None
 
 
 class Linearizer:
@@ -118,12 +122,22 @@ class Linearizer:
 
     def __init__(self, J: sp.csc_matrix):
         n = J.shape[0]
+        self.n = n
+        self.nnz_J = J.nnz
+        key_D = np.arange(n, dtype=np.int64) * (n + 1)
+        if J.nnz == n * n:
+            # A full pattern (a dense Jacobian) holds the diagonal: M has J's pattern.
+            self._same_pattern(J, key_D)
+            return
         # Structural union of pattern(J) and the diagonal, as sorted keys col * n + row
         # (values of J could cancel against the identity and vanish); built with array
         # operations, no sparse arithmetic: small problems build one per solve.
         col = np.repeat(np.arange(n, dtype=np.int64), np.diff(J.indptr))
         key_J = col * n + J.indices
-        key_D = np.arange(n, dtype=np.int64) * (n + 1)
+        pos_D = np.searchsorted(key_J, key_D)
+        if key_J.size and (pos_D < key_J.size).all() and (key_J[pos_D] == key_D).all():
+            self._same_pattern(J, key_D, pos_D)  # the diagonal is stored already
+            return
         keys = np.union1d(key_J, key_D)
         indices = (keys % n).astype(np.int32)
         indptr = np.searchsorted(keys, np.arange(n + 1, dtype=np.int64) * n).astype(np.int32)
@@ -131,12 +145,22 @@ class Linearizer:
         # position of each J entry and each diagonal entry inside M's pattern
         self.pos_J = np.searchsorted(keys, key_J)
         self.pos_D = np.searchsorted(keys, key_D)
-        self.n = n
-        self.nnz_J = J.nnz
+
+    def _same_pattern(self, J, key_D, pos_D=None):
+        """M on J's own (canonical) pattern; ``pos_D``: the diagonal's positions in it
+        (on a full pattern the diagonal of column j is entry j * (n + 1))."""
+        n = self.n
+        self.M = trusted_csc(np.zeros(J.nnz), J.indices.astype(np.int32),
+                             J.indptr.astype(np.int32), (n, n))
+        self.pos_J = None  # J's entries are M's, in the same order
+        self.pos_D = key_D if pos_D is None else pos_D
 
     def __call__(self, J, eps: float) -> sp.csc_matrix:
-        data = np.zeros_like(self.M.data)
-        data[self.pos_J] = J.data  # canonical pattern: positions are distinct
+        if self.pos_J is None:
+            data = J.data.copy()
+        else:
+            data = np.zeros_like(self.M.data)
+            data[self.pos_J] = J.data  # canonical pattern: positions are distinct
         if eps:
             data[self.pos_D] += eps
         return trusted_csc(data, self.M.indices, self.M.indptr, self.M.shape)
@@ -231,8 +255,17 @@ class NMSSolver:
         self.linearizer = None
         self.bm = None
         self.basis: WarmBasis | None = None
-        self.rng = np.random.default_rng(options.seed)
+        self._rng = None
+        self.verdict = None  # set when a point is judged a solution
         self.flat_rejections = 0
+
+    @property
+    def rng(self):
+        """The random generator of the restarts from new points (made when first needed:
+        most solves never restart, and making one costs ~20 us)."""
+        if self._rng is None:
+            self._rng = np.random.default_rng(self.opt0.seed)
+        return self._rng
 
     # ------------------------------------------------------------------ bookkeeping
     def _past_deadline(self) -> bool:
@@ -244,10 +277,12 @@ class NMSSolver:
         holds to within one evaluation."""
         if self.best is None or psi < self.best.psi:
             self.best = Point(z.copy(), f.copy(), phi.copy(), psi)
-        if self.acceptance.small(z, f):
-            v = self.acceptance.judge(z, f, jac=lambda y: self.ev.jac(y, f))
+        if self.acceptance.small(z, f, phi):
+            v = self.acceptance.judge(z, f, jac=lambda y: self.ev.jac(y, f), phi=phi,
+                                      small=True)
             if v.solved:
                 self.best = Point(z.copy(), f.copy(), phi.copy(), psi)
+                self.verdict = v
                 raise _Stop(Status.SOLVED, "solution found")
             if v.small_residual and v.flat_row >= 0:
                 # A flat tail: keep going (a genuine solution may still be reached), but
@@ -313,7 +348,9 @@ class NMSSolver:
         if self.linearizer is None or self.linearizer.nnz_J != J.nnz:
             self.linearizer = Linearizer(J)  # first J, or an undeclared pattern grew
         M = self.linearizer(J, eps)
-        q = cur.f - M @ cur.z
+        Mz = np.empty(self.n)
+        csc_matvec(M.indptr, M.indices, M.data, cur.z, Mz)  # M @ z without scipy's dispatch
+        q = cur.f - Mz
         if self.bm is None:
             self.bm = self.manager_factory(M)
         else:
@@ -597,6 +634,7 @@ class NMSSolver:
             + self.passes.get("homotopy", PassStats()).factorizations,
             updates=bm.stats.updates if bm is not None else 0,
             basis=self.basis, passes=self.passes,
+            verdict=self.verdict if status is Status.SOLVED else None,
         )
 
     def _homotopy(self, start):

@@ -53,6 +53,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
+from ._slot_kernels import slot_basis, slot_point, slot_table, start_basis
 from .basis import KIND_DENSE, KIND_M, KIND_UNIT, UpdateStatus
 from .exceptions import ShapeError, SingularBasisError
 
@@ -104,6 +105,12 @@ class PathResult:
         return self.z - self.w + self.v
 
 
+def _floats(n, *arrays) -> bool:
+    """All float64 vectors of length n (the compiled slot kernels' arguments)."""
+    return all(isinstance(a, np.ndarray) and a.dtype == np.float64 and a.shape == (n,)
+               for a in arrays)
+
+
 def components(x, lb, ub):
     """(z, w, v) comprising x: z = pi(x), w = (z - x)+, v = (x - z)+ (thesis (3.2.2)-(3.2.5))."""
     z = np.minimum(np.maximum(x, lb), ub)
@@ -116,6 +123,14 @@ def default_basis(z, lb, ub, previous: WarmBasis | None = None) -> np.ndarray:
     Strictly inside its bounds z_i is basic; at a bound the slack is basic (the thesis
     prefers slack columns: fewer chances of a singular basis) unless the previous basis had
     z_i basic there (a degenerate but valid warm start that saves pivots)."""
+    if previous is not None and previous.basic.shape != z.shape:
+        raise ShapeError(f"warm basis of shape {previous.basic.shape} for a linear MCP "
+                         f"of {z.size} variables")
+    if _floats(z.size, z, lb, ub) and z.ndim == 1:
+        basic = np.empty(z.shape, dtype=np.int8)
+        prev = previous.basic if previous is not None else basic
+        start_basis(z, lb, ub, prev, previous is not None, basic)
+        return basic
     basic = np.full(z.shape, VAR_Z, dtype=np.int8)
     at_l = z <= lb
     at_u = (z >= ub) & ~at_l
@@ -123,9 +138,6 @@ def default_basis(z, lb, ub, previous: WarmBasis | None = None) -> np.ndarray:
     basic[at_l] = VAR_W
     basic[at_u] = VAR_V
     if previous is not None:
-        if previous.basic.shape != z.shape:
-            raise ShapeError(f"warm basis of shape {previous.basic.shape} for a linear MCP "
-                             f"of {z.size} variables")
         keep_z = (previous.basic == VAR_Z) & (at_l | at_u)
         basic[keep_z] = VAR_Z
     basic[fixed] = VAR_S
@@ -255,13 +267,13 @@ class PivotalPath:
                 # dropped for the all-slack basis below.
                 inward = ((z <= lb) & (w == 0) & (r < 0)) | ((z >= ub) & (v == 0) & (r > 0))
                 inward &= lb < ub
-                if np.any(inward):
+                if inward.any():
                     slack_basis = basic.copy()
                     basic[inward] = VAR_Z
         self.st.r = r
         self.st.zval = z.copy()  # values of z (basic or not); basic ones refreshed from xb
         st0 = self._stats0()
-        if not np.any(r):
+        if not r.any():
             # Already a solution of the linear problem: nothing to pivot.
             res = PathResult(LinearCode.SOLVED, z, w, v, 1.0, basis=WarmBasis(basic.copy()),
                              ray_start=ray_start)
@@ -312,11 +324,17 @@ class PivotalPath:
     def _reset_slots(self, basic, z, w, v):
         """Slot table: slot i holds index i's basic variable at its value in (z, w, v)."""
         n = self.n
-        self.st.sk = basic.astype(np.int64)  # slot variable kind (VAR_*)
-        self.st.si = np.arange(n, dtype=np.int64)  # slot variable index
-        xb = np.where(basic == VAR_Z, z, np.where(basic == VAR_W, w, v))
-        xb = np.where(basic == VAR_S, w - v, xb)
-        self.st.xb = xb.astype(float)
+        if _floats(n, z, w, v):
+            self.st.sk = np.empty(n, dtype=np.int64)  # slot variable kind (VAR_*)
+            self.st.si = np.empty(n, dtype=np.int64)  # slot variable index
+            self.st.xb = np.empty(n)
+            slot_table(basic, z, w, v, self.st.sk, self.st.si, self.st.xb)
+        else:
+            self.st.sk = basic.astype(np.int64)
+            self.st.si = np.arange(n, dtype=np.int64)
+            xb = np.where(basic == VAR_Z, z, np.where(basic == VAR_W, w, v))
+            xb = np.where(basic == VAR_S, w - v, xb)
+            self.st.xb = xb.astype(float)
         self.st.zval = z.copy()
         self.st.art_sign = np.ones(n, dtype=np.int64)
         self.st.displaced = {}  # artificial row -> z index it displaced
@@ -563,6 +581,11 @@ class PivotalPath:
                 self.st.breakpoints.append((self.st.t, x))
 
     def _current_point(self):
+        if _floats(self.n, self.st.zval, self.st.xb, self.lb, self.ub):
+            z, w, v = np.empty(self.n), np.empty(self.n), np.empty(self.n)
+            slot_point(self.st.sk, self.st.si, self.st.xb, self.st.zval, self.lb, self.ub,
+                       z, w, v)
+            return z, w, v
         z = self.st.zval.copy()
         w = np.zeros(self.n)
         v = np.zeros(self.n)
@@ -601,7 +624,9 @@ class PivotalPath:
             w = np.zeros(self.n)
             v = np.zeros(self.n)
         basic = np.full(self.n, VAR_Z, dtype=np.int8)
-        if self.st.sk is not None:
+        if self.st.sk is not None and _floats(self.n, z, self.lb, self.ub):
+            slot_basis(z, self.lb, self.ub, self.st.sk, self.st.si, basic)
+        elif self.st.sk is not None:
             basic = default_basis(z, self.lb, self.ub)
             for kind in (VAR_Z, VAR_W, VAR_V, VAR_S):
                 m = self.st.sk == kind
@@ -610,7 +635,8 @@ class PivotalPath:
             code, z, w, v, float(t if code is not LinearCode.SOLVED else 1.0),
             pivots=self.st.pivots,
             factorizations=s.factorizations - st0[0], updates=s.updates - st0[1],
-            artificials=int(np.sum(self.st.sk == VAR_A)) if self.st.sk is not None else 0,
+            artificials=(int(np.count_nonzero(self.st.sk == VAR_A))
+                         if self.st.sk is not None else 0),
             breakpoints=self.st.breakpoints,
             basis=WarmBasis(basic), ray_start=ray_start, message=msg,
         )

@@ -87,11 +87,17 @@ def _canonical(A) -> sp.csc_matrix:
 def _maxnorms(A: sp.csc_matrix, row=None, col=None):
     """Row and column max-norms of diag(row) A diag(col) (A canonical CSC), read off the
     stored entries: no sparse matrix is built (this runs on every solve)."""
+    rows = np.zeros(A.shape[0])
+    cols = np.zeros(A.shape[1])
+    if row is None and A.shape[0] == A.shape[1]:
+        # unscaled (every solve asks for this once): one compiled pass
+        from ._merit_kernels import csc_abs_maxima
+
+        csc_abs_maxima(A.indptr, A.indices, A.data, rows, cols, np.empty(A.shape[1]))
+        return rows, cols
     a = np.abs(A.data)
     if row is not None:
         a = a * row[A.indices] * col[_columns(A)]
-    rows = np.zeros(A.shape[0])
-    cols = np.zeros(A.shape[1])
     if A.nnz:
         np.maximum.at(rows, A.indices, a)
         filled = np.flatnonzero(np.diff(A.indptr))
@@ -100,8 +106,9 @@ def _maxnorms(A: sp.csc_matrix, row=None, col=None):
 
 
 def _spread(v) -> float:
-    v = v[v > 0]
-    return float(v.max() / v.min()) if v.size else 1.0
+    from ._merit_kernels import positive_spread
+
+    return float(positive_spread(v))
 
 
 def spread(J) -> float:

@@ -64,12 +64,19 @@ def _manager_factory(opt: Options, deadline=None):
     return make
 
 
+BLAS_LIMIT_MIN_N = 16
+"""Below this dimension the BLAS thread count is left alone: the dense kernels of such a
+problem have at most 256 entries, and OpenBLAS runs every LU or matrix-vector product of
+fewer than 10^4 entries on one thread by itself (setting and restoring the count cost
+~10 us, a few percent of a whole solve of a 2-variable problem)."""
+
+
 def _blas_threads(n: int):
     """Single-threaded BLAS for small problems (their dense kernels are tiny; see
     :mod:`compass_sparse._blas`)."""
     import contextlib
 
-    if n > DENSE_BASIS_MAX_N:
+    if n > DENSE_BASIS_MAX_N or n < BLAS_LIMIT_MIN_N:
         return contextlib.nullcontext()
     return single_threaded_blas()
 
@@ -92,14 +99,14 @@ _PROBLEM_KEYWORDS = ("n", "jac_sparsity", "var_names", "eqn_names", "constant_ja
 def _check_keywords(kwargs):
     """Unknown keywords of solve_mcp: a ProblemError with a hint (an option given as a
     keyword belongs in ``options=``)."""
+    if not kwargs or set(kwargs).issubset(_PROBLEM_KEYWORDS):
+        return
     import dataclasses
     import difflib
 
     from .exceptions import ProblemError
 
     unknown = sorted(set(kwargs) - set(_PROBLEM_KEYWORDS))
-    if not unknown:
-        return
     option_names = {f.name for f in dataclasses.fields(Options)}
     hints = []
     for u in unknown:
@@ -125,15 +132,16 @@ def _as_problem(F, jac, lb, ub, x0, kwargs) -> tuple[MCP, bool]:
     return MCP(F, jac, lb, ub, x0, **kwargs, check=False), check
 
 
-def _judge_on(problem: MCP, z, f, opt: Options):
+def _judge_on(problem: MCP, z, f, opt: Options, phi=None):
     """The acceptance verdict of z on ``problem`` (J evaluated only when the residuals are
-    small; a J that cannot be evaluated there leaves the residual test alone)."""
+    small; a J that cannot be evaluated there leaves the residual test alone).  ``phi``:
+    Phi(z) when known."""
     def jac(y):
         try:
             return problem.evaluator.jac(y)
         except CompassError:
             return None
-    return judge(z, f, problem.lb, problem.ub, opt.convergence_tolerance, jac=jac)
+    return judge(z, f, problem.lb, problem.ub, opt.convergence_tolerance, jac=jac, phi=phi)
 
 
 _FLAT_OVERRIDES = (Status.SOLVED, Status.NO_PROGRESS, Status.MAJOR_ITERATION_LIMIT,
@@ -141,9 +149,14 @@ _FLAT_OVERRIDES = (Status.SOLVED, Status.NO_PROGRESS, Status.MAJOR_ITERATION_LIM
 
 
 def _result(problem: MCP, status: Status, message: str, z, f, opt: Options, t0, *,
-            start_z=None, **counts) -> Result:
-    rep = residual_report(z, f, problem.lb, problem.ub, names=problem.row_label)
-    verdict = _judge_on(problem, z, f, opt)
+            start_z=None, verdict=None, **counts) -> Result:
+    """The Result of the point z with F values f on ``problem`` (the user's).  ``verdict``:
+    the acceptance verdict of exactly this (z, f) on this problem, when the solver has
+    just computed it (it is not computed again)."""
+    phi = fb_phi(z, f, problem.lb, problem.ub)
+    rep = residual_report(z, f, problem.lb, problem.ub, names=problem.row_label, phi=phi)
+    if verdict is None:
+        verdict = _judge_on(problem, z, f, opt, phi)
     solved = verdict.solved
     if solved and status not in (Status.SOLVED,):
         # A limit fired after the solution was reached: report the solution.
@@ -216,8 +229,8 @@ def _presolve_pass(problem, opt, f0, J0):
         return None, st
     # Every reduction but fixing l = u needs a row whose entries are all declared
     # constant; without one the pass would only cost time (17 s at n = 1e6, measured).
-    has_fixed = bool(np.any(problem.lb == problem.ub))
-    P = problem.pattern
+    has_fixed = bool((problem.lb == problem.ub).any())
+    P = J0 if J0 is not None else problem.pattern  # J0 is stored on the pattern
     mask = problem.constant_mask
     nonconst_rows = P.indices if mask is None else P.indices[~mask]
     linear_rows = int(np.count_nonzero(np.bincount(nonconst_rows, minlength=problem.n) == 0))
@@ -316,7 +329,8 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
         if f0 is None:
             return _finish(problem, pre, Status.DOMAIN_ERROR, "F or J failed at the start "
                            f"point: {work.evaluator.last_error}", z0, opt, t0, passes)
-    at_solution = _judge_on(work, z0, f0, opt).solved
+    phi0 = fb_phi(z0, f0, work.lb, work.ub)
+    at_solution = _judge_on(work, z0, f0, opt, phi0).solved
     if at_solution or opt.major_iteration_limit == 0:
         status = Status.SOLVED if at_solution else Status.MAJOR_ITERATION_LIMIT
         msg = ("the start point is a solution" if status is Status.SOLVED
@@ -333,7 +347,7 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
     if sc is not None:  # the solver works in the scaled units
         inner = scale_problem(work, sc)
         z0, f0, J0 = z0 / sc.col, sc.row * f0, sc.scale_jacobian(J0)
-    phi0 = fb_phi(z0, f0, inner.lb, inner.ub)
+        phi0 = fb_phi(z0, f0, inner.lb, inner.ub)
     solver = NMSSolver(inner, opt, manager_factory=_manager_factory(opt, deadline),
                        callback=callback, deadline=deadline, log_major=log_major,
                        log_minor=log_minor, acceptance=acceptance)
@@ -352,8 +366,12 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
     zb, fb = out.best.z, out.best.f
     if sc is not None:  # back to the user's units
         zb, fb = sc.col * zb, fb / sc.row
+    # The verdict that stopped the solve was taken on (zb, fb); when neither the
+    # preprocessor nor the scaling changed the problem, that is the user's problem and
+    # the verdict stands for the Result.
+    verdict = out.verdict if pre is None and sc is None else None
     res = _finish(problem, pre, out.status, out.message, zb, opt, t0, passes,
-                  start_z=problem.x0,
+                  start_z=problem.x0, verdict=verdict,
                   f_reduced=fb, nit=out.nit, minor_iterations=out.minor,
                   crash_iterations=out.crash_iterations, restarts=out.restarts,
                   gradient_steps=out.gradient_steps, lm_steps=out.lm_steps,
@@ -394,11 +412,10 @@ def _scaling_pass(J0, opt):
 
 def _lu_report(bm) -> dict:
     """Sparse-LU figures of a solve for ``Result.lu`` (empty for the dense basis)."""
-    import resource
-
     st = getattr(bm, "stats", None)
     if st is None or not hasattr(st, "est_bytes"):
         return {}
+    import resource
     return dict(backend=st.backend, ordering=st.ordering,
                 orderings_computed=st.orderings_computed, time_ordering=st.time_ordering,
                 time_factor=st.time_factor, est_nnz_lu=st.est_nnz_lu, est_flops=st.est_flops,

@@ -169,3 +169,27 @@ def test_repeated_solves_do_not_reuse_start_values_from_before_the_data_changed(
     data["b"] = np.linspace(3.0, 4.0, n)
     r = cs.solve_mcp(problem)
     assert r.success and np.allclose(r.x, data["b"] / 2)
+
+
+def test_memo_compares_points_as_equal_values_signed_zeros_alike_nan_never():
+    """The evaluation memo's byte keys answer exactly as an elementwise == would: -0.0
+    hits the value stored at 0.0, a point with a NaN is never a hit, a different point or
+    shape misses, and the pinned point survives later evaluations."""
+    from compass_sparse.evaluation import _Memo
+
+    m = _Memo()
+    assert m.get(np.zeros(2)) is None
+    m.put(np.array([0.0, 1.0]), "a")
+    assert m.get(np.array([-0.0, 1.0])) == "a"
+    assert m.get(np.array([0.0, 1.0 + 2e-16])) is None
+    assert m.get(np.array([0.0, 1.0, 0.0])) is None
+    m.pin(np.array([0.0, 1.0]))
+    m.put(np.array([np.nan, 1.0]), "nan")
+    assert m.get(np.array([np.nan, 1.0])) is None
+    assert m.get(np.array([-0.0, 1.0])) == "a"  # the pinned value
+    m.put(np.array([0.0, 1.0]), "b")  # a new value at the pinned point replaces it
+    m.put(np.array([5.0, 5.0]), "c")
+    assert m.get(np.array([0.0, 1.0])) == "b"
+    assert m.get(np.array([5.0, 5.0])) == "c"
+    m.clear()
+    assert m.get(np.array([5.0, 5.0])) is None

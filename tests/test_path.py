@@ -447,3 +447,96 @@ def test_fixed_variables():
         assert res.code is LinearCode.SOLVED
         assert nat_res(M, q, lb, ub, res.z) <= 1e-10
         np.testing.assert_allclose(res.z, g.solution, atol=1e-9)
+
+
+def _random_slot_table(seed, n=40):
+    """A slot table with every kind, repeated indices across and within kinds, NaN and
+    signed-zero values, bounds of every kind (fixed ones included)."""
+    from compass_sparse._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z
+    from compass_sparse.path import PathState
+
+    rng = np.random.default_rng(seed)
+    lb = np.where(rng.random(n) < 0.3, -np.inf, rng.standard_normal(n))
+    ub = np.where(rng.random(n) < 0.3, np.inf, np.nan_to_num(lb, neginf=-1.0)
+                  + rng.random(n) * (rng.random(n) < 0.8))
+    st = PathState(art_sign=np.ones(n, dtype=np.int64))
+    st.sk = rng.choice([VAR_Z, VAR_W, VAR_V, VAR_S, VAR_A, VAR_T], n).astype(np.int64)
+    st.si = rng.integers(0, n, n).astype(np.int64)  # repeated indices on purpose
+    st.xb = rng.standard_normal(n) * 10.0
+    st.xb[rng.random(n) < 0.1] = -0.0
+    st.xb[rng.random(n) < 0.05] = np.nan
+    st.zval = rng.standard_normal(n) * 10.0
+    return lb, ub, st
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_compiled_slot_readout_matches_array_formulas(seed):
+    """The compiled read-out of a slot table (the point (z, w, v) and the basis handed to
+    the next path) equals the array formulas bit for bit, NaN and -0.0 included, with
+    repeated indices assigned in the array version's order."""
+    from compass_sparse._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
+    from compass_sparse._slot_kernels import slot_basis
+    from compass_sparse.path import PivotalPath, default_basis
+
+    lb, ub, st = _random_slot_table(seed)
+    n = lb.size
+    p = PivotalPath.__new__(PivotalPath)
+    p.n, p.st = n, st
+    p.lb, p.ub = lb, ub
+    got = p._current_point()
+    p.lb, p.ub = lb.tolist(), ub.tolist()  # not float vectors: the array formulas
+    with np.errstate(invalid="ignore"):
+        ref = p._current_point()
+    for a, b in zip(got, ref):
+        assert np.array_equal(a, b, equal_nan=True)
+        assert np.array_equal(np.signbit(a), np.signbit(b))
+    z = np.nan_to_num(got[0])
+    basic = np.full(n, VAR_Z, dtype=np.int8)
+    slot_basis(z, lb, ub, st.sk, st.si, basic)
+    expect = default_basis(z, lb, ub)
+    for kind in (VAR_Z, VAR_W, VAR_V, VAR_S):
+        expect[st.si[st.sk == kind]] = kind
+    assert np.array_equal(basic, expect)
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_compiled_slot_table_matches_array_formulas(seed):
+    from compass_sparse._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
+    from compass_sparse.path import PathState, PivotalPath
+
+    rng = np.random.default_rng(seed)
+    n = 30
+    basic = rng.choice([VAR_Z, VAR_W, VAR_V, VAR_S], n).astype(np.int8)
+    z, w, v = (rng.standard_normal(n) for _ in range(3))
+    w[::4] = -0.0
+    p = PivotalPath.__new__(PivotalPath)
+    p.n, p.st = n, PathState(art_sign=np.ones(n, dtype=np.int64))
+    p._reset_slots(basic, z, w, v)
+    got = (p.st.sk, p.st.si, p.st.xb)
+    p._reset_slots(basic, z.tolist(), w, v)  # not a float vector: the array formulas
+    for a, b in zip(got, (p.st.sk, p.st.si, p.st.xb)):
+        assert a.dtype == b.dtype
+        assert np.array_equal(a, b) and np.array_equal(np.signbit(a), np.signbit(b))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_compiled_default_basis_matches_array_formulas(seed):
+    """The start basis of a path (cold and warm-started) from the compiled pass equals the
+    array formulas, at points inside, on and beyond bounds, fixed and infinite ones."""
+    from compass_sparse._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
+    from compass_sparse.path import WarmBasis, default_basis
+
+    lb, ub, st = _random_slot_table(seed)
+    rng = np.random.default_rng(seed)
+    z = np.clip(st.zval, lb, ub)
+    at = rng.random(lb.size) < 0.4
+    z[at] = np.where(np.isfinite(lb), lb, np.where(np.isfinite(ub), ub, z))[at]
+    z[0] = np.nan
+    prev = WarmBasis(rng.choice([VAR_Z, VAR_W, VAR_V, VAR_S], lb.size).astype(np.int8))
+    for warm in (None, prev):
+        got = default_basis(z, lb, ub, warm)
+        with np.errstate(invalid="ignore"):
+            # long doubles hold every double exactly: the array formulas, same comparisons
+            ref = default_basis(z, lb.astype(np.longdouble), ub.astype(np.longdouble), warm)
+        assert got.dtype == ref.dtype == np.int8
+        assert np.array_equal(got, ref)

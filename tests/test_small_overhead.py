@@ -133,7 +133,7 @@ def test_blas_limit_reuses_one_controller():
     from compass_sparse import _blas
     from compass_sparse import solve as S
 
-    with S._blas_threads(10):
+    with S._blas_threads(50):
         pass
     first = list(_blas._CONTROLLER)
     with _blas.single_threaded_blas():
@@ -286,3 +286,222 @@ def test_options_from_equal_dicts_shared_but_true_and_one_stay_apart():
     with pytest.raises(OptionError):
         Options.coerce({"time_limit": float("nan")})
     assert Options.coerce({"time_limit": float("inf")}).time_limit == float("inf")
+
+
+@pytest.mark.parametrize("n,density", [(1, 1.0), (5, 0.6), (40, 0.1)])
+def test_csc_abs_maxima_matches_array_formulas(n, density):
+    """Row and column max-norms and the diagonal of a canonical CSC in one compiled pass
+    agree with numpy's (a NaN entry poisons its row and column, as np.maximum does)."""
+    from compass_sparse._merit_kernels import csc_abs_maxima
+
+    A = sp.random(n, n, density=density, format="csc", random_state=n) - 0.5 * sp.random(
+        n, n, density=density, format="csc", random_state=n + 1)
+    A = sp.csc_matrix(A)
+    A.sum_duplicates()
+    if A.nnz and n > 1:
+        A.data[A.nnz // 2] = np.nan
+    rows, cols, diag = np.zeros(n), np.empty(n), np.empty(n)
+    csc_abs_maxima(A.indptr, A.indices, A.data, rows, cols, diag)
+    dense = np.abs(A.toarray())  # absent entries are 0, below every |stored| but NaN
+    with np.errstate(invalid="ignore"):
+        assert np.array_equal(rows, np.max(dense, axis=1), equal_nan=True)
+        assert np.array_equal(cols, np.max(dense, axis=0), equal_nan=True)
+    assert np.array_equal(diag, A.diagonal(), equal_nan=True)
+
+
+def test_verdict_shared_by_the_solver_and_the_result_agrees_with_a_fresh_judgement():
+    """The acceptance verdict that stops the solve is reused by the Result (not taken
+    twice); on every known problem it is the verdict a fresh judgement of the returned
+    point gives on the user's problem."""
+    import known_problems as kp
+
+    from compass_sparse import MCP, solve_mcp
+    from compass_sparse.acceptance import judge
+
+    makers = dict(kp.ALL_SOLVABLE)
+    makers.update(sqrt_ncp=kp.sqrt_ncp, billups=kp.billups)
+    for name, make in makers.items():
+        p = make()
+        res = solve_mcp(MCP(p.F, p.J, p.lb, p.ub, p.x0))
+        f = np.asarray(p.F(res.x), dtype=float)
+        v = judge(res.x, f, res.lb, res.ub, res.tolerance, jac=lambda y: sp.csc_matrix(p.J(y)))
+        assert v.solved == res.success, name
+        assert res.success, name
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_normal_map_kernel_matches_array_formula_bitwise_across_magnitudes(seed):
+    """The compiled normal-map point and residual agree bit for bit (signed zeros
+    included) with the array formulas, with fixed variables and points at bounds."""
+    z, f, lb, ub = _stress_point(seed, at_bounds=0.3)
+    fixed = np.random.default_rng(seed).random(z.size) < 0.1
+    ub = ub.copy()
+    ub[fixed] = lb[fixed]
+    z = np.clip(z, lb, ub)
+    with np.errstate(all="ignore"):
+        got = merit.normal_map_at(z, f, lb, ub)
+        ref = merit.normal_map_at_arrays(z, f, lb, ub)
+    for a, b in zip(got, ref):
+        assert np.array_equal(a, b, equal_nan=True)
+        num = ~np.isnan(b)
+        assert np.array_equal(np.signbit(a[num]), np.signbit(b[num]))
+    # signed zeros at bounds: np.maximum(-0.0, 0.0) is 0.0, and z - w + v keeps the sign
+    z0 = np.array([-0.0, 0.0, -0.0, 0.0, -0.0])
+    f0 = np.array([-0.0, -0.0, 0.0, 0.0, -0.0])
+    l0, u0 = np.array([0.0, 0.0, -0.0, 0.0, -1.0]), np.array([np.inf, 1.0, 0.0, 0.0, -0.0])
+    for a, b in zip(merit.normal_map_at(z0, f0, l0, u0),
+                    merit.normal_map_at_arrays(z0, f0, l0, u0)):
+        assert np.array_equal(a, b) and np.array_equal(np.signbit(a), np.signbit(b))
+
+
+@pytest.mark.parametrize("kind", ["full", "with diagonal", "without diagonal"])
+def test_linearizer_on_patterns_that_hold_the_diagonal(kind):
+    """A full pattern and a pattern that stores the whole diagonal give M = J + eps I on
+    J's own pattern (stored zeros kept); one without it gets the diagonal added."""
+    from compass_sparse.evaluation import canonical_csc
+    from compass_sparse.nms import Linearizer
+
+    rng = np.random.default_rng(8)
+    n = 9
+    if kind == "full":
+        J = canonical_csc(rng.standard_normal((n, n)) * (rng.random((n, n)) < 0.5), n)
+    else:
+        J = sp.random(n, n, density=0.3, random_state=rng, format="csc")
+        if kind == "with diagonal":
+            J = (J + sp.diags(rng.standard_normal(n))).tocsc()
+            J.data[::3] = 0.0  # stored zeros, some on the diagonal
+        else:
+            J = J.tolil()
+            J.setdiag(0.0)
+            J = J.tocsc()
+            J.eliminate_zeros()
+            J[0, 1] = 1.0
+        J.sort_indices()
+    L = Linearizer(J)
+    if kind == "without diagonal":
+        assert L.M.nnz == J.nnz + n
+    else:
+        np.testing.assert_array_equal(L.M.indptr, J.indptr)
+        np.testing.assert_array_equal(L.M.indices, J.indices)
+    for eps in (0.0, 0.5):
+        M = L(J, eps)
+        np.testing.assert_array_equal(M.toarray(), J.toarray() + eps * np.eye(n))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_compiled_scale_test_gives_the_array_formula_verdict(seed):
+    """The compiled flat-step test returns the verdict, the row and the step of the array
+    formulas, on random sparse Jacobians with rows of every scale (flat rows included)
+    and points at and between bounds."""
+    from compass_sparse.acceptance import _scale_test, _scale_test_arrays
+
+    rng = np.random.default_rng(seed)
+    n = 30
+    lb, ub = _random_box(rng, n)
+    z = np.clip(rng.standard_normal(n) * 10.0, lb, ub)
+    at = rng.random(n) < 0.3
+    z[at] = np.where(np.isfinite(lb), lb, z)[at]
+    f = rng.standard_normal(n) * 10.0 ** rng.uniform(-12, -6, n)
+    f[rng.random(n) < 0.2] = 0.0
+    J = sp.random(n, n, density=0.2, random_state=seed, format="csc")
+    J.data *= 10.0 ** rng.uniform(-9, 3, J.nnz)
+    J = (J + sp.diags(rng.standard_normal(n) * (rng.random(n) < 0.7))).tocsc()
+    # rows scaled down to 1e-14: F flat there, a Newton step would still move far
+    J = (sp.diags(10.0 ** rng.uniform(-14 if seed % 2 else -2, 0, n)) @ J).tocsc()
+    J.sort_indices()
+    phi = merit.fb_phi(z, f, lb, ub)
+    got = _scale_test(z, f, lb, ub, phi, J)
+    ref = _scale_test_arrays(z, f, lb, ub, phi, J)
+    assert (got.solved, got.flat_row) == (ref.solved, ref.flat_row)
+    assert got.step == ref.step or np.isclose(got.step, ref.step, rtol=1e-15)
+    assert got.solved == (seed % 2 == 0)  # both verdicts occur
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_residual_report_maxima_match_array_formulas_across_magnitudes(seed):
+    """The compiled maxima of the residual report (||Phi||_inf, the natural residual, the
+    normal-map residual and every row's |min-map|) are those of the array formulas, NaN
+    and infinite entries included; the scaled 2-norm is unchanged."""
+    z, f, lb, ub = _stress_point(seed, at_bounds=0.3)
+    for sl in (slice(10, None), slice(None)):  # finite F values; with inf and NaN
+        zz, ff, ll, uu = z[sl], f[sl], lb[sl], ub[sl]
+        with np.errstate(all="ignore"):
+            rep = merit.residual_report(zz, ff, ll, uu)
+            phi = merit.fb_phi(zz, ff, ll, uu)
+            mm = np.abs(merit.min_map(zz, ff, ll, uu))
+            nm = merit.normal_map_at_arrays(zz, ff, ll, uu)[1]
+        np.testing.assert_array_equal(rep.fb_inf, np.max(np.abs(phi)))
+        np.testing.assert_array_equal(rep.natural, np.max(mm))
+        np.testing.assert_array_equal(rep.normal_map_inf, np.max(np.abs(nm)))
+        for name, a, m in rep.worst:  # rows named F[i]
+            i = int(name[2:-1])
+            np.testing.assert_array_equal([a, m], [abs(phi[i]), mm[i]])
+    rep = merit.residual_report(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0))
+    assert (rep.fb_norm, rep.fb_inf, rep.natural, rep.worst) == (0.0, 0.0, 0.0, [])
+
+
+def test_spread_of_positive_entries():
+    from compass_sparse import scaling
+
+    assert scaling._spread(np.array([0.0, 4.0, np.nan, 0.5, -3.0])) == 8.0
+    assert scaling._spread(np.array([0.0, -1.0])) == 1.0
+
+
+@pytest.mark.parametrize("n,density", [(1, 1.0), (7, 0.5), (60, 0.1)])
+def test_csc_matvec_is_scipy_product_bitwise(n, density):
+    """The linearization's M z in compiled code, bit for bit scipy's CSC product (same
+    order of the sums), entries over 40 orders of magnitude."""
+    from compass_sparse._merit_kernels import csc_matvec
+
+    rng = np.random.default_rng(n)
+    A = sp.random(n, n, density=density, format="csc", random_state=n)
+    A.data *= 10.0 ** rng.uniform(-20, 20, A.nnz)
+    x = rng.standard_normal(n) * 10.0 ** rng.uniform(-20, 20, n)
+    out = np.full(n, np.nan)
+    csc_matvec(A.indptr, A.indices, A.data, x, out)
+    assert np.array_equal(out, A @ x)
+
+
+def test_dense_engine_refills_its_matrix_in_place_from_each_linearization():
+    """The engine's dense copy of M is allocated once per order and refilled by every
+    set_matrix: CSC (duplicates summed, unsorted indices), other sparse formats and dense
+    input give M exactly; a new order gets a new array."""
+    from compass_sparse.dense_path import DensePathEngine
+
+    rng = np.random.default_rng(4)
+    A = sp.random(6, 6, density=0.5, format="csc", random_state=4)
+    eng = DensePathEngine(A)
+    buf = eng.M
+    np.testing.assert_array_equal(eng.M, A.toarray())
+    dup = sp.csc_matrix((np.array([1.0, 2.0, 3.0]), np.array([4, 1, 4]),
+                         np.array([0, 3, 3, 3, 3, 3, 3])), shape=(6, 6))
+    eng.set_matrix(dup)
+    assert eng.M is buf and eng.M.flags.f_contiguous
+    np.testing.assert_array_equal(eng.M, dup.toarray())
+    D = rng.standard_normal((6, 6))
+    for M in (sp.csr_matrix(D), D):
+        eng.set_matrix(M)
+        assert eng.M is buf
+        np.testing.assert_array_equal(eng.M, D)
+    eng.set_matrix(sp.identity(3, format="csc"))
+    assert eng.M.shape == (3, 3) and eng.n == 3
+    np.testing.assert_array_equal(eng.M, np.eye(3))
+
+
+def test_scaled_solve_judges_its_result_on_the_user_problem_again():
+    """When the scaling pass changed the problem the solver works on, its verdict (taken
+    on the scaled problem) is not handed to the Result: the Result's verdict is a fresh
+    judgement of the returned point on the user's problem, and agrees with one."""
+    from compass_sparse import MCP, solve_mcp
+    from compass_sparse.acceptance import judge
+
+    d = np.array([1e-5, 1.0, 1e5])
+    q = np.array([-1e-5, 2.0, -3e5])
+    F = lambda x: d * x + q  # noqa: E731
+    J = lambda x: sp.diags(d, format="csc")  # noqa: E731
+    res = solve_mcp(MCP(F, J, np.zeros(3), np.full(3, np.inf), np.ones(3)))
+    assert res.passes["scaling"].ran
+    assert res.success
+    v = judge(res.x, F(res.x), res.lb, res.ub, res.tolerance, jac=J)
+    assert v.solved
+    np.testing.assert_allclose(res.x, [1.0, 0.0, 3.0], atol=1e-6)
