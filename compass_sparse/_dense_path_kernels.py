@@ -25,16 +25,69 @@ column on that row takes its slot (a dependent covering vector or slack makes th
 singular: nothing to repair).  The repaired basis is then factorized with partial pivoting
 for the solves.
 
-Updates (product form on top of the LU)
----------------------------------------
-Replacing slot s by column a with FTRAN column ``d = B^{-1} a`` gives
-``B' = B E`` with E the identity whose column s is d, so ``B'^{-1} = E^{-1} B^{-1}``:
-after the LU solve, each stored eta (s_k, d_k) in order maps ``y_s <- y_s / d_s`` and
-``y_i <- y_i - d_i y_s``.  The update is refused when ``|d_s| <= pivot_tol * ||d||_inf``
-(the same test as the sparse manager's) and the basis is refactorized after
-``update_limit`` etas: the eta file stays short, so its error growth is bounded by a fresh
-LU at least every ``update_limit`` pivots (what a Forrest–Tomlin update with the same
-refactorization frequency also relies on).  Cost per FTRAN: n^2 + (number of etas) n.
+Solves with the fresh factors
+-----------------------------
+After the factorization the rows of L are permuted to step order (``L[m, k]`` is the
+multiplier of step k on the row pivoted at step m > k), so both factors are triangular in
+step index: FTRAN ``B x = b`` is ``w = P b`` (``w_m = b[p_m]``), ``w <- L^{-1} w``,
+``w <- U^{-1} w``, ``x[q_m] = w_m``; BTRAN ``B^T y = c`` is ``w_m = c[q_m]``,
+``w <- U^{-T} w``, ``w <- L^{-T} w``, ``y[p_m] = w_m``.  Each costs n^2 flops (L and U
+half each), on contiguous columns of column-major arrays.
+
+Updates: Forrest-Tomlin on the dense factors
+--------------------------------------------
+A column replacement keeps L and modifies U in place, as the sparse basis manager does
+on its sparse factors (same formulas; Forrest and Tomlin 1972).  After k updates
+
+    R_k ... R_1 L^{-1} P B Q_k = U_k,
+
+where U_k lives on *positions* 0 .. n+k-1: positions < n are the elimination steps, the
+update number t appends position n+t, and a replaced position is *dead* (``slot_at = -1``:
+its column is ignored and its row is zero in every vector the solves meet).  The live
+positions in index order are a triangular order of U_k.  Replacing the column of slot s
+(position p) by a column a:
+
+* the *spike* ``v = R_k ... R_1 L^{-1} P a`` is the FTRAN of a stopped before U (the path
+  computes it anyway for the ratio test and keeps it);
+* ``y = U_k^{-T} e_p`` (zero before p), and the row eta ``R_{k+1}`` maps
+  ``w_q = w_p - sum_{i>p} c_i w_i`` and ``w_p = 0`` with ``c_i = -u_pp y_i``, q = n + k:
+  it eliminates row p of U_k against the rows below it and moves it to the new last
+  position q;
+* column q of U_{k+1} is v (row p set to zero) with the new diagonal ``d2 = u_pp y^T v``;
+  position p dies.
+
+FTRAN applies the row etas between L and U, BTRAN their transposes between U^T and L^T
+(``w_p += w_q``, ``w_i -= c_i w_q``, ``w_q = 0``).  Solve cost after k updates with
+N = n + k positions: n^2/2 (L) + k N (etas) + N^2/2 (U); an update costs one partial
+transposed solve from p, (N - p)^2 / 2, plus O(N).  Nothing is allocated per pivot: U is
+preallocated with n + limit positions, R with limit rows.
+
+Why Forrest-Tomlin, and its safeguards
+--------------------------------------
+The dense Bartels-Golub update would allow row interchanges while U is restored to
+triangular form, but it has to rewrite L (or keep column etas with interchanges) and
+moves rows of the dense U: more data movement per pivot than the row-eta form, for a
+stability that a short update sequence plus checks also gives.  Forrest-Tomlin takes no
+interchanges, so its error can grow through large multipliers c_i; it is guarded by
+three tests, each of which makes the path refactorize (with the thesis' repair when the
+new basis is singular) instead of updating:
+
+* ``update_tol`` (the pivot tolerance of the update, 1e-11, the sparse manager's):
+  ``|d_s| <= update_tol * max(1, ||d||_inf)`` with d = B^{-1} a: the new basis is
+  (nearly) singular;
+* ``stab_tol`` (1e-8, the sparse manager's stability tolerance): the new diagonal is
+  computed twice, ``d1 = d_s u_pp`` from the FTRAN column and ``d2`` from the row eta;
+  ``|d1 - d2| > stab_tol |d1|`` means one of them lost its digits;
+* ``growth_limit`` (100): ``max_i |c_i| > growth_limit``: a row eta multiplies rows of U
+  by up to max |c_i| and every later solve meets it; a fresh LU with partial pivoting
+  (multipliers <= 1) is the stable alternative.  Measured (benchmarks/dense_engine.md):
+  on long random replacement sequences the worst backward error of a solve was ~5e-12
+  with limit 1e8, ~8e-13 with 1e4 and ~2e-14 with 100 (fresh factors: ~1e-16); on the
+  thesis families' paths limit 100 declined 0.7% of the updates (1e8: 0.15%);
+
+and the factors are refreshed after ``update_limit`` updates (``factorization_update_limit``,
+50 as in PATH) in any case.  Fresh factors also recompute the basic values from scratch
+(as the Python loop does after a refactorization).
 
 The pivot loop (:func:`path_loop`) is the loop of ``PivotalPath._pivot_loop`` with the
 same ratio test, complement rule, cycle rule, value recomputation and solution check, so a
@@ -55,8 +108,17 @@ MSG_NONE, MSG_RAY_UNBOUNDED, MSG_T_ZERO, MSG_CYCLE, MSG_LIMIT, MSG_SING_FACTOR, 
     MSG_BOUNDED_SLACK = range(13)
 
 # integer state (istate) and float state (fstate) layout
-I_EK, I_EI, I_PIV, I_TSLOT, I_NFAC, I_NUPD, I_NETA, I_NBP, I_MSG, I_REFUSED = range(10)
+I_EK, I_EI, I_PIV, I_TSLOT, I_NFAC, I_NUPD, I_NETA, I_NBP, I_MSG, I_REFUSED, \
+    I_UNSTABLE, I_GROWTH = range(12)
+N_ISTATE = 12
 F_ES, F_EV, F_T, F_BEST_T, F_RES = range(5)
+N_FSTATE = 5
+# rows of the integer factor array ``perm`` (4 x (n + limit)): the pivot row of each
+# elimination step, the slot at each position (-1: replaced), the position of each slot,
+# the position eliminated by each row eta
+P_ROW, P_SLOT, P_POS, P_ETA = range(4)
+# outcomes of replace_column (UPD_OK: updated; otherwise the caller refactorizes)
+UPD_OK, UPD_UNSTABLE, UPD_GROWTH, UPD_REFUSED, UPD_LIMIT = range(5)
 
 
 @njit(cache=True)
@@ -165,39 +227,206 @@ def factor(M, r, sk, si, art_sign, L, U, prow, qslot, rank_tol, rep_slot, rep_ro
 
 
 @njit(cache=True)
-def lu_solve(L, U, prow, qslot, b, out, w):
-    """out = B^{-1} b for the factorized basis (no etas).  w is workspace (n)."""
-    n = b.shape[0]
-    y = out  # reuse out as the forward work vector
-    y[:] = b
-    for m in range(n):
-        ym = y[prow[m]]
-        w[m] = ym
-        if ym != 0.0:
-            for i in range(n):
-                y[i] -= L[i, m] * ym
-    for m in range(n - 1, -1, -1):
-        v = w[m] / U[m, m]
-        w[m] = v
-        if v != 0.0:
-            for k in range(m):
-                w[k] -= U[k, m] * v
-    for m in range(n):
-        out[qslot[m]] = w[m]
+def _rows_to_steps(L, prow, n):
+    """Permute the rows of L (n x n) from basis rows to elimination steps in place: row m
+    of the result is row ``prow[m]`` of the input (cycle by cycle, one row in flight)."""
+    done = np.zeros(n, dtype=np.bool_)
+    tmp = np.empty(n)
+    for start in range(n):
+        if done[start]:
+            continue
+        tmp[:] = L[start, :]
+        m = start
+        while True:
+            done[m] = True
+            src = prow[m]
+            if src == start:
+                L[m, :] = tmp
+                break
+            L[m, :] = L[src, :]
+            m = src
 
 
 @njit(cache=True)
-def ftran(L, U, prow, qslot, eta_s, eta_d, neta, b, out, w):
-    """out = B^{-1} b with the eta file applied after the LU solve."""
-    lu_solve(L, U, prow, qslot, b, out, w)
+def lu_factor(M, r, sk, si, art_sign, L, U, perm, rank_tol, rep_slot, rep_row):
+    """Stable LU of the slot table for the solves (partial pivoting, no repair) in the
+    form the solves and updates use: L by steps, no update applied.  Returns the number
+    of dependent slots found (0: the factors are valid)."""
+    n = sk.shape[0]
+    prow = perm[P_ROW]
+    slot_at = perm[P_SLOT]
+    nrep = factor(M, r, sk, si, art_sign, L, U, prow, slot_at, rank_tol, rep_slot,
+                  rep_row, False)
+    if nrep > 0:
+        return nrep
+    _rows_to_steps(L, prow, n)
+    pos_of = perm[P_POS]
+    for m in range(n):
+        pos_of[slot_at[m]] = m
+    for m in range(n, slot_at.shape[0]):
+        slot_at[m] = -1
+    return 0
+
+
+@njit(cache=True)
+def _forward(L, R, perm, nupd, b, w):
+    """w[:n + nupd] = R_nupd ... R_1 L^{-1} P b: the spike of b (w has length n + limit)."""
     n = b.shape[0]
-    for k in range(neta):
-        s = eta_s[k]
-        ys = out[s] / eta_d[k, s]
-        if ys != 0.0:
-            for i in range(n):
-                out[i] -= eta_d[k, i] * ys
-        out[s] = ys
+    prow = perm[P_ROW]
+    eta_p = perm[P_ETA]
+    for m in range(n):
+        w[m] = b[prow[m]]
+    for m in range(n, n + nupd):
+        w[m] = 0.0
+    for m in range(n):
+        x = w[m]
+        if x != 0.0:
+            for i in range(m + 1, n):
+                w[i] -= L[i, m] * x
+    for t in range(nupd):
+        p = eta_p[t]
+        s = w[p]
+        for i in range(p + 1, n + t):
+            s -= R[t, i] * w[i]
+        w[n + t] = s
+        w[p] = 0.0
+
+
+@njit(cache=True)
+def _backward(U, perm, N, w, out):
+    """out[slot] = (U^{-1} w)[position of slot] over positions 0..N-1 (w overwritten)."""
+    slot_at = perm[P_SLOT]
+    for j in range(N - 1, -1, -1):
+        if slot_at[j] < 0:  # a replaced position: its column is gone
+            continue
+        x = w[j] / U[j, j]
+        w[j] = x
+        if x != 0.0:
+            for i in range(j):
+                w[i] -= U[i, j] * x
+        out[slot_at[j]] = x
+
+
+@njit(cache=True)
+def ftran(L, U, R, perm, nupd, b, out, w, spike, keep):
+    """out = B^{-1} b (out indexed by slot).  w and spike are work vectors of length
+    n + limit; with ``keep`` the spike of b (what :func:`ft_update` needs) is left in
+    spike[:n + nupd]."""
+    n = b.shape[0]
+    N = n + nupd
+    _forward(L, R, perm, nupd, b, w)
+    if keep:
+        spike[:N] = w[:N]
+    _backward(U, perm, N, w, out)
+
+
+@njit(cache=True)
+def btran(L, U, R, perm, nupd, c, out, w):
+    """out = B^{-T} c (c indexed by slot, out by row); w is work of length n + limit."""
+    n = c.shape[0]
+    N = n + nupd
+    prow = perm[P_ROW]
+    slot_at = perm[P_SLOT]
+    pos_of = perm[P_POS]
+    eta_p = perm[P_ETA]
+    for j in range(N):
+        w[j] = 0.0
+    for s in range(n):
+        w[pos_of[s]] = c[s]
+    for j in range(N):  # U^T v = Q^T c, forward over the positions
+        if slot_at[j] < 0:
+            w[j] = 0.0
+            continue
+        s = w[j]
+        for i in range(j):
+            s -= U[i, j] * w[i]
+        w[j] = s / U[j, j]
+    for t in range(nupd - 1, -1, -1):  # R_1^T ... R_k^T
+        q = n + t
+        s = w[q]
+        w[q] = 0.0
+        if s != 0.0:
+            p = eta_p[t]
+            w[p] += s
+            for i in range(p + 1, q):
+                w[i] -= R[t, i] * s
+    for m in range(n - 1, -1, -1):  # L^T
+        s = w[m]
+        for i in range(m + 1, n):
+            s -= L[i, m] * w[i]
+        w[m] = s
+        out[prow[m]] = s
+
+
+@njit(cache=True)
+def ft_update(U, R, perm, n, nupd, slot, spike, alpha, y, stab_tol, growth_limit):
+    """Forrest-Tomlin replacement of the column of ``slot`` (see the module docstring).
+
+    spike: the spike of the entering column (:func:`ftran` with keep), alpha = d[slot]
+    its FTRAN entry; y is work (n + limit).  Returns UPD_OK (the factors now represent
+    the new basis: the caller counts the update), UPD_UNSTABLE (the two computations of
+    the new diagonal disagree) or UPD_GROWTH (a row-eta multiplier above growth_limit);
+    the factors are left unchanged unless UPD_OK."""
+    N = n + nupd
+    slot_at = perm[P_SLOT]
+    pos_of = perm[P_POS]
+    p = pos_of[slot]
+    upp = U[p, p]
+    # y = U^{-T} e_p (zero before p; dead positions stay zero)
+    y[p] = 1.0 / upp
+    for j in range(p + 1, N):
+        if slot_at[j] < 0:
+            y[j] = 0.0
+            continue
+        s = 0.0
+        for i in range(p, j):
+            s -= U[i, j] * y[i]
+        y[j] = s / U[j, j]
+    # row eta c_i = -u_pp y_i and the new diagonal from it: d2 = s_p - c^T s = u_pp y^T s
+    gmax = 0.0
+    d2 = 0.0
+    for i in range(p, N):
+        d2 += y[i] * spike[i]
+        if i > p:
+            gmax = max(gmax, abs(upp * y[i]))
+    d2 *= upp
+    d1 = alpha * upp
+    if not (np.isfinite(d2) and d2 != 0.0 and abs(d1 - d2) <= stab_tol * abs(d1)):
+        return UPD_UNSTABLE
+    if not gmax <= growth_limit:
+        return UPD_GROWTH
+    q = N
+    for i in range(p + 1, N):
+        R[nupd, i] = -upp * y[i]
+    perm[P_ETA, nupd] = p
+    for i in range(N):
+        U[i, q] = spike[i]
+    U[p, q] = 0.0
+    U[q, q] = d2
+    slot_at[p] = -1
+    slot_at[q] = slot
+    pos_of[slot] = q
+    return UPD_OK
+
+
+@njit(cache=True)
+def replace_column(U, R, perm, nupd, slot, d, spike, y, update_tol, stab_tol,
+                   growth_limit):
+    """Replace the column of ``slot`` by the column whose FTRAN is d (slots) and spike
+    ``spike`` (:func:`ftran` with keep), after ``nupd`` updates.  Returns UPD_OK (the
+    factors now represent the new basis) or why the caller must refactorize: UPD_REFUSED
+    (``|d[slot]| <= update_tol * max(1, ||d||_inf)``: a (nearly) singular replacement),
+    UPD_LIMIT (``nupd`` is the update limit, the number of rows of R), UPD_UNSTABLE or
+    UPD_GROWTH (:func:`ft_update`); the factors are unchanged then."""
+    n = d.shape[0]
+    dmax = 0.0
+    for k in range(n):
+        dmax = max(dmax, abs(d[k]))
+    if abs(d[slot]) <= update_tol * max(1.0, dmax):
+        return UPD_REFUSED
+    if nupd >= R.shape[0]:
+        return UPD_LIMIT
+    return ft_update(U, R, perm, n, nupd, slot, spike, d[slot], y, stab_tol, growth_limit)
 
 
 @njit(cache=True)
@@ -225,8 +454,8 @@ def current_point(sk, si, xb, zval, lb, ub, z, w, v):
 
 
 @njit(cache=True)
-def _recompute(M, q, r, sk, si, zval, t, t_slot, L, U, prow, qslot, eta_s, eta_d, neta,
-               xb, rhs, w, lb, ub):
+def _recompute(M, q, r, sk, si, zval, t, t_slot, L, U, R, perm, nupd, xb, rhs, w, fwork,
+               lb, ub):
     """x_B = B^{-1}(r (1 - t_nb) - q - M z_N) (PivotalPath._recompute_values); returns t."""
     n = sk.shape[0]
     t_nb = 0.0 if t_slot >= 0 else t
@@ -242,7 +471,7 @@ def _recompute(M, q, r, sk, si, zval, t, t_slot, L, U, prow, qslot, eta_s, eta_d
         if zj != 0.0:
             for i in range(n):
                 rhs[i] -= M[i, j] * zj
-    ftran(L, U, prow, qslot, eta_s, eta_d, neta, rhs, xb, w)
+    ftran(L, U, R, perm, nupd, rhs, xb, fwork[0], fwork[1], False)
     for k in range(n):
         if sk[k] == VAR_T:
             t = xb[k]
@@ -252,8 +481,8 @@ def _recompute(M, q, r, sk, si, zval, t, t_slot, L, U, prow, qslot, eta_s, eta_d
 
 
 @njit(cache=True)
-def refactor(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate, L, U, prow,
-             qslot, rank_tol, lb, ub, work):
+def refactor(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate, L, U, R,
+             perm, rank_tol, lb, ub, work, fwork):
     """PivotalPath._factor: factorize, repair dependent columns with artificials,
     recompute the basic values.  Returns 0 or a SINGULAR message code."""
     n = sk.shape[0]
@@ -262,11 +491,10 @@ def refactor(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate, L, 
     istate[I_NFAC] += 1
     # A regular basis is factorized as it is (partial pivoting); only a singular one is
     # repaired, by the home-row rule of the thesis (see factor()).
-    nrep = factor(M, r, sk, si, art_sign, L, U, prow, qslot, rank_tol, rep_slot, rep_row,
-                  False)
+    nrep = lu_factor(M, r, sk, si, art_sign, L, U, perm, rank_tol, rep_slot, rep_row)
     if nrep > 0:
-        nrep = factor(M, r, sk, si, art_sign, L, U, prow, qslot, rank_tol, rep_slot,
-                      rep_row, True)
+        nrep = factor(M, r, sk, si, art_sign, L, U, perm[P_ROW], perm[P_SLOT], rank_tol,
+                      rep_slot, rep_row, True)
     if nrep > 0:
         if rep_row[nrep - 1] < 0:
             if sk[rep_slot[nrep - 1]] == VAR_T:
@@ -288,16 +516,12 @@ def refactor(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate, L, 
             si[slot] = new_row
             art_sign[new_row] = 1
         # The stable LU (partial pivoting) of the repaired basis for the solves.
-        nrep = factor(M, r, sk, si, art_sign, L, U, prow, qslot, rank_tol, rep_slot,
-                      rep_row, False)
+        nrep = lu_factor(M, r, sk, si, art_sign, L, U, perm, rank_tol, rep_slot, rep_row)
         if nrep > 0:
             return MSG_SING_FACTOR
     istate[I_NETA] = 0
-    rhs = work[0]
-    w = work[1]
-    fstate[F_T] = _recompute(M, q, r, sk, si, zval, fstate[F_T], istate[I_TSLOT], L, U,
-                             prow, qslot, np.empty(0, dtype=np.int64), np.empty((0, n)), 0,
-                             xb, rhs, w, lb, ub)
+    fstate[F_T] = _recompute(M, q, r, sk, si, zval, fstate[F_T], istate[I_TSLOT], L, U, R,
+                             perm, 0, xb, work[0], work[1], fwork, lb, ub)
     return 0
 
 
@@ -332,8 +556,8 @@ def _record(sk, si, xb, zval, lb, ub, t, fstate, istate, best_x, bp_t, bp_x, wor
 
 
 @njit(cache=True)
-def verify(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate, L, U, prow,
-           qslot, rank_tol, lb, ub, work):
+def verify(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate, L, U, R, perm,
+           rank_tol, lb, ub, work, fwork):
     """PivotalPath._verify_solution: (code, message)."""
     n = sk.shape[0]
     qmax = 0.0
@@ -363,7 +587,7 @@ def verify(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate, L, U,
             return SOLVED, MSG_NONE
         if attempt == 0:
             msg = refactor(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate,
-                           L, U, prow, qslot, rank_tol, lb, ub, work)
+                           L, U, R, perm, rank_tol, lb, ub, work, fwork)
             if msg != 0:
                 return SINGULAR, msg
     return TOLERANCE, MSG_TOL
@@ -371,15 +595,14 @@ def verify(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate, L, U,
 
 @njit(cache=True)
 def path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_count,
-              istate, fstate, L, U, prow, qslot, eta_s, eta_d, best_x, bp_t, bp_x, work,
-              piv_tol_base, ratio_tol, rank_tol, update_tol, minor_limit, cycle_limit,
-              max_pivots):
+              istate, fstate, L, U, R, perm, best_x, bp_t, bp_x, work, fwork,
+              piv_tol_base, ratio_tol, rank_tol, update_tol, stab_tol, growth_limit,
+              minor_limit, cycle_limit, max_pivots):
     """PivotalPath._pivot_loop for at most max_pivots pivots (RUNNING when they are used
     up: the caller checks its clock and calls again).  Returns (code, message)."""
     n = sk.shape[0]
     d = work[5]
     col = work[6]
-    update_limit = eta_s.shape[0]
     start = istate[I_PIV]
     while True:
         pivots = istate[I_PIV]
@@ -395,7 +618,7 @@ def path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_coun
         if enter_count[ek, ei] > cycle_limit:
             return CYCLE, MSG_CYCLE
         _column(ek, ei, M, r, art_sign, col)
-        ftran(L, U, prow, qslot, eta_s, eta_d, istate[I_NETA], col, d, work[1])
+        ftran(L, U, R, perm, istate[I_NETA], col, d, fwork[0], fwork[1], True)
         t_slot = istate[I_TSLOT]
         t = fstate[F_T]
         if ek == VAR_Z and es == 0.0:
@@ -450,7 +673,6 @@ def path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_coun
         else:
             leave_val = 0.0
         istate[I_PIV] = pivots + 1
-        refused = abs(d[leave]) <= update_tol * max(1.0, dmax)
         # set the slot (PivotalPath._set_slot)
         if lk == VAR_Z:
             zval[li] = leave_val
@@ -464,19 +686,22 @@ def path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_coun
             istate[I_TSLOT] = leave
         if ek == VAR_Z:
             zval[ei] = new_val
-        neta = istate[I_NETA]
-        if refused or neta >= update_limit:
-            if refused:
+        upd = replace_column(U, R, perm, istate[I_NETA], leave, d, fwork[1], fwork[2],
+                             update_tol, stab_tol, growth_limit)
+        if upd == UPD_OK:
+            istate[I_NETA] += 1
+            istate[I_NUPD] += 1
+        else:
+            if upd == UPD_REFUSED:
                 istate[I_REFUSED] += 1
+            elif upd == UPD_UNSTABLE:
+                istate[I_UNSTABLE] += 1
+            elif upd == UPD_GROWTH:
+                istate[I_GROWTH] += 1
             msg = refactor(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate,
-                           L, U, prow, qslot, rank_tol, lb, ub, work)
+                           L, U, R, perm, rank_tol, lb, ub, work, fwork)
             if msg != 0:
                 return SINGULAR, msg
-        else:
-            eta_s[neta] = leave
-            eta_d[neta, :] = d
-            istate[I_NETA] = neta + 1
-            istate[I_NUPD] += 1
         project_slots(sk, si, xb, lb, ub)
         if istate[I_TSLOT] >= 0:
             fstate[F_T] = xb[istate[I_TSLOT]]
@@ -513,3 +738,16 @@ def path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_coun
             fstate[F_EV] = zval[j]
         else:
             return ERROR, MSG_LEAVE_KIND
+
+
+def allocate_factors(n: int, update_limit: int):
+    """The preallocated factor arrays of an n x n basis with up to ``update_limit``
+    updates: L (n x n), U ((n + limit)^2, column-major), R (limit x (n + limit)), perm
+    (4 x (n + limit), rows P_ROW, P_SLOT, P_POS, P_ETA) and fwork (3 x (n + limit))."""
+    nmax = n + max(int(update_limit), 0)
+    L = np.zeros((n, n), order="F")
+    U = np.zeros((nmax, nmax), order="F")
+    R = np.zeros((max(int(update_limit), 0), nmax))
+    perm = np.zeros((4, nmax), dtype=np.int64)
+    fwork = np.zeros((3, nmax))
+    return L, U, R, perm, fwork
