@@ -113,10 +113,14 @@ I_EK, I_EI, I_PIV, I_TSLOT, I_NFAC, I_NUPD, I_NETA, I_NBP, I_MSG, I_REFUSED, \
 N_ISTATE = 12
 F_ES, F_EV, F_T, F_BEST_T, F_RES = range(5)
 N_FSTATE = 5
-# rows of the integer factor array ``perm`` (4 x (n + limit)): the pivot row of each
+# rows of the integer factor array ``perm`` (5 x (n + limit)): the pivot row of each
 # elimination step, the slot at each position (-1: replaced), the position of each slot,
-# the position eliminated by each row eta
-P_ROW, P_SLOT, P_POS, P_ETA = range(4)
+# the position eliminated by each row eta, and P_INFO
+P_ROW, P_SLOT, P_POS, P_ETA, P_INFO = range(5)
+# perm[P_INFO, 0]: the number m1 of unit columns of the factorization; they are its first
+# steps, their columns of L are zero and their columns of U are zero above the diagonal,
+# so every solve and update skips them
+
 # outcomes of replace_column (UPD_OK: updated; otherwise the caller refactorizes)
 UPD_OK, UPD_UNSTABLE, UPD_GROWTH, UPD_REFUSED, UPD_LIMIT = range(5)
 
@@ -184,8 +188,10 @@ def factor(M, r, sk, si, art_sign, L, U, prow, qslot, rank_tol, rep_slot, rep_ro
         for k in range(m):
             ck = c[prow[k]]
             U[k, m] = ck
-            if ck != 0.0:
-                for i in range(n):  # L[:, k] is zero on the rows pivoted up to step k
+            # L[:, k] is zero on the rows pivoted up to step k, and everywhere for the
+            # unit steps k < first_nonunit (a unit column eliminates nothing)
+            if ck != 0.0 and k >= first_nonunit:
+                for i in range(n):
                     c[i] -= L[i, k] * ck
         best = -1
         bv = -1.0
@@ -260,6 +266,11 @@ def lu_factor(M, r, sk, si, art_sign, L, U, perm, rank_tol, rep_slot, rep_row):
     if nrep > 0:
         return nrep
     _rows_to_steps(L, prow, n)
+    m1 = 0
+    for j in range(n):
+        if sk[j] != VAR_Z and sk[j] != VAR_T:
+            m1 += 1
+    perm[P_INFO, 0] = m1
     pos_of = perm[P_POS]
     for m in range(n):
         pos_of[slot_at[m]] = m
@@ -278,7 +289,8 @@ def _forward(L, R, perm, nupd, b, w):
         w[m] = b[prow[m]]
     for m in range(n, n + nupd):
         w[m] = 0.0
-    for m in range(n):
+    m1 = perm[P_INFO, 0]
+    for m in range(m1, n):
         x = w[m]
         if x != 0.0:
             for i in range(m + 1, n):
@@ -286,7 +298,7 @@ def _forward(L, R, perm, nupd, b, w):
     for t in range(nupd):
         p = eta_p[t]
         s = w[p]
-        for i in range(p + 1, n + t):
+        for i in range(max(p + 1, m1), n + t):  # (zero between p and m1)
             s -= R[t, i] * w[i]
         w[n + t] = s
         w[p] = 0.0
@@ -296,12 +308,13 @@ def _forward(L, R, perm, nupd, b, w):
 def _backward(U, perm, N, w, out):
     """out[slot] = (U^{-1} w)[position of slot] over positions 0..N-1 (w overwritten)."""
     slot_at = perm[P_SLOT]
+    m1 = perm[P_INFO, 0]
     for j in range(N - 1, -1, -1):
         if slot_at[j] < 0:  # a replaced position: its column is gone
             continue
         x = w[j] / U[j, j]
         w[j] = x
-        if x != 0.0:
+        if x != 0.0 and j >= m1:
             for i in range(j):
                 w[i] -= U[i, j] * x
         out[slot_at[j]] = x
@@ -333,13 +346,15 @@ def btran(L, U, R, perm, nupd, c, out, w):
         w[j] = 0.0
     for s in range(n):
         w[pos_of[s]] = c[s]
+    m1 = perm[P_INFO, 0]
     for j in range(N):  # U^T v = Q^T c, forward over the positions
         if slot_at[j] < 0:
             w[j] = 0.0
             continue
         s = w[j]
-        for i in range(j):
-            s -= U[i, j] * w[i]
+        if j >= m1:
+            for i in range(j):
+                s -= U[i, j] * w[i]
         w[j] = s / U[j, j]
     for t in range(nupd - 1, -1, -1):  # R_1^T ... R_k^T
         q = n + t
@@ -352,8 +367,9 @@ def btran(L, U, R, perm, nupd, c, out, w):
                 w[i] -= R[t, i] * s
     for m in range(n - 1, -1, -1):  # L^T
         s = w[m]
-        for i in range(m + 1, n):
-            s -= L[i, m] * w[i]
+        if m >= m1:
+            for i in range(m + 1, n):
+                s -= L[i, m] * w[i]
         w[m] = s
         out[prow[m]] = s
 
@@ -372,14 +388,16 @@ def ft_update(U, R, perm, n, nupd, slot, spike, alpha, y, stab_tol, growth_limit
     pos_of = perm[P_POS]
     p = pos_of[slot]
     upp = U[p, p]
-    # y = U^{-T} e_p (zero before p; dead positions stay zero)
+    m1 = perm[P_INFO, 0]
+    # y = U^{-T} e_p: zero before p, on dead positions and on the unit positions after p
+    # (their columns of U are zero above the diagonal)
     y[p] = 1.0 / upp
     for j in range(p + 1, N):
-        if slot_at[j] < 0:
+        if slot_at[j] < 0 or j < m1:
             y[j] = 0.0
             continue
-        s = 0.0
-        for i in range(p, j):
+        s = -U[p, j] * y[p]
+        for i in range(max(p + 1, m1), j):
             s -= U[i, j] * y[i]
         y[j] = s / U[j, j]
     # row eta c_i = -u_pp y_i and the new diagonal from it: d2 = s_p - c^T s = u_pp y^T s
@@ -743,11 +761,11 @@ def path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_coun
 def allocate_factors(n: int, update_limit: int):
     """The preallocated factor arrays of an n x n basis with up to ``update_limit``
     updates: L (n x n), U ((n + limit)^2, column-major), R (limit x (n + limit)), perm
-    (4 x (n + limit), rows P_ROW, P_SLOT, P_POS, P_ETA) and fwork (3 x (n + limit))."""
+    (5 x (n + limit), rows P_ROW, P_SLOT, P_POS, P_ETA, P_INFO) and fwork (3 x (n + limit))."""
     nmax = n + max(int(update_limit), 0)
     L = np.zeros((n, n), order="F")
     U = np.zeros((nmax, nmax), order="F")
     R = np.zeros((max(int(update_limit), 0), nmax))
-    perm = np.zeros((4, nmax), dtype=np.int64)
+    perm = np.zeros((5, nmax), dtype=np.int64)
     fwork = np.zeros((3, nmax))
     return L, U, R, perm, fwork
