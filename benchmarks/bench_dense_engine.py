@@ -16,7 +16,8 @@ Modes
   (the same formulas applied to ``scipy.linalg.lu_factor`` factors).
 * ``--crossover``: this tree's engine against the sparse basis manager on the problems the
   threshold ``DENSE_ENGINE_MAX_N`` was set on: a banded P-matrix LCP (crash off) and the
-  Ramsey CGE model with a 25% capital tax (NMS), alternating engine/manager per repeat.
+  Ramsey CGE model with a 25% capital tax (NMS), and on the thesis families (dense
+  Jacobians), alternating engine/manager per repeat.
 
     python3 benchmarks/bench_dense_engine.py --paths /tmp/main . --rounds 2 --repeats 3
     python3 benchmarks/bench_dense_engine.py --accuracy
@@ -222,7 +223,7 @@ def _pf_solve(lu, etas, b):
 # --------------------------------------------------------------------------- crossover
 def crossover(a):
     from compass_sparse import Options, dense_path, solve, solve_lcp, solve_mcp
-    from compass_sparse.generators import p_matrix_lcp
+    from compass_sparse.generators import p_matrix_lcp, thesis_family
     from compass_sparse.generators.cge import ramsey_cge
 
     cases = []
@@ -236,6 +237,11 @@ def crossover(a):
         prob = ramsey_cge(periods=T, sectors=1).with_shock(capital_tax=0.25).problem
         cases.append(("Ramsey CGE, 25% capital tax, NMS", prob.n,
                       lambda prob=prob: solve_mcp(prob)))
+    for n in a.thesis_n:
+        for fam in (1, 2):
+            prob = thesis_family(n, fam, 1).problem
+            cases.append((f"thesis family {fam}, seed 1", n,
+                          lambda prob=prob: solve_mcp(prob)))
     saved = dense_path.DENSE_ENGINE_MAX_N, solve.DENSE_BASIS_MAX_N
     print(f"threshold in the code: DENSE_ENGINE_MAX_N = {saved[0]}\n")
     print("| problem | n | engine CPU (median) | sparse manager CPU (median) | engine / manager |")
@@ -280,6 +286,8 @@ def main():
     ap.add_argument("--acc-steps", type=int, default=600)
     ap.add_argument("--lcp-sizes", nargs="+", type=int, default=[150, 300, 500, 800])
     ap.add_argument("--ramsey-T", nargs="+", type=int, default=[40, 56, 84, 110])
+    ap.add_argument("--thesis-n", nargs="*", type=int, default=[300, 500],
+                    help="thesis families 1 and 2 (dense Jacobians) in --crossover")
     a = ap.parse_args()
     if a.worker:
         sys.path.insert(0, a.root)

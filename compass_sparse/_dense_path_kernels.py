@@ -12,9 +12,10 @@ column ``c = B[:, j]``, applies the earlier eliminations (``c -= L[:, k] c[p_k]`
 k < m) and chooses as pivot row ``p_m`` the not yet pivoted row with the largest ``|c|``
 (partial pivoting).  Then ``U[k, m] = c[p_k]`` (k < m), ``U[m, m] = c[p_m]`` and
 ``L[:, m] = c / c[p_m]`` on the rows not yet pivoted.  So ``B Q = P^T L U`` with Q the
-elimination order; a solve ``B x = b`` is a forward pass over the steps, a backward pass
-with U, and the scatter of step m's value to slot ``q_m``.  Cost n^3/3 per factorization
-(less when unit columns are many: their eliminations are skipped).
+elimination order.  The m1 unit columns (the first m1 steps) eliminate nothing: their
+columns of L are zero and their columns of U are zero above the diagonal, so the
+factorization costs about n (n - m1)^2 / 2 and the solves and updates below skip them
+(the work is that of the non-unit block; ``perm[P_INFO, 0]`` holds m1).
 
 When a pivot is at most ``rank_tol * max(1, ||B[:, j]||_inf)`` the basis is singular and
 is repaired as the thesis does (§3.3.1; the dense reference basis does the same): start
@@ -31,8 +32,8 @@ After the factorization the rows of L are permuted to step order (``L[m, k]`` is
 multiplier of step k on the row pivoted at step m > k), so both factors are triangular in
 step index: FTRAN ``B x = b`` is ``w = P b`` (``w_m = b[p_m]``), ``w <- L^{-1} w``,
 ``w <- U^{-1} w``, ``x[q_m] = w_m``; BTRAN ``B^T y = c`` is ``w_m = c[q_m]``,
-``w <- U^{-T} w``, ``w <- L^{-T} w``, ``y[p_m] = w_m``.  Each costs n^2 flops (L and U
-half each), on contiguous columns of column-major arrays.
+``w <- U^{-T} w``, ``w <- L^{-T} w``, ``y[p_m] = w_m``.  Each costs at most n^2 flops (L
+and U half each, less the unit steps), on contiguous columns of column-major arrays.
 
 Updates: Forrest-Tomlin on the dense factors
 --------------------------------------------
@@ -58,9 +59,11 @@ positions in index order are a triangular order of U_k.  Replacing the column of
 
 FTRAN applies the row etas between L and U, BTRAN their transposes between U^T and L^T
 (``w_p += w_q``, ``w_i -= c_i w_q``, ``w_q = 0``).  Solve cost after k updates with
-N = n + k positions: n^2/2 (L) + k N (etas) + N^2/2 (U); an update costs one partial
-transposed solve from p, (N - p)^2 / 2, plus O(N).  Nothing is allocated per pivot: U is
-preallocated with n + limit positions, R with limit rows.
+N = n + k positions: at most n^2/2 (L) + k N (etas) + N^2/2 (U); an update costs one
+partial transposed solve from max(p, m1), at most (N - p)^2 / 2, plus O(N) — the price of
+stability over the product form, which costs nothing at the update (measured in
+benchmarks/dense_engine.md).  Nothing is allocated per pivot: U is preallocated with
+n + limit positions, R with limit rows.
 
 Why Forrest-Tomlin, and its safeguards
 --------------------------------------
@@ -81,9 +84,10 @@ new basis is singular) instead of updating:
 * ``growth_limit`` (100): ``max_i |c_i| > growth_limit``: a row eta multiplies rows of U
   by up to max |c_i| and every later solve meets it; a fresh LU with partial pivoting
   (multipliers <= 1) is the stable alternative.  Measured (benchmarks/dense_engine.md):
-  on long random replacement sequences the worst backward error of a solve was ~5e-12
-  with limit 1e8, ~8e-13 with 1e4 and ~2e-14 with 100 (fresh factors: ~1e-16); on the
-  thesis families' paths limit 100 declined 0.7% of the updates (1e8: 0.15%);
+  on random replacement sequences with small leaving pivots (n = 50) the worst backward
+  error of a solve after 26-50 updates was 1.4e-12 without the limit and 9.4e-15 with it
+  (the product form: 4.0e-14); on the thesis families' paths the limit declines about
+  1.5% of the updates;
 
 and the factors are refreshed after ``update_limit`` updates (``factorization_update_limit``,
 50 as in PATH) in any case.  Fresh factors also recompute the basic values from scratch
