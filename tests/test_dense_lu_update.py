@@ -134,6 +134,20 @@ def _entering(f, rng):
             return kind, idx
 
 
+def _random_sequence(f, rng, steps, thr=1e-3):
+    """``steps`` replacements, the leaving slot random among those with |d_s| > thr
+    ||d||_inf; returns the worst backward error met and the longest run of updates."""
+    worst, longest = 0.0, 0
+    for _ in range(steps):
+        kind, idx = _entering(f, rng)
+        d = f.d_of(kind, idx)
+        ok = np.flatnonzero(np.abs(d) > thr * np.abs(d).max())
+        f.replace(int(rng.choice(ok)), kind, idx)
+        worst = max(worst, *backward_errors(f, rng))
+        longest = max(longest, f.k)
+    return worst, longest
+
+
 @pytest.mark.parametrize("n,seed", [(8, 0), (40, 1), (120, 2)])
 def test_forrest_tomlin_solves_stay_accurate_over_long_replacement_sequences(n, seed):
     """600 replacements in random slots (any slot the pivot test accepts, not the best
@@ -142,14 +156,7 @@ def test_forrest_tomlin_solves_stay_accurate_over_long_replacement_sequences(n, 
     rng = np.random.default_rng(seed)
     M, r = rng.standard_normal((n, n)), rng.standard_normal(n)
     f = Factors(M, r, *_random_table(n, rng), limit=50)
-    worst, longest = 0.0, 0
-    for _ in range(600):
-        kind, idx = _entering(f, rng)
-        d = f.d_of(kind, idx)
-        ok = np.flatnonzero(np.abs(d) > 1e-3 * np.abs(d).max())
-        f.replace(int(rng.choice(ok)), kind, idx)
-        worst = max(worst, *backward_errors(f, rng))
-        longest = max(longest, f.k)
+    worst, longest = _random_sequence(f, rng, 600)
     assert worst <= BACKWARD_TOL
     counts = np.bincount(f.outcomes, minlength=5)
     assert counts[K.UPD_OK] >= 500 and longest >= 40  # long runs of updates were solved
@@ -269,13 +276,7 @@ def test_extreme_update_tolerances_keep_the_solves_accurate(tols):
     rng = np.random.default_rng(11)
     M, r = rng.standard_normal((n, n)), rng.standard_normal(n)
     f = Factors(M, r, *_random_table(n, rng), limit=30, **tols)
-    worst = 0.0
-    for _ in range(200):
-        kind, idx = _entering(f, rng)
-        d = f.d_of(kind, idx)
-        ok = np.flatnonzero(np.abs(d) > 1e-3 * np.abs(d).max())
-        f.replace(int(rng.choice(ok)), kind, idx)
-        worst = max(worst, *backward_errors(f, rng))
+    worst, _ = _random_sequence(f, rng, 200)
     assert worst <= BACKWARD_TOL
     counts = np.bincount(f.outcomes, minlength=5)
     declined = {"stab_tol": K.UPD_UNSTABLE, "growth": K.UPD_GROWTH,
