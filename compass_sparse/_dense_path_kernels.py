@@ -62,8 +62,9 @@ FTRAN applies the row etas between L and U, BTRAN their transposes between U^T a
 N = n + k positions: at most n^2/2 (L) + k N (etas) + N^2/2 (U); an update costs one
 partial transposed solve from max(p, m1), at most (N - p)^2 / 2, plus O(N) — the price of
 stability over the product form, which costs nothing at the update (measured in
-benchmarks/dense_engine.md).  Nothing is allocated per pivot: U is preallocated with
-n + limit positions, R with limit rows.
+benchmarks/dense_engine.md).  Nothing is allocated per pivot or per factorization: U is
+preallocated with n + limit positions, R with limit rows, and the work of the
+factorization with them (:func:`allocate_factors`).
 
 Why Forrest-Tomlin, and its safeguards
 --------------------------------------
@@ -117,10 +118,12 @@ I_EK, I_EI, I_PIV, I_TSLOT, I_NFAC, I_NUPD, I_NETA, I_NBP, I_MSG, I_REFUSED, \
 N_ISTATE = 12
 F_ES, F_EV, F_T, F_BEST_T, F_RES = range(5)
 N_FSTATE = 5
-# rows of the integer factor array ``perm`` (5 x (n + limit)): the pivot row of each
+# rows of the integer factor array ``perm`` (N_PERM x (n + limit)): the pivot row of each
 # elimination step, the slot at each position (-1: replaced), the position of each slot,
-# the position eliminated by each row eta, and P_INFO
-P_ROW, P_SLOT, P_POS, P_ETA, P_INFO = range(5)
+# the position eliminated by each row eta, and P_INFO; then the work of a factorization
+# (the slots and rows of a repair, and four rows for factor()), preallocated with the rest
+P_ROW, P_SLOT, P_POS, P_ETA, P_INFO, W_REP_SLOT, W_REP_ROW, W_FACTOR = range(8)
+N_PERM = W_FACTOR + 4
 # perm[P_INFO, 0]: the number m1 of unit columns of the factorization; they are its first
 # steps, their columns of L are zero and their columns of U are zero above the diagonal,
 # so every solve and update skips them
@@ -146,7 +149,8 @@ def _column(kind, idx, M, r, art_sign, out):
 
 
 @njit(cache=True)
-def factor(M, r, sk, si, art_sign, L, U, prow, qslot, rank_tol, rep_slot, rep_row, home):
+def factor(M, r, sk, si, art_sign, L, U, prow, qslot, rank_tol, rep_slot, rep_row, home,
+           iwork, c):
     """LU of the slot basis (see the module docstring); with ``home`` the repair decision.
 
     With ``home = True`` the non-unit slots pivot on their home rows (the rows not covered
@@ -157,28 +161,30 @@ def factor(M, r, sk, si, art_sign, L, U, prow, qslot, rank_tol, rep_slot, rep_ro
     reference basis makes.  With ``home = False`` every column pivots on the free row of
     largest remainder (partial pivoting): the stable factorization used for the solves.
     Returns the number of dependent slots (slot and row in rep_slot, rep_row; row -1 when
-    a covering-vector or slack column is dependent, which nothing can repair)."""
+    a covering-vector or slack column is dependent, which nothing can repair).  Work: iwork
+    (4 x n integers), c (n)."""
     n = sk.shape[0]
-    pivoted = np.zeros(n, dtype=np.bool_)
-    c = np.empty(n)
-    # elimination order: unit columns first, then M columns and the covering vector
-    order = np.empty(n, dtype=np.int64)
-    covered = np.zeros(n, dtype=np.bool_)
+    order = iwork[0]  # elimination order: unit columns first, then M columns and t
+    free_rows = iwork[1]
+    pivoted = iwork[2]
+    covered = iwork[3]
+    for i in range(n):
+        pivoted[i] = 0
+        covered[i] = 0
     m = 0
     for j in range(n):
         if sk[j] != VAR_Z and sk[j] != VAR_T:
             order[m] = j
-            covered[si[j]] = True
+            covered[si[j]] = 1
             m += 1
     first_nonunit = m
     for j in range(n):
         if sk[j] == VAR_Z or sk[j] == VAR_T:
             order[m] = j
             m += 1
-    free_rows = np.empty(n - first_nonunit, dtype=np.int64)
     f = 0
     for i in range(n):
-        if not covered[i]:
+        if covered[i] == 0:
             free_rows[f] = i
             f += 1
     nrep = 0
@@ -207,7 +213,7 @@ def factor(M, r, sk, si, art_sign, L, U, prow, qslot, rank_tol, rep_slot, rep_ro
             bv = abs(c[best])
         else:
             for i in range(n):
-                if not pivoted[i]:
+                if pivoted[i] == 0:
                     a = abs(c[i])
                     if a > bv:
                         bv = a
@@ -230,46 +236,50 @@ def factor(M, r, sk, si, art_sign, L, U, prow, qslot, rank_tol, rep_slot, rep_ro
         prow[m] = best
         qslot[m] = j
         U[m, m] = piv
-        pivoted[best] = True
+        pivoted[best] = 1
         for i in range(n):
-            L[i, m] = 0.0 if pivoted[i] else c[i] / piv
+            L[i, m] = 0.0 if pivoted[i] != 0 else c[i] / piv
     return nrep
 
 
 @njit(cache=True)
-def _rows_to_steps(L, prow, n):
+def _rows_to_steps(L, prow, n, done, tmp):
     """Permute the rows of L (n x n) from basis rows to elimination steps in place: row m
-    of the result is row ``prow[m]`` of the input (cycle by cycle, one row in flight)."""
-    done = np.zeros(n, dtype=np.bool_)
-    tmp = np.empty(n)
+    of the result is row ``prow[m]`` of the input (cycle by cycle, one row in flight in
+    tmp; done: n integers of work)."""
+    for i in range(n):
+        done[i] = 0
     for start in range(n):
-        if done[start]:
+        if done[start] != 0:
             continue
-        tmp[:] = L[start, :]
+        for i in range(n):
+            tmp[i] = L[start, i]
         m = start
         while True:
-            done[m] = True
+            done[m] = 1
             src = prow[m]
             if src == start:
-                L[m, :] = tmp
+                for i in range(n):
+                    L[m, i] = tmp[i]
                 break
             L[m, :] = L[src, :]
             m = src
 
 
 @njit(cache=True)
-def lu_factor(M, r, sk, si, art_sign, L, U, perm, rank_tol, rep_slot, rep_row):
+def lu_factor(M, r, sk, si, art_sign, L, U, perm, fwork, rank_tol):
     """Stable LU of the slot table for the solves (partial pivoting, no repair) in the
     form the solves and updates use: L by steps, no update applied.  Returns the number
-    of dependent slots found (0: the factors are valid)."""
+    of dependent slots found (0: the factors are valid; else their slots and rows are in
+    perm[W_REP_SLOT], perm[W_REP_ROW]).  Uses fwork[0] and fwork[2] as work."""
     n = sk.shape[0]
     prow = perm[P_ROW]
     slot_at = perm[P_SLOT]
-    nrep = factor(M, r, sk, si, art_sign, L, U, prow, slot_at, rank_tol, rep_slot,
-                  rep_row, False)
+    nrep = factor(M, r, sk, si, art_sign, L, U, prow, slot_at, rank_tol, perm[W_REP_SLOT],
+                  perm[W_REP_ROW], False, perm[W_FACTOR:W_FACTOR + 4], fwork[2, :n])
     if nrep > 0:
         return nrep
-    _rows_to_steps(L, prow, n)
+    _rows_to_steps(L, prow, n, perm[W_FACTOR], fwork[0])
     m1 = 0
     for j in range(n):
         if sk[j] != VAR_Z and sk[j] != VAR_T:
@@ -508,15 +518,15 @@ def refactor(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate, L, 
     """PivotalPath._factor: factorize, repair dependent columns with artificials,
     recompute the basic values.  Returns 0 or a SINGULAR message code."""
     n = sk.shape[0]
-    rep_slot = np.empty(n, dtype=np.int64)
-    rep_row = np.empty(n, dtype=np.int64)
+    rep_slot = perm[W_REP_SLOT]
+    rep_row = perm[W_REP_ROW]
     istate[I_NFAC] += 1
     # A regular basis is factorized as it is (partial pivoting); only a singular one is
     # repaired, by the home-row rule of the thesis (see factor()).
-    nrep = lu_factor(M, r, sk, si, art_sign, L, U, perm, rank_tol, rep_slot, rep_row)
+    nrep = lu_factor(M, r, sk, si, art_sign, L, U, perm, fwork, rank_tol)
     if nrep > 0:
         nrep = factor(M, r, sk, si, art_sign, L, U, perm[P_ROW], perm[P_SLOT], rank_tol,
-                      rep_slot, rep_row, True)
+                      rep_slot, rep_row, True, perm[W_FACTOR:W_FACTOR + 4], fwork[2, :n])
     if nrep > 0:
         if rep_row[nrep - 1] < 0:
             if sk[rep_slot[nrep - 1]] == VAR_T:
@@ -538,7 +548,7 @@ def refactor(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate, L, 
             si[slot] = new_row
             art_sign[new_row] = 1
         # The stable LU (partial pivoting) of the repaired basis for the solves.
-        nrep = lu_factor(M, r, sk, si, art_sign, L, U, perm, rank_tol, rep_slot, rep_row)
+        nrep = lu_factor(M, r, sk, si, art_sign, L, U, perm, fwork, rank_tol)
         if nrep > 0:
             return MSG_SING_FACTOR
     istate[I_NETA] = 0
@@ -765,11 +775,12 @@ def path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_coun
 def allocate_factors(n: int, update_limit: int):
     """The preallocated factor arrays of an n x n basis with up to ``update_limit``
     updates: L (n x n), U ((n + limit)^2, column-major), R (limit x (n + limit)), perm
-    (5 x (n + limit), rows P_ROW, P_SLOT, P_POS, P_ETA, P_INFO) and fwork (3 x (n + limit))."""
+    (N_PERM x (n + limit), rows P_ROW ... and work rows) and fwork (3 x (n + limit)):
+    nothing else is allocated by the path, its updates or its factorizations."""
     nmax = n + max(int(update_limit), 0)
     L = np.zeros((n, n), order="F")
     U = np.zeros((nmax, nmax), order="F")
     R = np.zeros((max(int(update_limit), 0), nmax))
-    perm = np.zeros((5, nmax), dtype=np.int64)
+    perm = np.zeros((N_PERM, nmax), dtype=np.int64)
     fwork = np.zeros((3, nmax))
     return L, U, R, perm, fwork

@@ -53,8 +53,7 @@ class Factors:
     def refactor(self):
         n = self.n
         nrep = K.lu_factor(self.M, self.r, self.sk, self.si, np.ones(n, np.int64), self.L,
-                           self.U, self.perm, 1e-9, np.zeros(n, np.int64),
-                           np.zeros(n, np.int64))
+                           self.U, self.perm, self.fw, 1e-9)
         self.k = 0
         return nrep
 

@@ -44,7 +44,7 @@ def test_factor_repairs_dependent_columns_with_artificials_on_their_rows():
     prow, qslot = np.zeros(n, np.int64), np.zeros(n, np.int64)
     rs, rr = np.zeros(n, np.int64), np.zeros(n, np.int64)
     nrep = K.factor(np.asfortranarray(M), np.zeros(n), sk, si, np.ones(n, np.int64), L, U,
-                    prow, qslot, 1e-9, rs, rr, True)
+                    prow, qslot, 1e-9, rs, rr, True, np.zeros((4, n), np.int64), np.zeros(n))
     assert nrep == 1 and rs[0] == 4 and rr[0] == 4
     sk[4] = K.VAR_A
     B = _basis(sk, si, M, np.zeros(n))
