@@ -68,10 +68,14 @@ factorization with them (:func:`allocate_factors`).
 
 Why Forrest-Tomlin, and its safeguards
 --------------------------------------
-The dense Bartels-Golub update would allow row interchanges while U is restored to
-triangular form, but it has to rewrite L (or keep column etas with interchanges) and
-moves rows of the dense U: more data movement per pivot than the row-eta form, for a
-stability that a short update sequence plus checks also gives.  Forrest-Tomlin takes no
+Bartels-Golub would allow row interchanges while U is restored to triangular form, but
+on a dense U it shifts every column after the replaced one (an upper Hessenberg matrix)
+and keeps one stored elimination per subdiagonal entry: O(n^2) data movement and a longer
+transformation file per update, where the row-eta form writes one column and one row.
+Measured (benchmarks/dense_engine.md), Forrest-Tomlin with the checks below is more
+accurate than the product form the engine used before, and the updates it has to decline
+for stability are rare on the measured paths (0.6%), so the simpler form with a
+refactorization as its fallback was chosen.  Forrest-Tomlin takes no
 interchanges, so its error can grow through large multipliers c_i; it is guarded by
 three tests, each of which makes the path refactorize (with the thesis' repair when the
 new basis is singular) instead of updating:
