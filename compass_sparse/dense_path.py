@@ -11,16 +11,20 @@ check then run in :mod:`compass_sparse._dense_path_kernels` with no Python per p
 Results are returned through the same PivotalPath fields, so the algorithm, the codes and
 the messages are those of the Python loop.
 
-The factorization is a dense LU with partial pivoting and product-form updates, refreshed
-every ``factorization_update_limit`` pivots (see the kernels' docstring) — not an
-explicitly updated inverse.  All work arrays (L, U, etas, breakpoints) are allocated once
-per engine and reused by every path of a solve.
+The factorization is a dense LU with partial pivoting; column replacements are
+Forrest-Tomlin updates of its U (row etas, no explicit inverse), refreshed every
+``factorization_update_limit`` pivots (see the kernels' docstring).  All work arrays
+(L, U, row etas, breakpoints) are allocated once per engine and reused by every path of a
+solve.
 
 Tolerances: a column whose eliminated pivot is at most ``rank_tolerance`` (1e-9, the dense
 reference basis' repair threshold) times
 max(1, its inf-norm) is dependent and repaired by an artificial; a replacement with
 ``|d_s| <= pivot_tolerance * max(1, ||d||_inf)`` (1e-11) is refused and the basis
-refactorized (the sparse manager's tests, same defaults).
+refactorized (the sparse manager's tests, same defaults).  An update whose two computations
+of the new diagonal of U differ by more than ``stability_tolerance`` (1e-8, relative) or
+whose row eta has a multiplier above ``growth_limit`` (100) is replaced by a
+refactorization.
 """
 from __future__ import annotations
 
@@ -59,21 +63,19 @@ class DensePathEngine:
     runs_paths = True
 
     def __init__(self, M, options=None, *, update_limit: int | None = None,
-                 pivot_tolerance: float = 1e-11, rank_tolerance: float = 1e-9):
+                 pivot_tolerance: float = 1e-11, rank_tolerance: float = 1e-9,
+                 stability_tolerance: float = 1e-8, growth_limit: float = 100.0):
         if update_limit is None:
             update_limit = options.factorization_update_limit if options is not None else 50
         self.update_limit = max(1, int(update_limit))
         self.pivot_tolerance = float(pivot_tolerance)
         self.rank_tolerance = float(rank_tolerance)
+        self.stability_tolerance = float(stability_tolerance)
+        self.growth_limit = float(growth_limit)
         self.stats = BasisStats()
         self.set_matrix(M)
         n = self.n
-        self.L = np.zeros((n, n), order="F")
-        self.U = np.zeros((n, n), order="F")
-        self.prow = np.zeros(n, dtype=np.int64)
-        self.qslot = np.zeros(n, dtype=np.int64)
-        self.eta_s = np.zeros(self.update_limit, dtype=np.int64)
-        self.eta_d = np.zeros((self.update_limit, n))
+        self.L, self.U, self.R, self.perm, self.fwork = K.allocate_factors(n, self.update_limit)
         self.work = np.zeros((8, n))
         self.n_breakpoints = max(1, min(200, 5_000_000 // max(n, 1)))
         self.bp_t = np.zeros(self.n_breakpoints)
@@ -103,9 +105,9 @@ class DensePathEngine:
     def _factor(self, path, istate, fstate):
         st = path.st
         msg = K.refactor(self.M, path.q, self.r, st.sk, st.si, st.xb, st.zval,
-                         st.art_sign, self.displaced, istate, fstate, self.L, self.U,
-                         self.prow, self.qslot, self.rank_tolerance, path.lb, path.ub,
-                         self.work)
+                         st.art_sign, self.displaced, istate, fstate, self.L, self.U, self.R,
+                         self.perm, self.rank_tolerance, path.lb, path.ub, self.work,
+                         self.fwork)
         return msg
 
     def run_path(self, path, z, w, v, slack_basis):
@@ -115,8 +117,8 @@ class DensePathEngine:
         ub = np.ascontiguousarray(path.ub, dtype=float)
         path.lb, path.ub = lb, ub
         q = path.q = np.ascontiguousarray(path.q, dtype=float)
-        istate = np.zeros(10, dtype=np.int64)
-        fstate = np.zeros(5)
+        istate = np.zeros(K.N_ISTATE, dtype=np.int64)
+        fstate = np.zeros(K.N_FSTATE)
         istate[K.I_TSLOT] = -1
         self.displaced[:] = -1
         st = path.st  # the run's PathState: slot table set by PivotalPath.run
@@ -137,10 +139,10 @@ class DensePathEngine:
             code, msg = K.path_loop(
                 self.M, q, self.r, lb, ub, st.sk, st.si, st.xb, st.zval,
                 st.art_sign, self.displaced, self.enter_count, istate, fstate, self.L,
-                self.U, self.prow, self.qslot, self.eta_s, self.eta_d, self.best_x, self.bp_t,
-                self.bp_x, self.work, opt.pivot_tolerance, opt.ratio_tolerance,
-                self.rank_tolerance, self.pivot_tolerance, int(path.minor_limit),
-                int(opt.lemke_cycle_limit), PIVOT_CHUNK)
+                self.U, self.R, self.perm, self.best_x, self.bp_t, self.bp_x, self.work,
+                self.fwork, opt.pivot_tolerance, opt.ratio_tolerance, self.rank_tolerance,
+                self.pivot_tolerance, self.stability_tolerance, self.growth_limit,
+                int(path.minor_limit), int(opt.lemke_cycle_limit), PIVOT_CHUNK)
             if code != K.RUNNING:
                 break
             if path.deadline is not None and time.perf_counter() > path.deadline:
@@ -149,8 +151,8 @@ class DensePathEngine:
         if code == K.SOLVED:
             code, msg = K.verify(self.M, q, self.r, st.sk, st.si, st.xb, st.zval,
                                  st.art_sign, self.displaced, istate, fstate, self.L, self.U,
-                                 self.prow, self.qslot, self.rank_tolerance, lb, ub,
-                                 self.work)
+                                 self.R, self.perm, self.rank_tolerance, lb, ub, self.work,
+                                 self.fwork)
         st.unbounded = msg == K.MSG_RAY_UNBOUNDED
         if st.unbounded:
             # z moves along dz: basic z's at their rates, an entering z at its direction
@@ -176,6 +178,7 @@ class DensePathEngine:
         self.stats.factorizations += int(istate[K.I_NFAC])
         self.stats.updates += int(istate[K.I_NUPD])
         self.stats.refused_updates += int(istate[K.I_REFUSED])
+        self.stats.refactor_by_stability += int(istate[K.I_UNSTABLE] + istate[K.I_GROWTH])
 
     @staticmethod
     def _message(msg, istate, fstate, path) -> str:

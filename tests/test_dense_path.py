@@ -1,8 +1,9 @@
-"""The small-problem engine (compass_sparse.dense_path): its LU kernels against numpy, and
+"""The small-problem engine (compass_sparse.dense_path): its repair against the thesis' rule, and
 its paths against the Python pivot loop on the dense reference basis (same algorithm:
 same codes, pivots and points) on random, degenerate and rank-deficient linear MCPs.
 
-The ordinary path tests (tests/test_path.py) run with this engine as a third manager.
+The ordinary path tests (tests/test_path.py) run with this engine as a third manager; its
+LU and Forrest-Tomlin kernels are checked against numpy in tests/test_dense_lu_update.py.
 """
 from __future__ import annotations
 
@@ -15,19 +16,6 @@ from compass_sparse import _dense_path_kernels as K
 from compass_sparse.basis.dense import DenseBasis
 from compass_sparse.dense_path import DensePathEngine
 from compass_sparse.path import LinearCode, PivotalPath
-
-
-def _lu(B_slots, M, r=None):
-    """Factor a slot table (kinds, indices) with the engine's kernels."""
-    sk, si = (np.asarray(a, dtype=np.int64) for a in B_slots)
-    n = sk.size
-    r = np.zeros(n) if r is None else r
-    L, U = np.zeros((n, n), order="F"), np.zeros((n, n), order="F")
-    prow, qslot = np.zeros(n, np.int64), np.zeros(n, np.int64)
-    rs, rr = np.zeros(n, np.int64), np.zeros(n, np.int64)
-    nrep = K.factor(np.asfortranarray(M), r, sk, si, np.ones(n, np.int64), L, U, prow, qslot,
-                    1e-9, rs, rr, False)
-    return nrep, (L, U, prow, qslot), rs[:nrep], rr[:nrep]
 
 
 def _basis(sk, si, M, r):
@@ -43,38 +31,6 @@ def _basis(sk, si, M, r):
     return B
 
 
-@pytest.mark.parametrize("n,seed", [(1, 0), (5, 1), (30, 2), (80, 3)])
-def test_lu_solve_and_updates_agree_with_numpy(n, seed):
-    rng = np.random.default_rng(seed)
-    M = rng.standard_normal((n, n))
-    r = rng.standard_normal(n)
-    sk = rng.choice([K.VAR_Z, K.VAR_W, K.VAR_V], size=n).astype(np.int64)
-    sk[rng.integers(n)] = K.VAR_T
-    si = np.arange(n, dtype=np.int64)
-    nrep, (L, U, prow, qslot), _, _ = _lu((sk, si), M, r)
-    assert nrep == 0
-    B = _basis(sk, si, M, r)
-    b = rng.standard_normal(n)
-    x, w = np.zeros(n), np.zeros(n)
-    K.lu_solve(L, U, prow, qslot, b, x, w)
-    assert np.max(np.abs(B @ x - b)) <= 1e-10 * (1 + np.abs(B).max() * np.abs(x).max())
-    # Product-form updates: replace slots one after another by M columns, compare solves.
-    limit = 5
-    eta_s, eta_d = np.zeros(limit, np.int64), np.zeros((limit, n))
-    Mf = np.asfortranarray(M)
-    for k in range(min(limit, n)):
-        j = int(rng.integers(n))
-        a = M[:, j].copy()
-        d = np.zeros(n)
-        K.ftran(L, U, prow, qslot, eta_s, eta_d, k, a, d, w)
-        slot = int(np.argmax(np.abs(d)))  # a regular replacement
-        eta_s[k], eta_d[k] = slot, d
-        sk[slot], si[slot] = K.VAR_Z, j
-        B = _basis(sk, si, Mf, r)
-        K.ftran(L, U, prow, qslot, eta_s, eta_d, k + 1, b, x, w)
-        assert np.max(np.abs(B @ x - b)) <= 1e-8 * (1 + np.abs(B).max() * np.abs(x).max())
-
-
 def test_factor_repairs_dependent_columns_with_artificials_on_their_rows():
     """Two equal M columns basic together: the second is dependent; its artificial takes
     the slot on the column's home row, and the repaired basis is regular."""
@@ -88,7 +44,7 @@ def test_factor_repairs_dependent_columns_with_artificials_on_their_rows():
     prow, qslot = np.zeros(n, np.int64), np.zeros(n, np.int64)
     rs, rr = np.zeros(n, np.int64), np.zeros(n, np.int64)
     nrep = K.factor(np.asfortranarray(M), np.zeros(n), sk, si, np.ones(n, np.int64), L, U,
-                    prow, qslot, 1e-9, rs, rr, True)
+                    prow, qslot, 1e-9, rs, rr, True, np.zeros((4, n), np.int64), np.zeros(n))
     assert nrep == 1 and rs[0] == 4 and rr[0] == 4
     sk[4] = K.VAR_A
     B = _basis(sk, si, M, np.zeros(n))
@@ -200,3 +156,21 @@ def test_solves_agree_with_and_without_the_engine(monkeypatch):
             points[thr].append(rm.x)
     for a, b in zip(points[0], points[dense_path.DENSE_ENGINE_MAX_N]):
         assert np.max(np.abs(a - b)) <= 1e-6 * (1 + np.abs(b).max())
+
+
+@pytest.mark.parametrize("kw", [{"growth_limit": 1.0}, {"stability_tolerance": 0.0},
+                                {"growth_limit": 1e300, "stability_tolerance": 1.0}])
+def test_same_path_whatever_the_update_safeguards_decline(kw):
+    """The Forrest-Tomlin safeguards only choose between an update and a refactorization:
+    declining (almost) every update, or none, leaves the path pivot for pivot that of the
+    Python loop."""
+    for g in (gen.p_matrix_lcp(60, "banded", 4, "mixed"),
+              gen.duplicated_columns_lcp(40, 2, bounds="mixed")):
+        M, q, lb, ub = g.lcp
+        x = np.clip(np.zeros(q.size), lb, ub)
+        py = PivotalPath(M, q, lb, ub, DenseBasis(M), Options()).run(x)
+        eng = DensePathEngine(M, **kw)
+        cc = PivotalPath(M, q, lb, ub, eng, Options()).run(x)
+        _assert_same_path(py, cc, M, q)
+        if kw.get("growth_limit") == 1.0 and py.pivots > 20:
+            assert eng.stats.refactor_by_stability > 0
