@@ -44,6 +44,16 @@ Tolerances and triggers (defaults in :class:`~compass_sparse.basis.types.BasisOp
 ``residual_check_frequency`` = 20 FTRANs against ``residual_tolerance`` 1e-10, and
 ``rank_tolerance`` 1e-11 for the rank repair of a fresh factorization (see
 :mod:`compass_sparse.basis.repair`).
+
+Reused factors (``reuse_factors``).  Successive Newton steps factor bases with the same
+slot table whose M columns have moved a little.  After :meth:`set_matrix` with an unchanged
+pattern, :meth:`factor` with the slot table of the held factors keeps them: they are the
+LU of an older basis P, and each solve with the new B runs GMRES preconditioned by P
+(:mod:`compass_sparse.basis.krylov`).  A solve is accepted only when its true backward
+error is at most ``reuse_tolerance``; otherwise, and before any column replacement or
+BTRAN, the basis is factored afresh.  Should that fresh factorization find B singular (a
+rank repair changes the slot table the caller knows), :class:`FactorReuseFailed` is
+raised: the caller starts again with :meth:`factor`, which then factors afresh.
 """
 
 from __future__ import annotations
@@ -53,6 +63,7 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
+from .._blas import single_threaded_blas
 from ..exceptions import CompassError, ProblemError, ShapeError, SingularBasisError
 from . import _kernels as kern
 from .backends import FactorBudget, make_backend
@@ -65,6 +76,12 @@ _I = np.int64
 _REFINE_ABOVE = 1e-14
 """A residual check that finds a backward error above this (and below the residual
 tolerance) refines the solution once (:meth:`BasisManager._refine`)."""
+
+
+class FactorReuseFailed(CompassError):
+    """A basis solved on reused factors turned out singular when factored afresh: its rank
+    repair changed the slot table, so the caller must call :meth:`BasisManager.factor`
+    again (it factors afresh)."""
 
 
 def _readonly(a):
@@ -111,6 +128,9 @@ class BasisManager:
         self._version = 0
         self._cache = None
         self._n_ftran = 0
+        self._reusing = False   # the held factors belong to an older basis (GMRES solves)
+        self._held = None       # (kinds, indices, signs) of the basis of the held factors
+        self._reuse_aged = False
         self.stats = BasisStats()
         self.last_report = FactorReport()
         kern.warmup()
@@ -134,9 +154,17 @@ class BasisManager:
 
     def set_matrix(self, M):
         """Replace M (same order; the pattern may change). The factors become stale:
-        call :meth:`factor` or :meth:`refactor` before the next solve."""
+        call :meth:`factor` or :meth:`refactor` before the next solve (with
+        ``reuse_factors`` and an unchanged pattern, :meth:`factor` may keep them as the
+        preconditioner of the new basis)."""
+        old = self._M
         self._load_matrix(M)
         self._invalidate()
+        new = self._M
+        if not (new.indptr.size == old.indptr.size and new.indices.size == old.indices.size
+                and np.array_equal(new.indptr, old.indptr)
+                and np.array_equal(new.indices, old.indices)):
+            self._held = None   # another pattern: the held factors are no preconditioner
 
     def set_dense_column(self, r):
         """Set the dense column (covering vector) r, float64 of length n. If a slot holds
@@ -151,6 +179,9 @@ class BasisManager:
             self._invalidate()
 
     def _invalidate(self):
+        if self._factored and not self._reusing and self.options.reuse_factors:
+            # the factors stay valid for the basis they were computed for: keep what it was
+            self._held = (self._kinds.copy(), self._indices.copy(), self._signs.copy())
         self._factored = False
         self._cache = None
         self._version += 1
@@ -235,10 +266,66 @@ class BasisManager:
         indices = indices.copy()
         indices[~nd] = 0
         self._kinds, self._indices, self._signs = kinds.copy(), indices, signs.copy()
+        if self._can_reuse():
+            self._rebuild_maps()
+            self._factored = True
+            self._reusing = True
+            self._cache = None
+            self._version += 1
+            self.stats.reuses += 1
+            self.last_report = FactorReport()
+            return self.last_report
         return self._factorize()
 
+    def _can_reuse(self):
+        h = self._held
+        return (self.options.reuse_factors and h is not None and not self._reuse_aged
+                and np.array_equal(h[0], self._kinds) and np.array_equal(h[1], self._indices)
+                and np.array_equal(h[2], self._signs))
+
+    @property
+    def reusing(self) -> bool:
+        """True while solves run on the factors of an older basis (GMRES)."""
+        return self._factored and self._reusing
+
+    def _leave_reuse(self):
+        """Factor the current slot table afresh; raise :class:`FactorReuseFailed` when the
+        basis turns out singular (its repair changed the slot table)."""
+        self.stats.reuse_fallbacks += 1
+        rep = self._factorize()
+        if rep.rank_deficiency:
+            raise FactorReuseFailed("the basis solved on reused factors is singular")
+
+    def _reuse_solve(self, rhs):
+        """x with B x = rhs by GMRES on the held factors, or None when it does not reach
+        ``reuse_tolerance`` (backward error) within ``reuse_iterations`` steps."""
+        from .krylov import preconditioned_gmres
+
+        o = self.options
+        nb = self._norm_inf_B()
+        bn = float(np.abs(rhs).max()) if self.n else 0.0
+        # GMRES's 2-norm target is a guide (x is not known yet); the check below decides.
+        # Its vector operations are level-1 BLAS: threads only slow them (10x measured
+        # at n = 3e4 on a busy machine).
+        with single_threaded_blas():
+            x, steps, _ = preconditioned_gmres(self.matvec, self._solve_quiet, rhs,
+                                               0.1 * o.reuse_tolerance * (bn + nb),
+                                               o.reuse_iterations)
+        st = self.stats
+        st.reuse_solves += 1
+        st.reuse_steps += steps
+        if steps > o.reuse_iterations // 2:
+            self._reuse_aged = True    # the next factor() call factors afresh
+        if not np.all(np.isfinite(x)):
+            return None
+        res = float(np.abs(self.matvec(x) - rhs).max()) if self.n else 0.0
+        den = bn + nb * (float(np.abs(x).max()) if self.n else 0.0)
+        if res > o.reuse_tolerance * den:
+            return None
+        return x
+
     def refactor(self) -> FactorReport:
-        """Factorize the current slot table again."""
+        """Factorize the current slot table again (afresh, also when reusing)."""
         return self._factorize()
 
     def _nonunit_columns(self, slots):
@@ -393,6 +480,9 @@ class BasisManager:
         self._nnz_base = self._nnzL + self._nnzU
         self._rebuild_maps()
         self._factored = True
+        self._reusing = False
+        self._held = None
+        self._reuse_aged = False
         self._threshold_pivoting = bool(mk) and self._backend.last.ordering in ("amd", "metis")
         self._residual_refactored = False
         self._cache = None
@@ -461,6 +551,14 @@ class BasisManager:
         rhs = np.asarray(rhs, dtype=np.float64).ravel()
         if rhs.shape != (self.n,):
             raise ShapeError(f"rhs must have length {self.n}")
+        if self._reusing:
+            x = self._reuse_solve(rhs)
+            self.stats.time_solve += time.perf_counter() - t0
+            self.stats.ftran_calls += 1
+            if x is not None:
+                return x
+            self._leave_reuse()
+            t0 = time.perf_counter()
         w = self._work()
         self._scatter_rhs(w, np.arange(self.n), rhs)
         x, _ = self._ftran_work(w, False)
@@ -474,6 +572,16 @@ class BasisManager:
         self._require()
         kind, index, sign = self._check_column(kind, index, sign)
         t0 = time.perf_counter()
+        if self._reusing:
+            rhs = np.zeros(self.n)
+            rows, vals = self._column(kind, index, sign)
+            np.add.at(rhs, rows, vals)
+            d = self._reuse_solve(rhs)
+            if d is not None:  # (no spike: a replacement factors afresh first)
+                self.stats.time_solve += time.perf_counter() - t0
+                self.stats.ftran_calls += 1
+                return d
+            self._leave_reuse()
         d = self._ftran_column(kind, index, sign)
         self.stats.time_solve += time.perf_counter() - t0
         self.stats.ftran_calls += 1
@@ -494,6 +602,8 @@ class BasisManager:
         c = np.asarray(c, dtype=np.float64).ravel()
         if c.shape != (self.n,):
             raise ShapeError(f"c must have length {self.n}")
+        if self._reusing:
+            self._leave_reuse()
         y = self._btran_work(c)
         f = self.options.residual_check_frequency
         self.stats.btran_calls += 1
@@ -648,6 +758,8 @@ class BasisManager:
             raise ProblemError(f"slot {slot} out of range")
         kind, index, sign = self._check_column(kind, index, sign)
         t0 = time.perf_counter()
+        if self._reusing:
+            self._leave_reuse()
         try:
             return self._replace(slot, kind, index, sign)
         finally:
@@ -778,6 +890,8 @@ class BasisManager:
         from scipy.sparse.linalg import LinearOperator, onenormest
 
         self._require()
+        if self._reusing:
+            self._leave_reuse()
         n = self.n
         Binv = LinearOperator((n, n), matvec=lambda v: self._solve_quiet(v),
                               rmatvec=lambda v: self._solve_quiet_t(v), dtype=float)
