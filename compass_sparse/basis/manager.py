@@ -429,35 +429,35 @@ class BasisManager:
             Lk, Uk = sp.csc_matrix(fac.L), sp.csc_matrix(fac.U)
             C = BS[:, kcols]       # its entries in unit-covered rows form the C block
             Ud[m1:] = Uk.diagonal()
-            parts = [(F.indptr.astype(_I), F.indices.astype(_I), F.data) for F in (Lk, Uk, C)]
+            parts = [(F.indptr.astype(_I, copy=False), F.indices.astype(_I, copy=False),
+                      F.data) for F in (Lk, Uk, C)]
         else:
             e = (np.zeros(1, _I), np.zeros(0, _I), np.zeros(0))
             parts = [e, e, e]
-        L = sp.csc_matrix(kern.assemble_triangle(n, m1, *parts[0], True, *parts[2], rowpos),
-                          shape=(n, n))
-        Lr = L.tocsr()
-        U = sp.csc_matrix(kern.assemble_triangle(n, m1, *parts[1], False, *parts[2], rowpos),
-                          shape=(n, n))
+        # (the kernel's int64 arrays are kept as they are: a scipy matrix of them would
+        # narrow the indices to int32, and widening them back cost ~1 s per factorization
+        # at n = 1e5)
+        Lx, Li, Lp = kern.assemble_triangle(n, m1, *parts[0], True, *parts[2], rowpos)
+        Ux, Ui, Up = kern.assemble_triangle(n, m1, *parts[1], False, *parts[2], rowpos)
         cap_cols = n + o.update_limit + 2
-        self._Lp, self._Li, self._Lx = L.indptr.astype(_I), L.indices.astype(_I), L.data
-        self._Lrp, self._Lri, self._Lrx = (Lr.indptr.astype(_I), Lr.indices.astype(_I),
-                                           Lr.data)
-        nnzu = U.nnz
+        self._Lp, self._Li, self._Lx = Lp, Li, Lx
+        nnzu = int(Up[n])
         cap = max(2 * nnzu + 4 * n, 1024)
         self._Ui = np.zeros(cap, dtype=_I)
         self._Ux = np.zeros(cap)
-        self._Ui[:nnzu] = U.indices
-        self._Ux[:nnzu] = U.data
+        self._Ui[:nnzu] = Ui
+        self._Ux[:nnzu] = Ux
         self._Us = np.zeros(cap_cols, dtype=_I)
         self._Ue = np.zeros(cap_cols, dtype=_I)
-        self._Us[:n] = U.indptr[:-1]
-        self._Ue[:n] = U.indptr[1:]
+        self._Us[:n] = Up[:-1]
+        self._Ue[:n] = Up[1:]
         self._Us[n:] = nnzu
         self._Ue[n:] = nnzu
         self._Ufree = nnzu
-        Ur = U.tocsr()
-        self._Urp, self._Urj, self._Urx = (Ur.indptr.astype(_I), Ur.indices.astype(_I),
-                                           Ur.data)
+        # Row forms of L and U (for BTRAN and the update's U^{-T} e_p) are built on first
+        # use: a path without pivots never needs them (0.4 s each at n = 1e5).
+        self._row_forms = None
+        self._LU0 = (Lx, Li, Lp, Ux, Ui, Up)
         self._dead = np.zeros(cap_cols, dtype=np.bool_)
         self._Ud = np.ones(cap_cols)
         self._Ud[:n] = Ud
@@ -474,7 +474,7 @@ class BasisManager:
         self._slot_at = np.concatenate((slot_at, np.full(cap_cols - n, -1, dtype=_I)))
         self._pos_of_slot = np.empty(n, dtype=_I)
         self._pos_of_slot[slot_at] = np.arange(n, dtype=_I)
-        self._nnzL = int(L.nnz)
+        self._nnzL = int(Lp[n])
         self._nnzU = int(nnzu) + n
         self._nnzR = 0
         self._nnz_base = self._nnzL + self._nnzU
@@ -531,8 +531,23 @@ class BasisManager:
         kern.usolve(self._Us, self._Ue, self._Ui, self._Ux, self._Ud, w, N)
         return w[self._pos_of_slot], spike
 
+    def _rows(self):
+        """(Lrp, Lri, Lrx, Urp, Urj, Urx): CSR arrays of L and of U as factored (built once
+        per factorization, on first use)."""
+        if self._row_forms is None:
+            n = self.n
+            Lx, Li, Lp, Ux, Ui, Up = self._LU0
+            out = []
+            for (x, i, p) in ((Lx, Li, Lp), (Ux, Ui, Up)):
+                R = sp.csc_matrix((x, i, p), shape=(n, n)).tocsr()
+                out += [R.indptr.astype(_I, copy=False), R.indices.astype(_I, copy=False),
+                        R.data]
+            self._row_forms = tuple(out)
+        return self._row_forms
+
     def _utsolve(self, w, start, N):
-        kern.utsolve(self._Urp, self._Urj, self._Urx, self._dead, self.n, self._Us,
+        _, _, _, Urp, Urj, Urx = self._rows()
+        kern.utsolve(Urp, Urj, Urx, self._dead, self.n, self._Us,
                      self._Ue, self._Ui, self._Ux, self._Ud, w, start, N)
 
     def _column(self, kind, index, sign):
@@ -625,7 +640,8 @@ class BasisManager:
         w[self._pos_of_slot] = c
         self._utsolve(w, 0, N)
         kern.apply_etas_t(self._Rs, self._Ri, self._Rx, self._Rpos, self._Rq, self._k, w)
-        kern.ltsolve(self._Lrp, self._Lri, self._Lrx, w, self._m1)
+        Lrp, Lri, Lrx = self._rows()[:3]
+        kern.ltsolve(Lrp, Lri, Lrx, w, self._m1)
         y = w[self._rowpos]
         if self._rscale is not None:
             y = y * self._rscale
