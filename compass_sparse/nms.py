@@ -124,7 +124,9 @@ class Linearizer:
         col = np.repeat(np.arange(n, dtype=np.int64), np.diff(J.indptr))
         key_J = col * n + J.indices
         key_D = np.arange(n, dtype=np.int64) * (n + 1)
-        keys = np.union1d(key_J, key_D)
+        # (a sort and a mask: numpy 2's hashing np.union1d took 0.6 s at n = 3e4, this 30 ms)
+        keys = np.sort(np.concatenate((key_J, key_D)))
+        keys = keys[np.concatenate(([True], keys[1:] != keys[:-1]))]
         indices = (keys % n).astype(np.int32)
         indptr = np.searchsorted(keys, np.arange(n + 1, dtype=np.int64) * n).astype(np.int32)
         self.M = trusted_csc(np.zeros(keys.size), indices, indptr, (n, n))

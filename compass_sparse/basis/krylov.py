@@ -27,13 +27,18 @@ def preconditioned_gmres(matvec, psolve, b, tol, maxiter):
     """(x, steps, residual): GMRES on ``B x = b`` right-preconditioned by ``psolve``
     (``psolve(v) ~ B^{-1} v``), started from ``psolve(b)``.
 
+    Stops early when the residual's mean rate of decrease so far, doubled, predicts that
+    ``maxiter`` steps will not reach ``tol`` (checked from the fourth step on).
     Stops when the 2-norm residual (GMRES's own estimate, exact in exact arithmetic) is at
-    most ``tol`` or after ``maxiter`` steps; ``residual`` is that estimate (the caller
+    most ``tol`` (a number, or a function of ``x0 = psolve(b)`` for targets relative to
+    the solution's size) or after ``maxiter`` steps; ``residual`` is that estimate (the caller
     checks the true residual of x).  ``steps`` counts the Krylov steps, each one product
     with B and one preconditioner solve (plus the solve of ``x0`` and of the correction).
     """
     b = np.asarray(b, dtype=np.float64)
     x = psolve(b)
+    if callable(tol):
+        tol = tol(x)
     r = b - matvec(x)
     beta = float(np.linalg.norm(r))
     if not np.isfinite(beta) or beta <= tol or maxiter <= 0:
@@ -61,6 +66,12 @@ def preconditioned_gmres(matvec, psolve, b, tol, maxiter):
         res = float(np.linalg.norm(e1 - H[:j + 2, :j + 1] @ y))
         if not np.isfinite(res) or res <= tol or hn == 0.0:
             break
+        if j >= 3 and res > tol:
+            # Predicted failure: even at twice the mean rate so far the residual would
+            # not reach tol in the steps left; stop rather than spend them.
+            rate = (res / beta) ** (1.0 / steps)
+            if res * rate ** (2 * (maxiter - steps)) > tol:
+                break
         V[j + 1] = w / hn
     if steps and np.all(np.isfinite(y)):
         x = x + psolve(V[:steps].T @ y)
