@@ -53,7 +53,7 @@ class CrashResult:
     log: list
 
 
-def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None):
+def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None, labels=None):
     """Solve (J_II + eps I) d = rhs with eps = 0 first, then growing when singular.
 
     Returns (d or None, eps, factorizations, why): ``why`` is None on success, else the
@@ -68,7 +68,7 @@ def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None):
         A = Jii if eps == 0.0 else (Jii + eps * sp.identity(Jii.shape[0], format="csc"))
         try:
             nf += 1
-            d = solve_sparse(A, rhs, deadline=deadline)
+            d = solve_sparse(A, rhs, deadline=deadline, labels=labels)
             if np.all(np.isfinite(d)):
                 return d, eps, nf, None
         except SingularFactorError:  # exactly singular
@@ -158,7 +158,8 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
                 rhs = rhs - Jc[:, act] @ d[act]
             Jii = Jc[:, inact]
             di, eps, nf, why = _solve_reduced(Jii.tocsc(), rhs, opt.crash_perturb,
-                                              eps_scale * max(1.0, nm_norm), deadline)
+                                              eps_scale * max(1.0, nm_norm), deadline,
+                                              labels=inact)
             nfact += nf
             if di is None:
                 reason = why

@@ -205,10 +205,11 @@ class SuperLUBackend:
         self.budget = budget
         self.last = FactorInfo(backend=self.name)
 
-    def splu(self, K, strict=False):
+    def splu(self, K, strict=False, labels=None):
         """(SuperLU object of the ordered K, ordering): ``lu`` factors
         ``K[o.rows][:, o.cols]`` under a symmetric ordering, K itself under COLAMD.
-        ``strict`` = COLAMD and partial pivoting, for rank detection."""
+        ``strict`` = COLAMD and partial pivoting, for rank detection.  ``labels``: see
+        :meth:`~compass_sparse.basis.ordering.OrderingCache.get`."""
         from scipy.sparse.linalg import splu
 
         K = sp.csc_matrix(K)
@@ -217,7 +218,7 @@ class SuperLUBackend:
         # rank detection keeps to COLAMD with partial pivoting: with a symmetric ordering
         # (fixed column order) the tiny pivots of a singular block marked more columns
         # than its rank deficiency (measured on the rank-repair tests)
-        o = Ordering("colamd") if strict else self.orderings.get(K)
+        o = Ordering("colamd") if strict else self.orderings.get(K, labels=labels)
         fresh = self.orderings.computed > before
         info = FactorInfo(self.name, o.method, n, int(K.nnz), o.nnz_lu, o.flops,
                           time_ordering=o.time if fresh else 0.0, ordering_reused=not fresh)
@@ -256,9 +257,9 @@ class SuperLUBackend:
         self.last.time_factor = time.perf_counter() - t0
         return LUFactors(L, U, row_order, col_order)
 
-    def solve(self, K, b):
+    def solve(self, K, b, labels=None):
         """x with K x = b, from one factorization (no factors extracted)."""
-        lu, o = self.splu(K)
+        lu, o = self.splu(K, labels=labels)
         b = np.asarray(b, dtype=np.float64)
         if o.method == "colamd":
             return lu.solve(b)
@@ -455,19 +456,21 @@ def _dense_solve(A, b):
         return sla.lu_solve((lu, piv), np.asarray(b, dtype=np.float64), check_finite=False)
 
 
-def solve_sparse(A, b, deadline=None):
+def solve_sparse(A, b, deadline=None, labels=None):
     """Solve A x = b (A square sparse) by one LU in the automatic ordering (or the
     environment's choice, as for the basis); raises :class:`SingularFactorError` when A is
     exactly singular, and :class:`FactorBudgetError` when the factorization's estimate does
     not fit in the time left before ``deadline`` (a ``time.perf_counter()`` value).  For the
-    crash, whose reduced Jacobians are large CGE blocks too."""
+    crash, whose reduced Jacobians are large CGE blocks too: ``labels``, the increasing
+    indices of the principal submatrix A, let the ordering of a neighbouring index set be
+    carried over (:mod:`compass_sparse.basis.ordering`)."""
     if A.shape[0] <= DENSE_SOLVE_MAX_N:
         return _dense_solve(A, b)
     b_ = make_backend(budget=FactorBudget(deadline=deadline) if deadline is not None else None)
     if isinstance(b_, AutoBackend):
         b_ = b_.small if A.shape[0] < AUTO_SYMMETRIC_MIN_N else b_.large
     if isinstance(b_, SuperLUBackend):
-        return b_.solve(A, b)
+        return b_.solve(A, b, labels=labels)
     f = b_.factor(sp.csc_matrix(A))     # UMFPACK: solve with its factors
     from scipy.sparse.linalg import spsolve_triangular
 
