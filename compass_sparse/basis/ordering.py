@@ -60,6 +60,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._jit import njit
+from .._matching import column_matching
 
 log = logging.getLogger(__name__)
 
@@ -129,11 +130,9 @@ def zero_free_diagonal(K):
     # counted on would be lost: measured 3.2e6 instead of 2.0e6 on a CGE basis block)
     nz = K.data != 0.0
     cols = np.repeat(np.arange(K.shape[1], dtype=_I), np.diff(K.indptr))
-    P = sp.csr_matrix((np.ones(int(nz.sum())), (K.indices[nz], cols[nz])), shape=K.shape)
+    P = sp.csc_matrix((np.ones(int(nz.sum())), (K.indices[nz], cols[nz])), shape=K.shape)
     # a column-perfect matching of K: match[j] = row matched to column j
-    from scipy.sparse.csgraph import maximum_bipartite_matching  # lazy: import cost
-
-    m = maximum_bipartite_matching(P, perm_type="row")
+    m = column_matching(P)
     if np.any(m < 0):
         return None
     return m.astype(_I)
