@@ -232,6 +232,7 @@ class NMSSolver:
         self.passes = {"crash": PassStats(), "path": PassStats(), "fallback": PassStats()}
         self.linearizer = None
         self.bm = None
+        self._crash_factors = None  # the crash's last LU, offered to the next basis
         self.basis: WarmBasis | None = None
         self.rng = np.random.default_rng(options.seed)
         self.flat_rejections = 0
@@ -320,6 +321,9 @@ class NMSSolver:
             self.bm = self.manager_factory(M)
         else:
             self.bm.set_matrix(M)
+        if self._crash_factors is not None and hasattr(self.bm, "offer_factors"):
+            self.bm.offer_factors(*self._crash_factors)
+        self._crash_factors = None
         r = cur.f + x - cur.z  # normal map of the linearization at x
         limit = opt.minor_limit(self.n)
         t0 = time.perf_counter()
@@ -397,6 +401,7 @@ class NMSSolver:
                 self._consider(pt.z, pt.f, pt.phi, pt.psi)
                 if pt.psi <= opt.nms_initial_reference_factor * cur.psi:
                     cur, x = pt, cr.x
+                    self._crash_factors = cr.factors
         elif self.passes["crash"].reason == "":
             self.passes["crash"].reason = (
                 "crash_method none" if opt.crash_method == "none"

@@ -67,7 +67,7 @@ import scipy.sparse as sp
 from .._blas import single_threaded_blas
 from ..exceptions import CompassError, ProblemError, ShapeError, SingularBasisError
 from . import _kernels as kern
-from .backends import FactorBudget, make_backend
+from .backends import BYTES_PER_ENTRY, FactorBudget, make_backend
 from .repair import select_regular_block
 from .types import (KIND_DENSE, KIND_M, KIND_UNIT, BasisOptions, BasisStats,
                     FactorReport, UpdateStatus)
@@ -134,6 +134,8 @@ class BasisManager:
         self._reusing = False   # the held factors belong to an older basis (GMRES solves)
         self._held = None       # (kinds, indices, signs) of the basis of the held factors
         self._reuse_aged = False
+        self._offered = None    # (labels, HeldLU) of a principal block of M, e.g. the crash's
+        self._psolve = self._solve_quiet   # the preconditioner of the solves when reusing
         self.stats = BasisStats()
         self.last_report = FactorReport()
         kern.warmup()
@@ -269,7 +271,7 @@ class BasisManager:
         indices = indices.copy()
         indices[~nd] = 0
         self._kinds, self._indices, self._signs = kinds.copy(), indices, signs.copy()
-        if self._can_reuse():
+        if self._can_reuse() or self._offer_fits():
             self._rebuild_maps()
             self._factored = True
             self._reusing = True
@@ -282,9 +284,66 @@ class BasisManager:
 
     def _can_reuse(self):
         h = self._held
-        return (self.options.reuse_factors and h is not None and not self._reuse_aged
-                and np.array_equal(h[0], self._kinds) and np.array_equal(h[1], self._indices)
-                and np.array_equal(h[2], self._signs))
+        ok = (self.options.reuse_factors and h is not None and not self._reuse_aged
+              and np.array_equal(h[0], self._kinds) and np.array_equal(h[1], self._indices)
+              and np.array_equal(h[2], self._signs))
+        if ok:
+            self._psolve = self._solve_quiet
+        return ok
+
+    def offer_factors(self, labels, held):
+        """Offer the LU ``held`` (a :class:`~compass_sparse.basis.backends.HeldLU`) of a
+        matrix close to the principal block ``M[labels, labels]`` (increasing labels), e.g.
+        the crash's last reduced Jacobian: a later :meth:`factor` of a basis whose M
+        columns are exactly ``labels`` and whose unit columns cover the other rows solves
+        on it by GMRES instead of factoring (``reuse_factors``; the same fallbacks)."""
+        labels = np.asarray(labels, dtype=_I)
+        if (self.options.reuse_factors and held is not None and held.n == labels.size
+                and labels.size and np.all(np.diff(labels) > 0) and labels[-1] < self.n):
+            self._offered = (labels, held)
+
+    def _offer_fits(self):
+        if self._offered is None or self._reuse_aged or not self.options.reuse_factors:
+            return False
+        labels = self._offered[0]
+        k, i = self._kinds, self._indices
+        km, ku = k == KIND_M, k == KIND_UNIT
+        if not np.all(km | ku) or km.sum() != labels.size:
+            return False
+        if not np.array_equal(np.sort(i[km]), labels):
+            return False
+        cov = np.zeros(self.n, dtype=bool)
+        cov[i[ku]] = True
+        if cov.sum() != ku.sum() or cov[labels].any():
+            return False
+        self._psolve = self._offered_solve
+        # the factors in use are the offered ones: report their figures
+        held, st = self._offered[1], self.stats
+        o = held.ordering
+        st.backend, st.ordering = "superlu", o.method
+        st.est_nnz_lu = max(st.est_nnz_lu, o.nnz_lu)
+        st.est_flops = max(st.est_flops, o.flops)
+        if o.nnz_lu >= 0:
+            st.est_bytes = max(st.est_bytes, BYTES_PER_ENTRY * o.nnz_lu)
+        st.max_nnz_lu = max(st.max_nnz_lu, int(getattr(held.lu, "nnz", 0)))
+        return True
+
+    def _offered_solve(self, v):
+        """P^{-1} v for P the current basis with its M block on ``labels`` replaced by the
+        offered matrix: the M columns on the labelled rows first, then the unit columns
+        (they cover the other rows)."""
+        labels, held = self._offered
+        k, i, g = self._kinds, self._indices, self._signs
+        y = held.solve(v[labels])                 # (M_LL) y = v_L, y by label
+        x = np.empty(self.n)
+        km = np.flatnonzero(k == KIND_M)
+        x[km] = y[np.searchsorted(labels, i[km])] / g[km]
+        yfull = np.zeros(self.n)
+        yfull[labels] = y
+        t = self._M @ yfull
+        ku = np.flatnonzero(k == KIND_UNIT)
+        x[ku] = (v[i[ku]] - t[i[ku]]) / g[ku]
+        return x
 
     @property
     def reusing(self) -> bool:
@@ -314,7 +373,7 @@ class BasisManager:
             return 0.5 * o.reuse_tolerance * (bn + nb * float(np.abs(x0).max()))
 
         with single_threaded_blas():
-            x, steps, _ = preconditioned_gmres(self.matvec, self._solve_quiet, rhs, target,
+            x, steps, _ = preconditioned_gmres(self.matvec, self._psolve, rhs, target,
                                                o.reuse_iterations)
         st = self.stats
         st.reuse_solves += 1
@@ -492,6 +551,8 @@ class BasisManager:
         self._factored = True
         self._reusing = False
         self._held = None
+        self._offered = None
+        self._psolve = self._solve_quiet
         self._reuse_aged = False
         self._threshold_pivoting = bool(mk) and self._backend.last.ordering in ("amd", "metis")
         self._residual_refactored = False

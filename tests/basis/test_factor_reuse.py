@@ -179,3 +179,60 @@ def test_reuse_option_validation():
         BasisOptions(reuse_tolerance=1e-3)
     with pytest.raises(OptionError):
         BasisOptions(reuse_iterations=0)
+
+
+def _offer_setup(seed, move):
+    """A basis whose M columns are the labels L and whose unit columns cover the other rows,
+    and the SuperLU factors of M_LL moved by ``move`` (as the crash leaves them)."""
+    from compass_sparse.basis import KIND_UNIT
+    from compass_sparse.basis.backends import SuperLUBackend
+
+    rng = np.random.default_rng(seed)
+    n = 90
+    M = dominant_matrix(n, 0.06, rng)
+    labels = np.sort(rng.choice(n, 60, replace=False))
+    kinds = np.full(n, KIND_UNIT)
+    kinds[labels] = KIND_M
+    indices = np.arange(n)
+    signs = np.where(rng.random(n) < 0.5, -1.0, 1.0)
+    perm = rng.permutation(n)                       # slots in any order
+    table = (kinds[perm], indices[perm], signs[perm])
+    Mold = _moved(M, rng, move)
+    K = sp.csc_matrix(Mold[labels][:, labels])
+    _, held = SuperLUBackend().solve(K, np.ones(labels.size), keep=True)
+    return M, labels, held, table, rng
+
+
+@pytest.mark.parametrize("move", [1e-3, 3e-2])
+def test_offered_crash_factors_solve_the_first_basis_like_a_fresh_factorization(move):
+    M, labels, held, table, rng = _offer_setup(7, move)
+    bm = BasisManager(M, BasisOptions(reuse_factors=True))
+    bm.offer_factors(labels, held)
+    bm.factor(*table)
+    assert bm.reusing and bm.stats.factorizations == 0
+    B = dense_B(bm.kinds, bm.indices, bm.signs, M, None)
+    b = rng.standard_normal(B.shape[0])
+    x = bm.ftran(b)
+    assert bm.stats.reuse_fallbacks == 0 and bm.stats.factorizations == 0
+    assert rel_err(x, np.linalg.solve(B, b)) < 1e-10
+    assert _backward_error(B, x, b) <= 1e-12
+
+
+def test_offered_factors_of_another_block_are_not_used_and_bad_ones_fall_back():
+    M, labels, held, table, rng = _offer_setup(8, 1e-3)
+    bm = BasisManager(M, BasisOptions(reuse_factors=True))
+    bm.offer_factors(labels[1:], held)               # another block's size: ignored
+    bm.factor(*table)
+    assert not bm.reusing and bm.stats.factorizations == 1
+    # a useless preconditioner: the solve falls back to a fresh factorization
+    bad = type(held)(held.lu, held.ordering, held.n)
+    bad.solve = lambda v: -0.01 * v
+    bm2 = BasisManager(M, BasisOptions(reuse_factors=True))
+    bm2.offer_factors(labels, bad)
+    bm2.factor(*table)
+    assert bm2.reusing
+    B = dense_B(bm2.kinds, bm2.indices, bm2.signs, M, None)
+    b = rng.standard_normal(B.shape[0])
+    x = bm2.ftran(b)
+    assert bm2.stats.reuse_fallbacks == 1 and bm2.stats.factorizations == 1
+    assert _backward_error(B, x, b) <= 1e-13
