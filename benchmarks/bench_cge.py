@@ -294,12 +294,14 @@ def part_main(args, info):
 LU_FIELDS = ["family", "n_target", "n", "case", "lu", "success", "status", "natural", "time",
              "major", "crash", "factorizations", "splu_start", "fact_equiv", "ordering",
              "orderings_computed", "time_ordering", "time_factor", "est_nnz_lu", "est_gb",
-             "max_nnz_lu", "jac_nnz", "rss_delta_mb", "load", "error"]
+             "max_nnz_lu", "jac_nnz", "rss_delta_mb", "load", "reuses", "reuse_steps",
+             "reuse_fallbacks", "error"]
 
-LU_CONFIGS = {"old": "superlu:colamd", "new": ""}
+LU_CONFIGS = {"old": "superlu:colamd", "new": "", "noreuse": ""}
 """Linear algebra compared by part ``lu``: ``old`` = SuperLU with COLAMD and partial
 pivoting everywhere (what the solver did before the fill-reducing orderings), ``new`` = the
-automatic choice (``COMPASS_SPARSE_LU`` unset)."""
+automatic choice (``COMPASS_SPARSE_LU`` unset), ``noreuse`` = the automatic choice with
+``factor_reuse=False`` (every basis factored afresh)."""
 
 
 def task_splu_start(family, n_target, case):
@@ -324,14 +326,15 @@ def task_lu(family, n_target, case, lu, time_limit):
     base = rss_mb()
     load = os.getloadavg()[0]
     t = time.perf_counter()
-    res = solve_mcp(prob, options={"time_limit": float(time_limit)})
+    res = solve_mcp(prob, options={"time_limit": float(time_limit),
+                                   "factor_reuse": lu != "noreuse"})
     wall = time.perf_counter() - t
     row = dict(n=m.n, time=wall, rss_delta_mb=rss_mb() - base, load=load)
     row.update(result_fields(res, ms.F(res.x), prob.lb, prob.ub))
     row["success"] = bool(row["natural"] <= SUCCESS_TOL)
     lu_rep = getattr(res, "lu", {}) or {}
     for k in ("ordering", "orderings_computed", "time_ordering", "time_factor", "est_nnz_lu",
-              "max_nnz_lu"):
+              "max_nnz_lu", "reuses", "reuse_steps", "reuse_fallbacks"):
         row[k] = lu_rep.get(k, "")
     eb = lu_rep.get("est_bytes", -1)
     row["est_gb"] = eb / 2**30 if eb and eb > 0 else ""
