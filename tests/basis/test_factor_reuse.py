@@ -224,6 +224,16 @@ def test_offered_factors_of_another_block_are_not_used_and_bad_ones_fall_back():
     bm.offer_factors(labels[1:], held)               # another block's size: ignored
     bm.factor(*table)
     assert not bm.reusing and bm.stats.factorizations == 1
+    # factors with more fill than their ordering's estimate (off-diagonal pivots): ignored
+    from compass_sparse.basis.ordering import Ordering
+
+    est = held.ordering
+    if est.method in ("amd", "metis"):
+        low = Ordering(est.method, est.rows, est.cols, nnz_lu=held.lu.nnz - 1)
+        bm1 = BasisManager(M, BasisOptions(reuse_factors=True))
+        bm1.offer_factors(labels, type(held)(held.lu, low, held.n))
+        bm1.factor(*table)
+        assert not bm1.reusing
     # a useless preconditioner: the solve falls back to a fresh factorization
     bad = type(held)(held.lu, held.ordering, held.n)
     bad.solve = lambda v: -0.01 * v
