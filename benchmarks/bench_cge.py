@@ -291,7 +291,7 @@ def part_main(args, info):
 
 
 # =========================================================================== part lu
-LU_FIELDS = ["family", "n_target", "n", "case", "lu", "success", "status", "natural", "time",
+LU_FIELDS = ["family", "n_target", "n", "case", "lu", "rep", "success", "status", "natural", "time",
              "major", "crash", "factorizations", "splu_start", "fact_equiv", "ordering",
              "orderings_computed", "time_ordering", "time_factor", "est_nnz_lu", "est_gb",
              "max_nnz_lu", "jac_nnz", "rss_delta_mb", "load", "reuses", "reuse_steps",
@@ -350,9 +350,11 @@ def part_lu(args, info):
                               ("dynamic", ("ksub10", "ktax25"))):
             if family not in args.families:
                 continue
-            for case in cases:
+            for case, rep in ((c, k) for c in cases for k in range(args.lu_repeats)):
                 if args.cases and case not in args.cases:
                     continue
+                # (with --lu-repeats the reference and the configurations alternate, so
+                # that a change of the machine's load hits all of them alike)
                 ref = {}
                 if n <= args.splu_max_n:
                     ref = run_forked(task_splu_start, 700, family=family, n_target=int(n),
@@ -361,7 +363,7 @@ def part_lu(args, info):
                     row = run_forked(task_lu, args.time_limit + 60 + n / 500, family=family,
                                      n_target=int(n), case=case, lu=lu,
                                      time_limit=args.time_limit)
-                    row.update(family=family, n_target=int(n), case=case, lu=lu)
+                    row.update(family=family, n_target=int(n), case=case, lu=lu, rep=rep)
                     row.setdefault("success", False)
                     if ref.get("splu_start"):
                         row["splu_start"] = ref["splu_start"]
@@ -911,6 +913,8 @@ def main(argv=None):
     ap.add_argument("--lu", nargs="+", default=list(LU_CONFIGS), choices=list(LU_CONFIGS),
                     help="linear algebra compared by part lu")
     ap.add_argument("--time-limit", type=float, default=None, help="per-solve seconds")
+    ap.add_argument("--lu-repeats", type=int, default=1,
+                    help="part lu: repeats of (reference, configurations), alternating")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--suffix", default=None, help="CSV name suffix (default '' / '_quick')")
     ap.add_argument("--families", nargs="+", default=["static", "dynamic"])
