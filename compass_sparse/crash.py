@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from ._matching import column_matching
 from .basis.backends import SingularFactorError, solve_sparse
 from .exceptions import FactorBudgetError
 from .merit import fb_phi, normal_map_at, project
@@ -53,6 +54,15 @@ class CrashResult:
     log: list
 
 
+def _numerical(A):
+    """A without its stored zeros (the pattern that decides structural regularity)."""
+    if np.all(A.data != 0.0):
+        return A
+    A = A.copy()
+    A.eliminate_zeros()
+    return A
+
+
 def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None):
     """Solve (J_II + eps I) d = rhs with eps = 0 first, then growing when singular.
 
@@ -62,6 +72,11 @@ def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None):
     fit in the time left is not started)."""
     eps = 0.0
     nf = 0
+    if perturb and Jii.shape[0] and np.any(column_matching(_numerical(Jii)) < 0):
+        # Structurally singular: no value of its entries makes it regular, so the
+        # unperturbed factorization can only fail -- and without a zero-free diagonal it
+        # runs in the slow fallback ordering (40 s at n = 3e4 on the dynamic CGE model).
+        eps = eps0
     for attempt in range(6):
         if deadline is not None and time.perf_counter() > deadline:
             return None, eps, nf, "time limit"
@@ -108,6 +123,7 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
     # of the last few residuals (x2 at the start), so that the active set can change by
     # many indices at once instead of creeping one front per halved step.
     recent = [CRASH_START_FACTOR * nm_norm]
+    best = (nm_norm, z, f, x)
     for it in range(1, opt.crash_iteration_limit + 1):
         if deadline is not None and time.perf_counter() > deadline:
             reason = "time limit"
@@ -192,6 +208,13 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
             log(f"{it:5d} {changes:8d} {inact.size:9d} {nmt_norm:12.4e} {alpha:9.2e}")
         z, f, x, nm_norm = zt, ft, xt, nmt_norm
         recent = (recent + [nm_norm])[-CRASH_MEMORY:]
+        if nm_norm < best[0]:
+            best = (nm_norm, z, f, x)
         J = None
+    if best[0] < nm_norm:
+        # The non-monotone steps climbed from a better iterate (measured: 0.43 after the
+        # first step, 5.8 after the fourth, on the dynamic CGE model at n = 2.4e4): hand
+        # the best one on.
+        nm_norm, z, f, x = best
     return CrashResult(z, f, x, max(it, 0), float(np.linalg.norm(fb_phi(z, f, lb, ub))),
                        reason, time.perf_counter() - t0, nfact, rows)
