@@ -52,6 +52,9 @@ class CrashResult:
     time: float
     factorizations: int
     log: list
+    #: (labels, HeldLU): the factors of the last reduced Jacobian J[labels, labels]
+    #: (None if not kept), for the first Newton step's basis (a preconditioner)
+    factors: tuple | None = None
 
 
 def _numerical(A):
@@ -63,15 +66,17 @@ def _numerical(A):
     return A
 
 
-def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None):
-    """Solve (J_II + eps I) d = rhs with eps = 0 first, then growing when singular.
+def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None, labels=None):
+    """Solve (J_II + eps I) d = rhs with eps = 0 first (eps0 at once when J_II is
+    structurally singular), then growing when singular.
 
-    Returns (d or None, eps, factorizations, why): ``why`` is None on success, else the
-    crash's stop reason.  Each factorization is atomic, so the deadline is checked before
-    every attempt and handed to the factorization's budget (one whose estimate does not
+    Returns (d or None, eps, factorizations, why, held): ``why`` is None on success, else
+    the crash's stop reason; ``held`` the kept factors of the last matrix (or None).  Each
+    factorization is atomic, so the deadline is checked before every attempt and handed to the factorization's budget (one whose estimate does not
     fit in the time left is not started)."""
     eps = 0.0
     nf = 0
+    held = None
     if perturb and Jii.shape[0] and np.any(column_matching(_numerical(Jii)) < 0):
         # Structurally singular: no value of its entries makes it regular, so the
         # unperturbed factorization can only fail -- and without a zero-free diagonal it
@@ -79,21 +84,21 @@ def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None):
         eps = eps0
     for attempt in range(6):
         if deadline is not None and time.perf_counter() > deadline:
-            return None, eps, nf, "time limit"
+            return None, eps, nf, "time limit", None
         A = Jii if eps == 0.0 else (Jii + eps * sp.identity(Jii.shape[0], format="csc"))
         try:
             nf += 1
-            d = solve_sparse(A, rhs, deadline=deadline)
+            d, held = solve_sparse(A, rhs, deadline=deadline, labels=labels, keep=True)
             if np.all(np.isfinite(d)):
-                return d, eps, nf, None
+                return d, eps, nf, None, held
         except SingularFactorError:  # exactly singular
             pass
         except FactorBudgetError as exc:  # not started: no time or memory for it
-            return None, eps, nf - 1, f"{exc.kind} limit"
+            return None, eps, nf - 1, f"{exc.kind} limit", None
         if not perturb:
             break
         eps = eps0 if eps == 0.0 else eps * 10.0
-    return None, eps, nf, "singular reduced Jacobian"
+    return None, eps, nf, "singular reduced Jacobian", None
 
 
 def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=None,
@@ -118,6 +123,7 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
     reason = "iteration limit"
     J = J0
     it = 0
+    factors = None
     eps_scale = 1e-8
     # Non-monotone reference: the full projected Newton step is tried against the largest
     # of the last few residuals (x2 at the start), so that the active set can change by
@@ -173,14 +179,16 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
             if act.size:
                 rhs = rhs - Jc[:, act] @ d[act]
             Jii = Jc[:, inact]
-            di, eps, nf, why = _solve_reduced(Jii.tocsc(), rhs, opt.crash_perturb,
-                                              eps_scale * max(1.0, nm_norm), deadline)
+            di, eps, nf, why, held = _solve_reduced(Jii.tocsc(), rhs, opt.crash_perturb,
+                                                    eps_scale * max(1.0, nm_norm), deadline,
+                                                    labels=inact)
             nfact += nf
             if di is None:
                 reason = why
                 it -= 1
                 break
             d[inact] = di
+            factors = (inact, held) if held is not None else None
         # Search on ||F_B||: along the projected path (arc) or the segment to its end (line).
         alpha = 1.0
         accepted = False
@@ -217,4 +225,4 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
         # the best one on.
         nm_norm, z, f, x = best
     return CrashResult(z, f, x, max(it, 0), float(np.linalg.norm(fb_phi(z, f, lb, ub))),
-                       reason, time.perf_counter() - t0, nfact, rows)
+                       reason, time.perf_counter() - t0, nfact, rows, factors)
