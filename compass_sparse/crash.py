@@ -102,11 +102,14 @@ def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None, labels=None):
 
 
 def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=None,
-          log=None, on_point=None) -> CrashResult:
+          log=None, on_point=None, stats=None) -> CrashResult:
     """Projected-Newton crash from z0, a point of the box.  ``evalr`` is the problem's
     :class:`~compass_sparse.evaluation.Evaluator`; ``f0``, ``J0``: F and J at z0 when known.
     ``on_point(z, f)`` sees every trial point where F was evaluated (the caller's best point
-    may be among them, and it may stop the crash by raising)."""
+    may be among them, and it may stop the crash by raising).  ``stats`` (a
+    :class:`~compass_sparse.result.PassStats`) counts the accepted steps and the
+    factorizations as they happen, so that they are reported when ``on_point`` stops the
+    crash at a solution."""
     t0 = time.perf_counter()
     opt = options
     tol = opt.convergence_tolerance if tol is None else tol
@@ -183,6 +186,8 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
                                                     eps_scale * max(1.0, nm_norm), deadline,
                                                     labels=inact)
             nfact += nf
+            if stats is not None:
+                stats.factorizations += nf
             if di is None:
                 reason = why
                 it -= 1
@@ -200,7 +205,12 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
             ft = evalr.f(zt)
             if ft is not None:
                 if on_point is not None:
-                    on_point(zt, ft)
+                    try:
+                        on_point(zt, ft)
+                    except BaseException:
+                        if stats is not None:  # this step reached the point that stops
+                            stats.iterations += 1
+                        raise
                 xt, nmt = normal_map_at(zt, ft, lb, ub)
                 nmt_norm = float(np.linalg.norm(nmt))
                 if nmt_norm <= (1.0 - opt.crash_sigma * alpha) * max(recent):
@@ -212,6 +222,8 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
             it -= 1
             break
         rows.append((it, changes, inact.size, nmt_norm, alpha))
+        if stats is not None:
+            stats.iterations += 1
         if log is not None:
             log(f"{it:5d} {changes:8d} {inact.size:9d} {nmt_norm:12.4e} {alpha:9.2e}")
         z, f, x, nm_norm = zt, ft, xt, nmt_norm
