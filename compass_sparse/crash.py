@@ -79,8 +79,9 @@ def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None, labels=None):
 
     Returns (d or None, eps, factorizations, why, held): ``why`` is None on success, else
     the crash's stop reason; ``held`` the kept factors of the last matrix (or None).  Each
-    factorization is atomic, so the deadline is checked before every attempt and handed to the factorization's budget (one whose estimate does not
-    fit in the time left is not started)."""
+    factorization is atomic, so the deadline is checked before every attempt and handed to
+    the factorization's budget (one whose estimate does not fit in the time left is not
+    started)."""
     eps = 0.0
     nf = 0
     held = None
@@ -122,9 +123,10 @@ def _reuse_solve(J, inact, rhs, prev, nm_norm):
 
     The system is posed on U = I u I': rows and columns of I' - I are identity (those d
     are 0), so that it differs from the factored matrix by the moved Jacobian values and
-    a rank-|I' ^ I| border; GMRES absorbs both in a few steps when z moved little.  The
-    target is an inexact-Newton forcing term, ||J_II d - rhs|| <= eta ||rhs|| with
-    eta = min(1e-4, ||nm||) (bounded below by 1e-10): superlinear convergence is kept."""
+    a border whose rank is at most twice the number of indices that moved; GMRES absorbs
+    both in a few steps when z moved little.  The target is an inexact-Newton forcing
+    term, ||J_II d - rhs|| <= eta ||rhs|| with eta = min(1e-4, ||nm||) (bounded below by
+    1e-10): superlinear convergence is kept."""
     from .basis.krylov import preconditioned_gmres
 
     labels, held = prev
