@@ -130,9 +130,10 @@ class Options(OptionsMixin):
         lo=1)
     factor_reuse: bool = _opt(
         True, "a pivotal path whose start basis has the slot table of the previous path's "
-        "factors solves with GMRES preconditioned by those factors instead of factoring "
-        "(sparse basis; falls back to a fresh factorization when a solve does not reach a "
-        "backward error of 1e-12 in 30 steps, and before any pivot)")
+        "factors (or, first, the crash's last reduced Jacobian as its M block) solves with "
+        "GMRES preconditioned by those factors instead of factoring (sparse basis; falls "
+        "back to a fresh factorization when a solve does not reach a backward error of "
+        "1e-12 in 30 steps, and before any pivot)")
 
     # --- non-monotone stabilization (thesis §3.4) ---------------------------------------
     nms: bool = _opt(True, "non-monotone stabilization (False: a monotone line search: "

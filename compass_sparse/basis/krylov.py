@@ -23,10 +23,23 @@ from __future__ import annotations
 import numpy as np
 
 
+def _ps(psolve, cols):
+    """psolve on a list of vectors: one call on their (n, k) matrix (a sparse LU reads its
+    factors once for all k: 2 right-hand sides cost 1.4 of one, measured), one 1-D call
+    for a single vector."""
+    if len(cols) == 1:
+        return psolve(cols[0])[:, None]
+    return psolve(np.column_stack(cols))
+
+
 def preconditioned_gmres(matvec, psolve, b, tol, maxiter):
     """(x, steps, residual): GMRES on ``B x = b`` right-preconditioned by ``psolve``
     (``psolve(v) ~ B^{-1} v``), started from ``psolve(b)``.
 
+    ``b`` may be a matrix (n, k): k systems run in lockstep, each step one ``psolve`` of
+    the (n, k') matrix of the still-running ones (psolve must then take matrices), and x,
+    the residuals and ``tol`` (a list) are per column; ``steps`` is the number of lockstep
+    steps.
     Stops early when the residual's mean rate of decrease so far, doubled, predicts that
     ``maxiter`` steps will not reach ``tol`` (checked from the fourth step on).
     Stops when the 2-norm residual (GMRES's own estimate, exact in exact arithmetic) is at
@@ -36,43 +49,61 @@ def preconditioned_gmres(matvec, psolve, b, tol, maxiter):
     with B and one preconditioner solve (plus the solve of ``x0`` and of the correction).
     """
     b = np.asarray(b, dtype=np.float64)
-    x = psolve(b)
-    if callable(tol):
-        tol = tol(x)
-    r = b - matvec(x)
-    beta = float(np.linalg.norm(r))
-    if not np.isfinite(beta) or beta <= tol or maxiter <= 0:
-        return x, 0, beta
-    n = b.size
-    V = np.empty((maxiter + 1, n))
-    H = np.zeros((maxiter + 1, maxiter))
-    V[0] = r / beta
-    y = np.zeros(0)
-    res = beta
-    steps = 0
+    single = b.ndim == 1
+    Bm = b[:, None] if single else b
+    n, k = Bm.shape
+    X = _ps(psolve, [Bm[:, c] for c in range(k)])
+    tols = tol if isinstance(tol, (list, tuple)) else [tol] * k
+    tols = [t(X[:, c]) if callable(t) else t for c, t in enumerate(tols)]
+    R = [Bm[:, c] - matvec(X[:, c]) for c in range(k)]
+    beta = [float(np.linalg.norm(r)) for r in R]
+    res = list(beta)
+    active = [c for c in range(k) if np.isfinite(beta[c]) and beta[c] > tols[c]
+              and maxiter > 0]
+    V = {c: np.empty((maxiter + 1, n)) for c in active}
+    H = {c: np.zeros((maxiter + 1, maxiter)) for c in active}
+    y = {c: np.zeros(0) for c in active}
+    steps = {c: 0 for c in range(k)}
+    for c in active:
+        V[c][0] = R[c] / beta[c]
+    lock = 0
     for j in range(maxiter):
-        w = matvec(psolve(V[j]))
-        for _ in range(2):  # MGS, then once more for orthogonality
-            for i in range(j + 1):
-                h = float(V[i] @ w)
-                H[i, j] += h
-                w -= h * V[i]
-        hn = float(np.linalg.norm(w))
-        H[j + 1, j] = hn
-        steps = j + 1
-        e1 = np.zeros(j + 2)
-        e1[0] = beta
-        y, *_ = np.linalg.lstsq(H[:j + 2, :j + 1], e1, rcond=None)
-        res = float(np.linalg.norm(e1 - H[:j + 2, :j + 1] @ y))
-        if not np.isfinite(res) or res <= tol or hn == 0.0:
+        if not active:
             break
-        if j >= 3 and res > tol:
-            # Predicted failure: even at twice the mean rate so far the residual would
-            # not reach tol in the steps left; stop rather than spend them.
-            rate = (res / beta) ** (1.0 / steps)
-            if res * rate ** (2 * (maxiter - steps)) > tol:
-                break
-        V[j + 1] = w / hn
-    if steps and np.all(np.isfinite(y)):
-        x = x + psolve(V[:steps].T @ y)
-    return x, steps, res
+        lock = j + 1
+        Z = _ps(psolve, [V[c][j] for c in active])
+        still = []
+        for col, c in enumerate(active):
+            w = matvec(Z[:, col])
+            Vc, Hc = V[c], H[c]
+            for _ in range(2):  # MGS, then once more for orthogonality
+                for i in range(j + 1):
+                    h = float(Vc[i] @ w)
+                    Hc[i, j] += h
+                    w -= h * Vc[i]
+            hn = float(np.linalg.norm(w))
+            Hc[j + 1, j] = hn
+            steps[c] = j + 1
+            e1 = np.zeros(j + 2)
+            e1[0] = beta[c]
+            y[c], *_ = np.linalg.lstsq(Hc[:j + 2, :j + 1], e1, rcond=None)
+            res[c] = float(np.linalg.norm(e1 - Hc[:j + 2, :j + 1] @ y[c]))
+            if not np.isfinite(res[c]) or res[c] <= tols[c] or hn == 0.0:
+                continue
+            if j >= 3:
+                # Predicted failure: even at twice the mean rate so far the residual
+                # would not reach tol in the steps left; stop rather than spend them.
+                rate = (res[c] / beta[c]) ** (1.0 / steps[c])
+                if res[c] * rate ** (2 * (maxiter - steps[c])) > tols[c]:
+                    continue
+            Vc[j + 1] = w / hn
+            still.append(c)
+        active = still
+    done = [c for c in V if steps[c] and np.all(np.isfinite(y[c]))]
+    if done:
+        D = _ps(psolve, [V[c][:steps[c]].T @ y[c] for c in done])
+        for col, c in enumerate(done):
+            X[:, c] = X[:, c] + D[:, col]
+    if single:
+        return X[:, 0], lock, res[0]
+    return X, lock, res

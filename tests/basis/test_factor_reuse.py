@@ -8,7 +8,7 @@ import scipy.linalg
 import scipy.sparse as sp
 
 from basis_helpers import dense_B, dominant_dense_column, dominant_matrix, family_start, rel_err
-from compass_sparse.basis import (KIND_M, BasisManager, BasisOptions, FactorReuseFailed,
+from compass_sparse.basis import (KIND_DENSE, KIND_M, BasisManager, BasisOptions, FactorReuseFailed,
                                   UpdateStatus)
 from compass_sparse.basis.krylov import preconditioned_gmres
 
@@ -63,13 +63,18 @@ def test_reuse_agrees_with_fresh_factorization():
     x = bm.ftran(b)
     assert rel_err(x, np.linalg.solve(B, b)) < 1e-10
     assert _backward_error(B, x, b) <= 1e-12
+    # the covering vector was solved in lockstep with b: its FTRAN costs no more GMRES
+    assert bm.stats.reuse_solves == 2
+    dr = bm.ftran_column(KIND_DENSE, 0, -1.0)
+    assert bm.stats.reuse_solves == 2
+    assert rel_err(dr, np.linalg.solve(B, -r)) < 1e-10
     s = int(np.flatnonzero(np.asarray(bm.kinds) == KIND_M)[0])
     j = int(bm.indices[s])
     d = bm.ftran_column(KIND_M, j, 1.0)
     e = np.zeros(B.shape[0])
     e[s] = 1.0
     assert rel_err(d, e) < 1e-10            # B^{-1} (column s of B) = e_s
-    assert bm.stats.factorizations == 1 and bm.stats.reuse_solves == 2
+    assert bm.stats.factorizations == 1 and bm.stats.reuse_solves == 3
     # the fresh solve of the same system agrees
     fresh = BasisManager(M2, BasisOptions())
     fresh.set_dense_column(r)
@@ -224,6 +229,16 @@ def test_offered_factors_of_another_block_are_not_used_and_bad_ones_fall_back():
     bm.offer_factors(labels[1:], held)               # another block's size: ignored
     bm.factor(*table)
     assert not bm.reusing and bm.stats.factorizations == 1
+    # factors with more fill than their ordering's estimate (off-diagonal pivots): ignored
+    from compass_sparse.basis.ordering import Ordering
+
+    est = held.ordering
+    if est.method in ("amd", "metis"):
+        low = Ordering(est.method, est.rows, est.cols, nnz_lu=held.lu.nnz - 1)
+        bm1 = BasisManager(M, BasisOptions(reuse_factors=True))
+        bm1.offer_factors(labels, type(held)(held.lu, low, held.n))
+        bm1.factor(*table)
+        assert not bm1.reusing
     # a useless preconditioner: the solve falls back to a fresh factorization
     bad = type(held)(held.lu, held.ordering, held.n)
     bad.solve = lambda v: -0.01 * v
@@ -236,3 +251,24 @@ def test_offered_factors_of_another_block_are_not_used_and_bad_ones_fall_back():
     x = bm2.ftran(b)
     assert bm2.stats.reuse_fallbacks == 1 and bm2.stats.factorizations == 1
     assert _backward_error(B, x, b) <= 1e-13
+
+
+def test_gmres_in_lockstep_solves_each_column_like_alone():
+    rng = np.random.default_rng(11)
+    n = 70
+    A = np.eye(n) * 3 + rng.uniform(-1, 1, (n, n)) / n
+    lu = scipy.linalg.lu_factor(A + rng.uniform(-1, 1, (n, n)) * 0.1 / n)
+    calls = []
+
+    def psolve(v):
+        calls.append(v.shape)
+        return scipy.linalg.lu_solve(lu, v)
+
+    Bm = rng.standard_normal((n, 2))
+    X, steps, res = preconditioned_gmres(lambda v: A @ v, psolve, Bm, [1e-13, 1e-13], 25)
+    for c in range(2):
+        assert rel_err(X[:, c], np.linalg.solve(A, Bm[:, c])) < 1e-11
+        assert res[c] <= 1e-13
+    assert any(s == (n, 2) for s in calls)            # one solve served both columns
+    x1, _, _ = preconditioned_gmres(lambda v: A @ v, psolve, Bm[:, 1], 1e-13, 25)
+    assert rel_err(X[:, 1], x1) < 1e-11
