@@ -385,17 +385,18 @@ class NMSSolver:
                 and opt.crash_iteration_limit > 0):
             t0 = time.perf_counter()
             nf0, nj0 = self.p.counters.nfev, self.p.counters.njev
-            cr = crash(self.ev, cur.z, lb, ub, opt, f0=cur.f, J0=cur.J, tol=self.tol,
-                       deadline=self.deadline, log=self._crash_log,
-                       on_point=self._consider_trial)
             st = self.passes["crash"]
             st.ran = True
-            st.time += time.perf_counter() - t0
-            st.iterations += cr.iterations
-            st.factorizations += cr.factorizations
-            st.nfev += self.p.counters.nfev - nf0
-            st.njev += self.p.counters.njev - nj0
-            self.crash_its += cr.iterations
+            it0 = st.iterations
+            try:  # (a solution found by the crash stops the solve from inside it)
+                cr = crash(self.ev, cur.z, lb, ub, opt, f0=cur.f, J0=cur.J, tol=self.tol,
+                           deadline=self.deadline, log=self._crash_log,
+                           on_point=self._consider_trial, stats=st)
+            finally:
+                st.time += time.perf_counter() - t0
+                st.nfev += self.p.counters.nfev - nf0
+                st.njev += self.p.counters.njev - nj0
+                self.crash_its += st.iterations - it0
             if cr.iterations > 0 and np.all(np.isfinite(cr.f)):
                 pt = self._point(cr.z, cr.f)
                 self._consider(pt.z, pt.f, pt.phi, pt.psi)

@@ -169,6 +169,12 @@ def _check_budget(info: FactorInfo, budget: FactorBudget | None):
             "memory", f"a {info.order} x {info.order} factorization would need about "
             f"{info.est_bytes / 2**30:.1f} GiB for L + U (ordering {info.ordering}, "
             f"{info.est_nnz_lu:.3g} entries); {budget.memory_bytes / 2**30:.1f} GiB allowed")
+    if budget.deadline is not None and time.perf_counter() > budget.deadline:
+        # Past the deadline nothing is started, with or without an estimate (COLAMD has
+        # none: rank repairs and path refactorizations in it ran on past the limit).
+        raise FactorBudgetError(
+            "time", f"a {info.order} x {info.order} factorization (ordering "
+            f"{info.ordering}) after the time limit")
     if budget.deadline is not None and info.est_flops >= 0:
         left = budget.deadline - time.perf_counter()
         need = info.est_flops / FLOP_RATE
