@@ -291,15 +291,17 @@ def part_main(args, info):
 
 
 # =========================================================================== part lu
-LU_FIELDS = ["family", "n_target", "n", "case", "lu", "success", "status", "natural", "time",
+LU_FIELDS = ["family", "n_target", "n", "case", "lu", "rep", "success", "status", "natural", "time",
              "major", "crash", "factorizations", "splu_start", "fact_equiv", "ordering",
              "orderings_computed", "time_ordering", "time_factor", "est_nnz_lu", "est_gb",
-             "max_nnz_lu", "jac_nnz", "rss_delta_mb", "load", "error"]
+             "max_nnz_lu", "jac_nnz", "rss_delta_mb", "load", "reuses", "reuse_steps",
+             "reuse_fallbacks", "error"]
 
-LU_CONFIGS = {"old": "superlu:colamd", "new": ""}
+LU_CONFIGS = {"old": "superlu:colamd", "new": "", "noreuse": ""}
 """Linear algebra compared by part ``lu``: ``old`` = SuperLU with COLAMD and partial
 pivoting everywhere (what the solver did before the fill-reducing orderings), ``new`` = the
-automatic choice (``COMPASS_SPARSE_LU`` unset)."""
+automatic choice (``COMPASS_SPARSE_LU`` unset), ``noreuse`` = the automatic choice with
+``factor_reuse=False`` (every basis factored afresh)."""
 
 
 def task_splu_start(family, n_target, case):
@@ -324,14 +326,15 @@ def task_lu(family, n_target, case, lu, time_limit):
     base = rss_mb()
     load = os.getloadavg()[0]
     t = time.perf_counter()
-    res = solve_mcp(prob, options={"time_limit": float(time_limit)})
+    res = solve_mcp(prob, options={"time_limit": float(time_limit),
+                                   "factor_reuse": lu != "noreuse"})
     wall = time.perf_counter() - t
     row = dict(n=m.n, time=wall, rss_delta_mb=rss_mb() - base, load=load)
     row.update(result_fields(res, ms.F(res.x), prob.lb, prob.ub))
     row["success"] = bool(row["natural"] <= SUCCESS_TOL)
     lu_rep = getattr(res, "lu", {}) or {}
     for k in ("ordering", "orderings_computed", "time_ordering", "time_factor", "est_nnz_lu",
-              "max_nnz_lu"):
+              "max_nnz_lu", "reuses", "reuse_steps", "reuse_fallbacks"):
         row[k] = lu_rep.get(k, "")
     eb = lu_rep.get("est_bytes", -1)
     row["est_gb"] = eb / 2**30 if eb and eb > 0 else ""
@@ -347,9 +350,11 @@ def part_lu(args, info):
                               ("dynamic", ("ksub10", "ktax25"))):
             if family not in args.families:
                 continue
-            for case in cases:
+            for case, rep in ((c, k) for c in cases for k in range(args.lu_repeats)):
                 if args.cases and case not in args.cases:
                     continue
+                # (with --lu-repeats the reference and the configurations alternate, so
+                # that a change of the machine's load hits all of them alike)
                 ref = {}
                 if n <= args.splu_max_n:
                     ref = run_forked(task_splu_start, 700, family=family, n_target=int(n),
@@ -358,7 +363,7 @@ def part_lu(args, info):
                     row = run_forked(task_lu, args.time_limit + 60 + n / 500, family=family,
                                      n_target=int(n), case=case, lu=lu,
                                      time_limit=args.time_limit)
-                    row.update(family=family, n_target=int(n), case=case, lu=lu)
+                    row.update(family=family, n_target=int(n), case=case, lu=lu, rep=rep)
                     row.setdefault("success", False)
                     if ref.get("splu_start"):
                         row["splu_start"] = ref["splu_start"]
@@ -908,6 +913,8 @@ def main(argv=None):
     ap.add_argument("--lu", nargs="+", default=list(LU_CONFIGS), choices=list(LU_CONFIGS),
                     help="linear algebra compared by part lu")
     ap.add_argument("--time-limit", type=float, default=None, help="per-solve seconds")
+    ap.add_argument("--lu-repeats", type=int, default=1,
+                    help="part lu: repeats of (reference, configurations), alternating")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--suffix", default=None, help="CSV name suffix (default '' / '_quick')")
     ap.add_argument("--families", nargs="+", default=["static", "dynamic"])

@@ -41,6 +41,7 @@ PATH_NAMES: dict[str, str | None] = {
     "seed": None,
     "progress": None,
     "scaling": None,  # PATH's hidden model-scaling switches are defined otherwise
+    "factor_reuse": None,  # PATH factors every basis afresh
 }
 
 
@@ -127,6 +128,12 @@ class Options(OptionsMixin):
     factorization_update_limit: int = _opt(
         50, "Forrest–Tomlin updates before a fresh factorization (capped at max(n, 50))",
         lo=1)
+    factor_reuse: bool = _opt(
+        True, "a pivotal path whose start basis has the slot table of the previous path's "
+        "factors (or, first, the crash's last reduced Jacobian as its M block) solves with "
+        "GMRES preconditioned by those factors instead of factoring (sparse basis; falls "
+        "back to a fresh factorization when a solve does not reach a backward error of "
+        "1e-12 in 30 steps, and before any pivot)")
 
     # --- non-monotone stabilization (thesis §3.4) ---------------------------------------
     nms: bool = _opt(True, "non-monotone stabilization (False: a monotone line search: "

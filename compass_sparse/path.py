@@ -54,7 +54,7 @@ import scipy.sparse as sp
 
 from ._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
 from ._slot_kernels import slot_basis, slot_point, slot_table, start_basis
-from .basis import KIND_DENSE, KIND_M, KIND_UNIT, UpdateStatus
+from .basis import KIND_DENSE, KIND_M, KIND_UNIT, FactorReuseFailed, UpdateStatus
 from .exceptions import ShapeError, SingularBasisError
 
 _VAR_NAMES = "zwvatS"
@@ -248,6 +248,16 @@ class PivotalPath:
     def run(self, x_start, *, warm: WarmBasis | None = None, ray_start: bool = False,
             r=None) -> PathResult:
         t0 = time.perf_counter()
+        st0 = self._stats0()  # (the counts include a first attempt on reused factors)
+        try:
+            return self._run(x_start, warm, ray_start, r, t0, st0)
+        except FactorReuseFailed:
+            # The basis, solved on the factors of an older one, is singular: the manager
+            # has factored it afresh (and will not reuse at the next factor() call); the
+            # path starts again on fresh factors, repairing the basis as usual.
+            return self._run(x_start, warm, ray_start, r, t0, st0)
+
+    def _run(self, x_start, warm, ray_start, r, t0, st0) -> PathResult:
         n, lb, ub = self.n, self.lb, self.ub
         self.st = PathState(art_sign=np.ones(n, dtype=np.int64))  # a path may run again
         slack_basis = None
@@ -272,7 +282,6 @@ class PivotalPath:
                     basic[inward] = VAR_Z
         self.st.r = r
         self.st.zval = z.copy()  # values of z (basic or not); basic ones refreshed from xb
-        st0 = self._stats0()
         if not r.any():
             # Already a solution of the linear problem: nothing to pivot.
             res = PathResult(LinearCode.SOLVED, z, w, v, 1.0, basis=WarmBasis(basic.copy()),

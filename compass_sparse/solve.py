@@ -59,7 +59,8 @@ def _manager_factory(opt: Options, deadline=None):
             return DenseBasis(M)
         from .basis import BasisManager, BasisOptions
 
-        return BasisManager(M, options=BasisOptions(update_limit=limit, deadline=deadline))
+        return BasisManager(M, options=BasisOptions(update_limit=limit, deadline=deadline,
+                                                    reuse_factors=opt.factor_reuse))
 
     return make
 
@@ -419,7 +420,8 @@ def _lu_report(bm) -> dict:
     return dict(backend=st.backend, ordering=st.ordering,
                 orderings_computed=st.orderings_computed, time_ordering=st.time_ordering,
                 time_factor=st.time_factor, est_nnz_lu=st.est_nnz_lu, est_flops=st.est_flops,
-                est_bytes=st.est_bytes, max_nnz_lu=st.max_nnz_lu,
+                est_bytes=st.est_bytes, max_nnz_lu=st.max_nnz_lu, reuses=st.reuses,
+                reuse_steps=st.reuse_steps, reuse_fallbacks=st.reuse_fallbacks,
                 peak_rss_bytes=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024)
 
 

@@ -233,7 +233,7 @@ def test_time_limit_holds_through_the_crash_factorizations(clock, monkeypatch):
     FACTOR = 0.3
     calls = {"n": 0}
 
-    def slow_singular(A, b, deadline=None):
+    def slow_singular(A, b, deadline=None, labels=None, keep=False):
         calls["n"] += 1
         clock.now += FACTOR
         raise SingularFactorError("singular (simulated)")
@@ -247,6 +247,32 @@ def test_time_limit_holds_through_the_crash_factorizations(clock, monkeypatch):
     assert r.status is Status.TIME_LIMIT or "time limit" in r.message, r.message
     assert calls["n"] <= 2, calls
     assert clock.now - start <= 0.5 + FACTOR + COST + 1e-9, clock.now - start
+
+
+def test_time_limit_holds_through_the_levenberg_marquardt_factorizations(clock, monkeypatch):
+    # The LM step tried up to four Cholesky factorizations (growing mu) without looking
+    # at the clock; each is atomic (12 s of H^T H on the dynamic CGE model at n = 3e4).
+    import compass_sparse.fallback as fallback_module
+    from compass_sparse.fallback import lm_step
+    from compass_sparse.options import Options
+
+    FACTOR = 0.3
+    calls = {"n": 0}
+
+    def slow_failing(A, b):
+        calls["n"] += 1
+        clock.now += FACTOR
+        raise RuntimeError("not positive definite (simulated)")
+
+    monkeypatch.setattr(fallback_module, "spd_solve", slow_failing)
+    p = MCP(lambda x: x - 1.0 + 0.01 * (_B @ x), lambda x: sp.csc_matrix(np.eye(N) + 0.01 * _B),
+            -np.inf, np.inf, np.zeros(N))
+    z = p.x0
+    start = clock.now
+    assert lm_step(p.evaluator, z, p.F(z), None, p.lb, p.ub, Options(),
+                   deadline=start + 0.5) is None
+    assert calls["n"] == 2, calls         # started at 0 and 0.3 s, not at 0.6 and 0.9 s
+    assert clock.now - start <= 0.5 + FACTOR + 1e-9
 
 
 @pytest.mark.parametrize("where", ["F", "J"])

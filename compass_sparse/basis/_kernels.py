@@ -145,8 +145,10 @@ def warmup():
     dead = np.zeros(1, dtype=np.bool_)
     utsolve(i1, i00, f0, dead, 1, i0, i0, i00, f0, d, w, 0, 1)
     dot_from(w, w, 0)
-    assemble_triangle(1, 0, i0, i00, f0, True, i0, i00, f0, i0)
-    assemble_triangle(1, 0, i0, i00, f0, False, i0, i00, f0, i0)
+    for it in (np.int64, np.int32):  # (the factors' indices come in either width)
+        j0, j00 = i0.astype(it), i00.astype(it)
+        assemble_triangle(1, 0, j0, j00, f0, True, j0, j00, f0, i0)
+        assemble_triangle(1, 0, j0, j00, f0, False, j0, j00, f0, i0)
 
 
 @njit(cache=True)

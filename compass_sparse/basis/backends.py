@@ -169,6 +169,12 @@ def _check_budget(info: FactorInfo, budget: FactorBudget | None):
             "memory", f"a {info.order} x {info.order} factorization would need about "
             f"{info.est_bytes / 2**30:.1f} GiB for L + U (ordering {info.ordering}, "
             f"{info.est_nnz_lu:.3g} entries); {budget.memory_bytes / 2**30:.1f} GiB allowed")
+    if budget.deadline is not None and time.perf_counter() > budget.deadline:
+        # Past the deadline nothing is started, with or without an estimate (COLAMD has
+        # none: rank repairs and path refactorizations in it ran on past the limit).
+        raise FactorBudgetError(
+            "time", f"a {info.order} x {info.order} factorization (ordering "
+            f"{info.ordering}) after the time limit")
     if budget.deadline is not None and info.est_flops >= 0:
         left = budget.deadline - time.perf_counter()
         need = info.est_flops / FLOP_RATE
@@ -205,10 +211,11 @@ class SuperLUBackend:
         self.budget = budget
         self.last = FactorInfo(backend=self.name)
 
-    def splu(self, K, strict=False):
+    def splu(self, K, strict=False, labels=None):
         """(SuperLU object of the ordered K, ordering): ``lu`` factors
         ``K[o.rows][:, o.cols]`` under a symmetric ordering, K itself under COLAMD.
-        ``strict`` = COLAMD and partial pivoting, for rank detection."""
+        ``strict`` = COLAMD and partial pivoting, for rank detection.  ``labels``: see
+        :meth:`~compass_sparse.basis.ordering.OrderingCache.get`."""
         from scipy.sparse.linalg import splu
 
         K = sp.csc_matrix(K)
@@ -217,7 +224,7 @@ class SuperLUBackend:
         # rank detection keeps to COLAMD with partial pivoting: with a symmetric ordering
         # (fixed column order) the tiny pivots of a singular block marked more columns
         # than its rank deficiency (measured on the rank-repair tests)
-        o = Ordering("colamd") if strict else self.orderings.get(K)
+        o = Ordering("colamd") if strict else self.orderings.get(K, labels=labels)
         fresh = self.orderings.computed > before
         info = FactorInfo(self.name, o.method, n, int(K.nnz), o.nnz_lu, o.flops,
                           time_ordering=o.time if fresh else 0.0, ordering_reused=not fresh)
@@ -256,14 +263,28 @@ class SuperLUBackend:
         self.last.time_factor = time.perf_counter() - t0
         return LUFactors(L, U, row_order, col_order)
 
-    def solve(self, K, b):
-        """x with K x = b, from one factorization (no factors extracted)."""
-        lu, o = self.splu(K)
+    def solve(self, K, b, labels=None, keep=False):
+        """x with K x = b, from one factorization (no factors extracted); with ``keep``
+        also the :class:`HeldLU` of K."""
+        lu, o = self.splu(K, labels=labels)
+        held = HeldLU(lu, o, K.shape[0])
+        x = held.solve(b)
+        return (x, held) if keep else x
+
+
+class HeldLU:
+    """A SuperLU factorization of a square K kept for later solves with K (e.g. as the
+    preconditioner of a nearby matrix): ``solve(b)`` = K^{-1} b."""
+
+    def __init__(self, lu, ordering, n):
+        self.lu, self.ordering, self.n = lu, ordering, n
+
+    def solve(self, b):
         b = np.asarray(b, dtype=np.float64)
-        if o.method == "colamd":
-            return lu.solve(b)
+        if self.ordering.method == "colamd":
+            return self.lu.solve(b)
         x = np.empty_like(b)
-        x[o.cols] = lu.solve(b[o.rows])
+        x[self.ordering.cols] = self.lu.solve(b[self.ordering.rows])
         return x
 
 
@@ -455,19 +476,28 @@ def _dense_solve(A, b):
         return sla.lu_solve((lu, piv), np.asarray(b, dtype=np.float64), check_finite=False)
 
 
-def solve_sparse(A, b, deadline=None):
+def solve_sparse(A, b, deadline=None, labels=None, keep=False):
     """Solve A x = b (A square sparse) by one LU in the automatic ordering (or the
     environment's choice, as for the basis); raises :class:`SingularFactorError` when A is
     exactly singular, and :class:`FactorBudgetError` when the factorization's estimate does
-    not fit in the time left before ``deadline`` (a ``time.perf_counter()`` value).  For the
-    crash, whose reduced Jacobians are large CGE blocks too."""
+    not fit in the time left before ``deadline`` (a ``time.perf_counter()`` value) or in 80%
+    of the available memory.  For the crash, whose reduced Jacobians are large CGE blocks
+    too: ``labels``, the increasing indices of the principal submatrix A, let the ordering
+    of a neighbouring index set be carried over (:mod:`compass_sparse.basis.ordering`).
+    ``keep``: return ``(x, held)`` with held a :class:`HeldLU` of A, or None when the
+    factors were not kept (the dense and UMFPACK routes)."""
     if A.shape[0] <= DENSE_SOLVE_MAX_N:
-        return _dense_solve(A, b)
-    b_ = make_backend(budget=FactorBudget(deadline=deadline) if deadline is not None else None)
+        x = _dense_solve(A, b)
+        return (x, None) if keep else x
+    # the memory check of the basis manager applies here too (80% of what is available):
+    # the crash factors blocks as large as the basis'
+    avail = FactorBudget.available_memory()
+    b_ = make_backend(budget=FactorBudget(deadline=deadline,
+                                          memory_bytes=0.8 * avail if avail else None))
     if isinstance(b_, AutoBackend):
         b_ = b_.small if A.shape[0] < AUTO_SYMMETRIC_MIN_N else b_.large
     if isinstance(b_, SuperLUBackend):
-        return b_.solve(A, b)
+        return b_.solve(A, b, labels=labels, keep=keep)
     f = b_.factor(sp.csc_matrix(A))     # UMFPACK: solve with its factors
     from scipy.sparse.linalg import spsolve_triangular
 
@@ -477,7 +507,7 @@ def solve_sparse(A, b, deadline=None):
     y = spsolve_triangular(sp.csr_matrix(f.U), y, lower=False)
     x = np.empty_like(y)
     x[f.col_order] = y
-    return x
+    return (x, None) if keep else x
 
 
 def make_backend(name="auto", ordering="auto", diag_pivot_thresh=None, budget=None):

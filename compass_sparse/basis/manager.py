@@ -44,27 +44,47 @@ Tolerances and triggers (defaults in :class:`~compass_sparse.basis.types.BasisOp
 ``residual_check_frequency`` = 20 FTRANs against ``residual_tolerance`` 1e-10, and
 ``rank_tolerance`` 1e-11 for the rank repair of a fresh factorization (see
 :mod:`compass_sparse.basis.repair`).
+
+Reused factors (``reuse_factors``).  Successive Newton steps factor bases with the same
+slot table whose M columns have moved a little.  After :meth:`set_matrix` with an unchanged
+pattern, :meth:`factor` with the slot table of the held factors keeps them: they are the
+LU of an older basis P, and each solve with the new B runs GMRES preconditioned by P
+(:mod:`compass_sparse.basis.krylov`).  A solve is accepted only when its true backward
+error is at most ``reuse_tolerance``; otherwise, and before any column replacement or
+BTRAN, the basis is factored afresh.  Should that fresh factorization find B singular (a
+rank repair changes the slot table the caller knows), :class:`FactorReuseFailed` is
+raised: the caller starts again with :meth:`factor`, which then factors afresh.
 """
 
 from __future__ import annotations
 
+import logging
 import time
 
 import numpy as np
 import scipy.sparse as sp
 
+from .._blas import single_threaded_blas
 from ..exceptions import CompassError, ProblemError, ShapeError, SingularBasisError
 from . import _kernels as kern
-from .backends import FactorBudget, make_backend
+from .backends import BYTES_PER_ENTRY, FactorBudget, make_backend
 from .repair import select_regular_block
 from .types import (KIND_DENSE, KIND_M, KIND_UNIT, BasisOptions, BasisStats,
                     FactorReport, UpdateStatus)
 
 _I = np.int64
 
+log = logging.getLogger(__name__)
+
 _REFINE_ABOVE = 1e-14
 """A residual check that finds a backward error above this (and below the residual
 tolerance) refines the solution once (:meth:`BasisManager._refine`)."""
+
+
+class FactorReuseFailed(CompassError):
+    """A basis solved on reused factors turned out singular when factored afresh: its rank
+    repair changed the slot table, so the caller must call :meth:`BasisManager.factor`
+    again (it factors afresh)."""
 
 
 def _readonly(a):
@@ -111,6 +131,12 @@ class BasisManager:
         self._version = 0
         self._cache = None
         self._n_ftran = 0
+        self._reusing = False   # the held factors belong to an older basis (GMRES solves)
+        self._held = None       # (kinds, indices, signs) of the basis of the held factors
+        self._reuse_aged = False
+        self._offered = None    # (labels, HeldLU) of a principal block of M, e.g. the crash's
+        self._psolve = self._solve_quiet   # the preconditioner of the solves when reusing
+        self._prefetch = None   # (version, B^{-1} r) solved with an FTRAN on reused factors
         self.stats = BasisStats()
         self.last_report = FactorReport()
         kern.warmup()
@@ -134,9 +160,17 @@ class BasisManager:
 
     def set_matrix(self, M):
         """Replace M (same order; the pattern may change). The factors become stale:
-        call :meth:`factor` or :meth:`refactor` before the next solve."""
+        call :meth:`factor` or :meth:`refactor` before the next solve (with
+        ``reuse_factors`` and an unchanged pattern, :meth:`factor` may keep them as the
+        preconditioner of the new basis)."""
+        old = self._M
         self._load_matrix(M)
         self._invalidate()
+        new = self._M
+        if not (new.indptr.size == old.indptr.size and new.indices.size == old.indices.size
+                and np.array_equal(new.indptr, old.indptr)
+                and np.array_equal(new.indices, old.indices)):
+            self._held = None   # another pattern: the held factors are no preconditioner
 
     def set_dense_column(self, r):
         """Set the dense column (covering vector) r, float64 of length n. If a slot holds
@@ -151,6 +185,10 @@ class BasisManager:
             self._invalidate()
 
     def _invalidate(self):
+        self._prefetch = None
+        if self._factored and not self._reusing and self.options.reuse_factors:
+            # the factors stay valid for the basis they were computed for: keep what it was
+            self._held = (self._kinds.copy(), self._indices.copy(), self._signs.copy())
         self._factored = False
         self._cache = None
         self._version += 1
@@ -235,10 +273,163 @@ class BasisManager:
         indices = indices.copy()
         indices[~nd] = 0
         self._kinds, self._indices, self._signs = kinds.copy(), indices, signs.copy()
+        self._prefetch = None
+        if self._can_reuse() or self._offer_fits():
+            self._rebuild_maps()
+            self._factored = True
+            self._reusing = True
+            self._cache = None
+            self._version += 1
+            self.stats.reuses += 1
+            self.last_report = FactorReport()
+            return self.last_report
         return self._factorize()
 
+    def _can_reuse(self):
+        h = self._held
+        ok = (self.options.reuse_factors and h is not None and not self._reuse_aged
+              and np.array_equal(h[0], self._kinds) and np.array_equal(h[1], self._indices)
+              and np.array_equal(h[2], self._signs))
+        if ok:
+            self._psolve = self._solve_quiet
+        return ok
+
+    def offer_factors(self, labels, held):
+        """Offer the LU ``held`` (a :class:`~compass_sparse.basis.backends.HeldLU`) of a
+        matrix close to the principal block ``M[labels, labels]`` (increasing labels), e.g.
+        the crash's last reduced Jacobian: a later :meth:`factor` of a basis whose M
+        columns are exactly ``labels`` and whose unit columns cover the other rows solves
+        on it by GMRES instead of factoring (``reuse_factors``; the same fallbacks)."""
+        labels = np.asarray(labels, dtype=_I)
+        if not (self.options.reuse_factors and held is not None and held.n == labels.size
+                and labels.size and np.all(np.diff(labels) > 0) and labels[-1] < self.n):
+            return
+        est, nnz = held.ordering.nnz_lu, int(getattr(held.lu, "nnz", 0))
+        if est > 0 and nnz > est:
+            # Pivoting left the diagonal the ordering counted on (the crash's points are
+            # far from the solution): each solve with these factors costs more than with
+            # a fresh factorization of the basis (2x fill measured on the static CGE model
+            # at n = 3e4, tax abolition; the solve took 16 s with them, 13 s without).
+            return
+        self._offered = (labels, held)
+
+    def _offer_fits(self):
+        if self._offered is None or self._reuse_aged or not self.options.reuse_factors:
+            return False
+        labels = self._offered[0]
+        k, i = self._kinds, self._indices
+        km, ku = k == KIND_M, k == KIND_UNIT
+        if not np.all(km | ku) or km.sum() != labels.size:
+            return False
+        if not np.array_equal(np.sort(i[km]), labels):
+            return False
+        cov = np.zeros(self.n, dtype=bool)
+        cov[i[ku]] = True
+        if cov.sum() != ku.sum() or cov[labels].any():
+            return False
+        self._psolve = self._offered_solve
+        # the factors in use are the offered ones: report their figures
+        held, st = self._offered[1], self.stats
+        o = held.ordering
+        st.backend, st.ordering = "superlu", o.method
+        st.est_nnz_lu = max(st.est_nnz_lu, o.nnz_lu)
+        st.est_flops = max(st.est_flops, o.flops)
+        if o.nnz_lu >= 0:
+            st.est_bytes = max(st.est_bytes, BYTES_PER_ENTRY * o.nnz_lu)
+        st.max_nnz_lu = max(st.max_nnz_lu, int(getattr(held.lu, "nnz", 0)))
+        return True
+
+    def _offered_solve(self, v):
+        """P^{-1} v for P the current basis with its M block on ``labels`` replaced by the
+        offered matrix: the M columns on the labelled rows first, then the unit columns
+        (they cover the other rows)."""
+        labels, held = self._offered
+        k, i, g = self._kinds, self._indices, self._signs
+        g = g if v.ndim == 1 else g[:, None]      # (v may hold several right-hand sides)
+        y = held.solve(v[labels])                 # (M_LL) y = v_L, y by label
+        x = np.empty(v.shape)
+        km = np.flatnonzero(k == KIND_M)
+        x[km] = y[np.searchsorted(labels, i[km])] / g[km]
+        ku = np.flatnonzero(k == KIND_UNIT)
+        if ku.size:
+            yfull = np.zeros(v.shape)
+            yfull[labels] = y
+            t = self._M @ yfull
+            x[ku] = (v[i[ku]] - t[i[ku]]) / g[ku]
+        return x
+
+    @property
+    def reusing(self) -> bool:
+        """True while solves run on the factors of an older basis (GMRES)."""
+        return self._factored and self._reusing
+
+    def _leave_reuse(self):
+        """Factor the current slot table afresh; raise :class:`FactorReuseFailed` when the
+        basis turns out singular (its repair changed the slot table)."""
+        self.stats.reuse_fallbacks += 1
+        rep = self._factorize()
+        if rep.rank_deficiency:
+            raise FactorReuseFailed("the basis solved on reused factors is singular")
+
+    def _reuse_solve(self, rhs, more=()):
+        """x with B x = rhs by GMRES on the held factors, or None when it does not reach
+        ``reuse_tolerance`` (backward error) within ``reuse_iterations`` steps.  With
+        ``more`` (other right-hand sides), the list of the solutions of all, solved in
+        lockstep (one preconditioner solve of all per step)."""
+        from .krylov import preconditioned_gmres
+
+        o = self.options
+        nb = self._norm_inf_B()
+        cols = [rhs, *more]
+        bns = [float(np.abs(c).max()) if self.n else 0.0 for c in cols]
+
+        # GMRES's 2-norm target is a guide (||x|| is estimated by ||x0||, x0 = P^{-1} rhs;
+        # the 2-norm bounds the inf-norm); the check below decides.  Its vector operations
+        # are level-1 BLAS: threads only slow them (10x measured at n = 3e4, busy machine).
+        def target(bn):
+            return lambda x0: 0.5 * o.reuse_tolerance * (bn + nb * float(np.abs(x0).max()))
+
+        def berr(x, c):
+            if not np.all(np.isfinite(x)):
+                return np.inf, np.inf
+            res = float(np.abs(self.matvec(x) - cols[c]).max()) if self.n else 0.0
+            den = bns[c] + nb * (float(np.abs(x).max()) if self.n else 0.0)
+            return (res / den if den > 0 else res), den
+
+        st = self.stats
+        st.reuse_solves += len(cols)
+        with single_threaded_blas():
+            X, steps, _ = preconditioned_gmres(
+                self.matvec, self._psolve, cols[0] if not more else np.column_stack(cols),
+                target(bns[0]) if not more else [target(b) for b in bns],
+                o.reuse_iterations)
+            X = [X] if not more else [X[:, c] for c in range(len(cols))]
+            out = []
+            for c, x in enumerate(X):
+                err, den = berr(x, c)
+                if o.reuse_tolerance < err <= 1e3 * o.reuse_tolerance \
+                        and steps < o.reuse_iterations:
+                    # One restart: GMRES's own residual estimate may end just short of
+                    # the true backward error (2.9e-12 for 1e-12 measured at n = 1e5);
+                    # when it is that close, a correction continues from x with the
+                    # steps left instead of factoring afresh.
+                    dx, k, _ = preconditioned_gmres(self.matvec, self._psolve,
+                                                    cols[c] - self.matvec(x),
+                                                    0.1 * o.reuse_tolerance * den,
+                                                    o.reuse_iterations - steps)
+                    st.reuse_steps += k
+                    x = x + dx
+                    err, _ = berr(x, c)
+                log.debug("solve on reused factors: %d GMRES steps, backward error %.1e",
+                          steps, err)
+                out.append(x if err <= o.reuse_tolerance else None)
+        st.reuse_steps += steps
+        if steps > o.reuse_iterations // 2:
+            self._reuse_aged = True    # the next factor() call factors afresh
+        return out if more else out[0]
+
     def refactor(self) -> FactorReport:
-        """Factorize the current slot table again."""
+        """Factorize the current slot table again (afresh, also when reusing)."""
         return self._factorize()
 
     def _nonunit_columns(self, slots):
@@ -342,35 +533,38 @@ class BasisManager:
             Lk, Uk = sp.csc_matrix(fac.L), sp.csc_matrix(fac.U)
             C = BS[:, kcols]       # its entries in unit-covered rows form the C block
             Ud[m1:] = Uk.diagonal()
-            parts = [(F.indptr.astype(_I), F.indices.astype(_I), F.data) for F in (Lk, Uk, C)]
+            # SuperLU's factors come with int32 indices: the kernel takes them as they
+            # are (widening them cost 0.6 s per factorization at n = 1e5)
+            it = np.int32 if max(Lk.nnz, Uk.nnz, C.nnz) < 2**31 - 1 else _I
+            parts = [(F.indptr.astype(it, copy=False), F.indices.astype(it, copy=False),
+                      F.data) for F in (Lk, Uk, C)]
         else:
             e = (np.zeros(1, _I), np.zeros(0, _I), np.zeros(0))
             parts = [e, e, e]
-        L = sp.csc_matrix(kern.assemble_triangle(n, m1, *parts[0], True, *parts[2], rowpos),
-                          shape=(n, n))
-        Lr = L.tocsr()
-        U = sp.csc_matrix(kern.assemble_triangle(n, m1, *parts[1], False, *parts[2], rowpos),
-                          shape=(n, n))
+        # (the kernel's int64 arrays are kept as they are: a scipy matrix of them would
+        # narrow the indices to int32, and widening them back cost ~1 s per factorization
+        # at n = 1e5)
+        Lx, Li, Lp = kern.assemble_triangle(n, m1, *parts[0], True, *parts[2], rowpos)
+        Ux, Ui, Up = kern.assemble_triangle(n, m1, *parts[1], False, *parts[2], rowpos)
         cap_cols = n + o.update_limit + 2
-        self._Lp, self._Li, self._Lx = L.indptr.astype(_I), L.indices.astype(_I), L.data
-        self._Lrp, self._Lri, self._Lrx = (Lr.indptr.astype(_I), Lr.indices.astype(_I),
-                                           Lr.data)
-        nnzu = U.nnz
+        self._Lp, self._Li, self._Lx = Lp, Li, Lx
+        nnzu = int(Up[n])
         cap = max(2 * nnzu + 4 * n, 1024)
         self._Ui = np.zeros(cap, dtype=_I)
         self._Ux = np.zeros(cap)
-        self._Ui[:nnzu] = U.indices
-        self._Ux[:nnzu] = U.data
+        self._Ui[:nnzu] = Ui
+        self._Ux[:nnzu] = Ux
         self._Us = np.zeros(cap_cols, dtype=_I)
         self._Ue = np.zeros(cap_cols, dtype=_I)
-        self._Us[:n] = U.indptr[:-1]
-        self._Ue[:n] = U.indptr[1:]
+        self._Us[:n] = Up[:-1]
+        self._Ue[:n] = Up[1:]
         self._Us[n:] = nnzu
         self._Ue[n:] = nnzu
         self._Ufree = nnzu
-        Ur = U.tocsr()
-        self._Urp, self._Urj, self._Urx = (Ur.indptr.astype(_I), Ur.indices.astype(_I),
-                                           Ur.data)
+        # Row forms of L and U (for BTRAN and the update's U^{-T} e_p) are built on first
+        # use: a path without pivots never needs them (0.4 s each at n = 1e5).
+        self._row_forms = None
+        self._LU0 = (Lx, Li, Lp, Ux, Ui, Up)
         self._dead = np.zeros(cap_cols, dtype=np.bool_)
         self._Ud = np.ones(cap_cols)
         self._Ud[:n] = Ud
@@ -387,12 +581,17 @@ class BasisManager:
         self._slot_at = np.concatenate((slot_at, np.full(cap_cols - n, -1, dtype=_I)))
         self._pos_of_slot = np.empty(n, dtype=_I)
         self._pos_of_slot[slot_at] = np.arange(n, dtype=_I)
-        self._nnzL = int(L.nnz)
+        self._nnzL = int(Lp[n])
         self._nnzU = int(nnzu) + n
         self._nnzR = 0
         self._nnz_base = self._nnzL + self._nnzU
         self._rebuild_maps()
         self._factored = True
+        self._reusing = False
+        self._held = None
+        self._offered = None
+        self._psolve = self._solve_quiet
+        self._reuse_aged = False
         self._threshold_pivoting = bool(mk) and self._backend.last.ordering in ("amd", "metis")
         self._residual_refactored = False
         self._cache = None
@@ -441,8 +640,23 @@ class BasisManager:
         kern.usolve(self._Us, self._Ue, self._Ui, self._Ux, self._Ud, w, N)
         return w[self._pos_of_slot], spike
 
+    def _rows(self):
+        """(Lrp, Lri, Lrx, Urp, Urj, Urx): CSR arrays of L and of U as factored (built once
+        per factorization, on first use)."""
+        if self._row_forms is None:
+            n = self.n
+            Lx, Li, Lp, Ux, Ui, Up = self._LU0
+            out = []
+            for (x, i, p) in ((Lx, Li, Lp), (Ux, Ui, Up)):
+                R = sp.csc_matrix((x, i, p), shape=(n, n)).tocsr()
+                out += [R.indptr.astype(_I, copy=False), R.indices.astype(_I, copy=False),
+                        R.data]
+            self._row_forms = tuple(out)
+        return self._row_forms
+
     def _utsolve(self, w, start, N):
-        kern.utsolve(self._Urp, self._Urj, self._Urx, self._dead, self.n, self._Us,
+        _, _, _, Urp, Urj, Urx = self._rows()
+        kern.utsolve(Urp, Urj, Urx, self._dead, self.n, self._Us,
                      self._Ue, self._Ui, self._Ux, self._Ud, w, start, N)
 
     def _column(self, kind, index, sign):
@@ -461,6 +675,20 @@ class BasisManager:
         rhs = np.asarray(rhs, dtype=np.float64).ravel()
         if rhs.shape != (self.n,):
             raise ShapeError(f"rhs must have length {self.n}")
+        if self._reusing:
+            if self._r is not None and self._prefetch is None:
+                # The path solves with its covering vector next (t enters): both in
+                # lockstep, sharing the preconditioner solves.
+                x, d = self._reuse_solve(rhs, (self._r,))
+                self._prefetch = (self._version, d)
+            else:
+                x = self._reuse_solve(rhs)
+            self.stats.time_solve += time.perf_counter() - t0
+            self.stats.ftran_calls += 1
+            if x is not None:
+                return x
+            self._leave_reuse()
+            t0 = time.perf_counter()
         w = self._work()
         self._scatter_rhs(w, np.arange(self.n), rhs)
         x, _ = self._ftran_work(w, False)
@@ -474,6 +702,21 @@ class BasisManager:
         self._require()
         kind, index, sign = self._check_column(kind, index, sign)
         t0 = time.perf_counter()
+        if self._reusing:
+            pf = self._prefetch
+            if kind == KIND_DENSE and pf is not None and pf[0] == self._version \
+                    and pf[1] is not None:
+                self.stats.ftran_calls += 1
+                return pf[1] * sign
+            rhs = np.zeros(self.n)
+            rows, vals = self._column(kind, index, sign)
+            np.add.at(rhs, rows, vals)
+            d = self._reuse_solve(rhs)
+            if d is not None:  # (no spike: a replacement factors afresh first)
+                self.stats.time_solve += time.perf_counter() - t0
+                self.stats.ftran_calls += 1
+                return d
+            self._leave_reuse()
         d = self._ftran_column(kind, index, sign)
         self.stats.time_solve += time.perf_counter() - t0
         self.stats.ftran_calls += 1
@@ -494,6 +737,8 @@ class BasisManager:
         c = np.asarray(c, dtype=np.float64).ravel()
         if c.shape != (self.n,):
             raise ShapeError(f"c must have length {self.n}")
+        if self._reusing:
+            self._leave_reuse()
         y = self._btran_work(c)
         f = self.options.residual_check_frequency
         self.stats.btran_calls += 1
@@ -515,7 +760,8 @@ class BasisManager:
         w[self._pos_of_slot] = c
         self._utsolve(w, 0, N)
         kern.apply_etas_t(self._Rs, self._Ri, self._Rx, self._Rpos, self._Rq, self._k, w)
-        kern.ltsolve(self._Lrp, self._Lri, self._Lrx, w, self._m1)
+        Lrp, Lri, Lrx = self._rows()[:3]
+        kern.ltsolve(Lrp, Lri, Lrx, w, self._m1)
         y = w[self._rowpos]
         if self._rscale is not None:
             y = y * self._rscale
@@ -648,6 +894,8 @@ class BasisManager:
             raise ProblemError(f"slot {slot} out of range")
         kind, index, sign = self._check_column(kind, index, sign)
         t0 = time.perf_counter()
+        if self._reusing:
+            self._leave_reuse()
         try:
             return self._replace(slot, kind, index, sign)
         finally:
@@ -778,6 +1026,8 @@ class BasisManager:
         from scipy.sparse.linalg import LinearOperator, onenormest
 
         self._require()
+        if self._reusing:
+            self._leave_reuse()
         n = self.n
         Binv = LinearOperator((n, n), matvec=lambda v: self._solve_quiet(v),
                               rmatvec=lambda v: self._solve_quiet_t(v), dtype=float)
@@ -791,6 +1041,8 @@ class BasisManager:
         return self.condest() < limit
 
     def _solve_quiet(self, v):
+        if v.ndim == 2:   # several right-hand sides (lockstep GMRES): one at a time here
+            return np.column_stack([self._solve_quiet(v[:, c]) for c in range(v.shape[1])])
         w = self._work()
         self._scatter_rhs(w, np.arange(self.n), np.asarray(v, float).ravel())
         return self._ftran_work(w, False)[0]

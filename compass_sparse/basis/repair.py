@@ -13,7 +13,7 @@ tolerance), the largest number any regular basis of this form can keep.
 Steps, repeated until the LU of the kept block has no tiny pivot:
 
 1. structural: a maximum bipartite matching of K's pattern
-   (``scipy.sparse.csgraph.maximum_bipartite_matching``); unmatched columns are dropped,
+   (:mod:`compass_sparse._matching`); unmatched columns are dropped,
    unmatched rows freed;
 2. numerical, small blocks (order <= ``dense_rank_limit``): QR with column pivoting of
    the column-equilibrated dense block picks ``rank`` independent columns
@@ -31,6 +31,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from .._matching import column_matching
 from ..exceptions import SingularBasisError
 from .backends import SingularFactorError
 
@@ -50,11 +51,9 @@ def _structural(K):
     """Return (rows, cols) of a maximum matching, paired (rows[i] matched to cols[i])."""
     if K.shape[1] == 0 or K.shape[0] == 0:
         return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    Kp = sp.csr_matrix(K, copy=True)
+    Kp = sp.csc_matrix(K, copy=True)
     Kp.eliminate_zeros()
-    from scipy.sparse.csgraph import maximum_bipartite_matching  # lazy: import cost
-
-    match = maximum_bipartite_matching(Kp, perm_type="row")  # column -> row
+    match = column_matching(Kp)  # column -> row
     cols = np.flatnonzero(match >= 0)
     return match[cols].astype(np.int64), cols.astype(np.int64)
 

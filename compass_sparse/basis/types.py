@@ -93,6 +93,23 @@ class BasisOptions:
         Bytes the factors may take; a factorization estimated to need more is not
         started (kind "memory"). None = 80% of the memory available when the manager is
         created; ``math.inf`` = no limit.
+    reuse_factors : bool, default False
+        After :meth:`set_matrix` (a new M of the same sparsity pattern), a
+        :meth:`factor` call with the slot table of the factors held does not factor:
+        solves run GMRES on the new B preconditioned by the held factors
+        (:mod:`compass_sparse.basis.krylov`) and fall back to a fresh factorization on
+        any doubt (see ``reuse_tolerance``, ``reuse_iterations``; a column replacement or
+        a BTRAN also factors afresh first).
+    reuse_tolerance : float, default 1e-12, range (0, 1e-6]
+        Backward error ``||B x - a||_inf / (||a||_inf + ||B||_inf ||x||_inf)`` a solve on
+        reused factors must reach; else the basis is factored afresh and solved directly.
+        A fresh LU reaches 1e-16..1e-14; the pivotal path checks its solution at 1e-9.
+    reuse_iterations : int, default 30, range >= 1
+        GMRES steps allowed per solve on reused factors (a step costs two triangular
+        solves with the held factors and a product with B: at n = 3e4 and 1e5 about 1/50
+        of a factorization).  A solve that needed more than half of them ends the reuse
+        at the next :meth:`factor` (the factors have aged); GMRES stops early when its
+        rate of decrease predicts failure (:mod:`compass_sparse.basis.krylov`).
     """
 
     update_limit: int = 50
@@ -108,6 +125,9 @@ class BasisOptions:
     diag_pivot_thresh: float | None = None
     deadline: float | None = None
     memory_limit: float | None = None
+    reuse_factors: bool = False
+    reuse_tolerance: float = 1e-12
+    reuse_iterations: int = 30
 
     def __post_init__(self):
         def bad(name, why):
@@ -140,6 +160,10 @@ class BasisOptions:
             bad("diag_pivot_thresh", "must be None or in [0, 1]")
         if self.memory_limit is not None and not self.memory_limit > 0:
             bad("memory_limit", "must be None or > 0")
+        if not 0.0 < self.reuse_tolerance <= 1e-6:
+            bad("reuse_tolerance", "must be in (0, 1e-6]")
+        if int(self.reuse_iterations) != self.reuse_iterations or self.reuse_iterations < 1:
+            bad("reuse_iterations", "must be an integer >= 1")
 
 
 @dataclass
@@ -153,6 +177,7 @@ class BasisStats:
     counts the fill-reducing orderings computed (the others were reused for an unchanged
     pattern); ``est_nnz_lu``, ``est_flops`` and ``est_bytes`` are the largest symbolic
     estimates met (-1: none computed), ``max_nnz_lu`` the largest nnz(L + U) obtained.
+    ``reuse*`` count the work on held factors (``BasisOptions.reuse_factors``).
     """
 
     factorizations: int = 0
@@ -180,6 +205,10 @@ class BasisStats:
     est_flops: float = -1.0
     est_bytes: float = -1.0
     max_nnz_lu: int = 0
+    reuses: int = 0  #: factor() calls answered by the held factors (no factorization)
+    reuse_solves: int = 0  #: solves by preconditioned GMRES on held factors
+    reuse_steps: int = 0  #: GMRES steps of those solves
+    reuse_fallbacks: int = 0  #: reuses ended by a fresh factorization (doubt or update)
 
 
 class UpdateStatus(enum.IntEnum):

@@ -458,7 +458,7 @@ class PyomoMCP:
         return self._sig(row)
 
     def _match_equations(self, eqs, eq_sigs, pairs, claimed):
-        from scipy.sparse.csgraph import maximum_bipartite_matching
+        from .._matching import matching
 
         free, free_index = [], {}
         seen_vars = set()
@@ -492,7 +492,7 @@ class PyomoMCP:
                     rows.append(i)
                     cols.append(j)
         G = sp.csr_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(eqs), len(free)))
-        match = maximum_bipartite_matching(G, perm_type="column")
+        match = matching(G)[1]  # the variable matched to each equation
         bad = np.flatnonzero(match < 0)
         if bad.size:
             names = ", ".join(eqs[i][1] for i in bad[:5])

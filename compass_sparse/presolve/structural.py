@@ -15,7 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import maximum_bipartite_matching
+
+from .._matching import matching
 
 __all__ = ["StructuralReport", "structural_rank_check"]
 
@@ -64,8 +65,7 @@ def structural_rank_check(problem, *, include_fixed: bool = False) -> Structural
     m = idx.size
     if m == 0:
         return StructuralReport(n=0, rank=0, message="no non-fixed variables")
-    col_of_row = maximum_bipartite_matching(S, perm_type="column")
-    row_of_col = maximum_bipartite_matching(S, perm_type="row")
+    row_of_col, col_of_row = matching(S)
     rank = int(np.count_nonzero(col_of_row >= 0))
     ur = idx[col_of_row < 0]
     uv = idx[row_of_col < 0]

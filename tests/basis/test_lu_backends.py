@@ -158,6 +158,22 @@ def test_factorization_not_started_beyond_memory_or_time_budget():
     check_factors(K, b.factor(K))
 
 
+def test_no_factorization_without_an_estimate_is_started_after_the_deadline():
+    """COLAMD (and the strict factorizations of the rank repair) have no symbolic
+    estimate; the budget let them start after the deadline, so a repair or a path
+    refactorization could run on past the time limit."""
+    import time
+    K = dominant_matrix(300, 0.02, np.random.default_rng(14))
+    late = FactorBudget(deadline=time.perf_counter() - 1.0)
+    for b, strict in ((SuperLUBackend("colamd", budget=late), False),
+                      (SuperLUBackend("amd", budget=late), True)):
+        with pytest.raises(FactorBudgetError) as e:
+            b.factor(K, strict=strict)
+        assert e.value.kind == "time"
+    check_factors(K, SuperLUBackend("colamd", budget=FactorBudget(
+        deadline=time.perf_counter() + 60.0)).factor(K))
+
+
 def test_basis_options_memory_limit_reaches_the_backend():
     rng = np.random.default_rng(13)
     n = 600
