@@ -481,12 +481,11 @@ def solve_sparse(A, b, deadline=None, labels=None, keep=False):
     environment's choice, as for the basis); raises :class:`SingularFactorError` when A is
     exactly singular, and :class:`FactorBudgetError` when the factorization's estimate does
     not fit in the time left before ``deadline`` (a ``time.perf_counter()`` value) or in 80%
-    of the available memory.  For the
-    crash, whose reduced Jacobians are large CGE blocks too: ``labels``, the increasing
-    indices of the principal submatrix A, let the ordering of a neighbouring index set be
-    carried over (:mod:`compass_sparse.basis.ordering`).  ``keep``: return ``(x, held)``
-    with held a :class:`HeldLU` of A, or None when the factors were not kept (the dense
-    and UMFPACK routes)."""
+    of the available memory.  For the crash, whose reduced Jacobians are large CGE blocks
+    too: ``labels``, the increasing indices of the principal submatrix A, let the ordering
+    of a neighbouring index set be carried over (:mod:`compass_sparse.basis.ordering`).
+    ``keep``: return ``(x, held)`` with held a :class:`HeldLU` of A, or None when the
+    factors were not kept (the dense and UMFPACK routes)."""
     if A.shape[0] <= DENSE_SOLVE_MAX_N:
         x = _dense_solve(A, b)
         return (x, None) if keep else x

@@ -408,17 +408,13 @@ class OrderingCache:
             self.carried += 1
             log.debug("ordering of a %d x %d block carried over from a neighbouring index "
                       "set (%.3f s)", K.shape[0], K.shape[1], o.time)
-            _SHARED[key] = o
-            while len(_SHARED) > _SHARED_SIZE:
-                _SHARED.popitem(last=False)
-            _remember(self.method, labels, o)
-            return o
-        o = compute_ordering(K, self.method)
+        else:
+            o = compute_ordering(K, self.method)
+            self.computed += 1
+            log.debug("ordering of a %d x %d block (nnz %d): %s, estimated nnz(L+U) %d, "
+                      "%.3g flops, %.3f s", K.shape[0], K.shape[1], K.nnz, o.method,
+                      o.nnz_lu, o.flops, o.time)
         _remember(self.method, labels, o)
-        self.computed += 1
-        log.debug("ordering of a %d x %d block (nnz %d): %s, estimated nnz(L+U) %d, "
-                  "%.3g flops, %.3f s", K.shape[0], K.shape[1], K.nnz, o.method, o.nnz_lu,
-                  o.flops, o.time)
         _SHARED[key] = o
         while len(_SHARED) > _SHARED_SIZE:
             _SHARED.popitem(last=False)
