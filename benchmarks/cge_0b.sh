@@ -7,15 +7,9 @@
 set -euo pipefail
 what=${1:-all}
 base=${2:-ccdc514}
-root=$(pwd)
-tmp=$(mktemp -d)
-git archive "$base" | tar -x -C "$tmp"
-ln -sfn "$root/data/generators" "$tmp/compass_sparse/generators"
-run() {  # dir suffix args...
-    local dir=$1 suffix=$2; shift 2
-    (cd "$dir" && PYTHONPATH=. python3 benchmarks/bench_cge.py --parts lu --families static \
-        --cases tariff25 notax --suffix "$suffix" "$@")
-}
+source benchmarks/_cge_base.sh
+base_checkout "$base"
+run() { lu_run "$@" --families static --cases tariff25 notax; }
 if [[ $what == small || $what == all ]]; then
     run "$root" _r3 --sizes 1e4 3e4 --lu new noreuse --time-limit 200
     run "$tmp" _r3base --sizes 1e4 3e4 --lu new --time-limit 200

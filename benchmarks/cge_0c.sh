@@ -9,15 +9,9 @@
 set -euo pipefail
 what=${1:-all}
 base=${2:-ccdc514}
-root=$(pwd)
-tmp=$(mktemp -d)
-git archive "$base" | tar -x -C "$tmp"
-ln -sfn "$root/data/generators" "$tmp/compass_sparse/generators"
-run() {  # dir suffix args...
-    local dir=$1 suffix=$2; shift 2
-    (cd "$dir" && PYTHONPATH=. python3 benchmarks/bench_cge.py --parts lu --lu new \
-        --families dynamic --suffix "$suffix" "$@")
-}
+source benchmarks/_cge_base.sh
+base_checkout "$base"
+run() { lu_run "$@" --lu new --families dynamic; }
 if [[ $what == small || $what == all ]]; then
     run "$tmp" _dyn_base --sizes 1e4 3e4 --time-limit 300 --splu-max-n 15000
     run "$root" _dyn_new --sizes 1e4 3e4 --time-limit 300 --splu-max-n 15000
