@@ -73,7 +73,7 @@ def _numerical(A):
     return A
 
 
-def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None, labels=None):
+def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None, labels=None, lu=("auto", "auto")):
     """Solve (J_II + eps I) d = rhs with eps = 0 first (eps0 at once when J_II is
     structurally singular), then growing when singular.
 
@@ -96,7 +96,8 @@ def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None, labels=None):
         A = Jii if eps == 0.0 else (Jii + eps * sp.identity(Jii.shape[0], format="csc"))
         try:
             nf += 1
-            d, held = solve_sparse(A, rhs, deadline=deadline, labels=labels, keep=True)
+            d, held = solve_sparse(A, rhs, deadline=deadline, labels=labels, keep=True,
+                                   backend=lu[0], ordering=lu[1])
             if np.all(np.isfinite(d)):
                 return d, eps, nf, None, held
         except SingularFactorError:  # exactly singular
@@ -255,7 +256,7 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
                 Jii = Jc[:, inact]
                 di, eps, nf, why, held = _solve_reduced(
                     Jii.tocsc(), rhs, opt.crash_perturb, eps_scale * max(1.0, nm_norm),
-                    deadline, labels=inact)
+                    deadline, labels=inact, lu=(opt.lu_backend, opt.lu_ordering))
                 nfact += nf
                 if stats is not None:
                     stats.factorizations += nf

@@ -42,6 +42,8 @@ PATH_NAMES: dict[str, str | None] = {
     "progress": None,
     "scaling": None,  # PATH's hidden model-scaling switches are defined otherwise
     "factor_reuse": None,  # PATH factors every basis afresh
+    "lu_backend": "factorization_method",  # PATH's basis package (lusol, umfpack, ...)
+    "lu_ordering": None,  # PATH's packages order by themselves
 }
 
 
@@ -134,6 +136,19 @@ class Options(OptionsMixin):
         "GMRES preconditioned by those factors instead of factoring (sparse basis; falls "
         "back to a fresh factorization when a solve does not reach a backward error of "
         "1e-12 in 30 steps, and before any pivot)")
+    lu_backend: str = _opt(
+        "auto", "sparse LU of the basis (problems above n = 500; below, the compiled dense "
+        "engine) and of the crash's reduced Jacobians (above order 200; below, dense LU): 'superlu' (scipy) with the ordering of "
+        "lu_ordering, 'umfpack' (SuiteSparse through kvxopt; orders by itself, so "
+        "lu_ordering must be 'auto'), or 'auto' (SuperLU; the environment variable "
+        "COMPASS_SPARSE_LU='backend[:ordering]' replaces 'auto' values)",
+        choices=("auto", "superlu", "umfpack"))
+    lu_ordering: str = _opt(
+        "auto", "fill-reducing column ordering for SuperLU: 'colamd', 'amd' or 'metis' "
+        "(nested dissection; both on the symmetrized pattern after a zero-free-diagonal row "
+        "matching), or 'auto' (COLAMD below 400 columns, above it AMD or METIS, whichever "
+        "a symbolic estimate of the factorization's flops prefers; computed once per "
+        "pattern)", choices=("auto", "colamd", "amd", "metis"))
 
     # --- non-monotone stabilization (thesis §3.4) ---------------------------------------
     nms: bool = _opt(True, "non-monotone stabilization (False: a monotone line search: "
@@ -263,6 +278,9 @@ class Options(OptionsMixin):
                 raise OptionError(f"option {name}={v!r}: must be {op} {lo}")
             if hi is not None and v > hi:
                 raise OptionError(f"option {name}={v!r}: must be <= {hi}")
+        if self.lu_backend == "umfpack" and self.lu_ordering != "auto":
+            raise OptionError(f"option lu_ordering={self.lu_ordering!r}: UMFPACK orders by "
+                              "itself; use lu_backend='superlu' to force an ordering")
 
     def minor_limit(self, n: int) -> int:
         return self.minor_iteration_limit or max(2 * n, 100)

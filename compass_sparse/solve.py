@@ -60,6 +60,8 @@ def _manager_factory(opt: Options, deadline=None):
         from .basis import BasisManager, BasisOptions
 
         return BasisManager(M, options=BasisOptions(update_limit=limit, deadline=deadline,
+                                                    backend=opt.lu_backend,
+                                                    ordering=opt.lu_ordering,
                                                     reuse_factors=opt.factor_reuse))
 
     return make

@@ -476,7 +476,8 @@ def _dense_solve(A, b):
         return sla.lu_solve((lu, piv), np.asarray(b, dtype=np.float64), check_finite=False)
 
 
-def solve_sparse(A, b, deadline=None, labels=None, keep=False):
+def solve_sparse(A, b, deadline=None, labels=None, keep=False, backend="auto",
+                 ordering="auto"):
     """Solve A x = b (A square sparse) by one LU in the automatic ordering (or the
     environment's choice, as for the basis); raises :class:`SingularFactorError` when A is
     exactly singular, and :class:`FactorBudgetError` when the factorization's estimate does
@@ -485,14 +486,16 @@ def solve_sparse(A, b, deadline=None, labels=None, keep=False):
     too: ``labels``, the increasing indices of the principal submatrix A, let the ordering
     of a neighbouring index set be carried over (:mod:`compass_sparse.basis.ordering`).
     ``keep``: return ``(x, held)`` with held a :class:`HeldLU` of A, or None when the
-    factors were not kept (the dense and UMFPACK routes)."""
+    factors were not kept (the dense and UMFPACK routes).  ``backend``, ``ordering``: as
+    for :func:`make_backend` (the options ``lu_backend``, ``lu_ordering``)."""
     if A.shape[0] <= DENSE_SOLVE_MAX_N:
         x = _dense_solve(A, b)
         return (x, None) if keep else x
     # the memory check of the basis manager applies here too (80% of what is available):
     # the crash factors blocks as large as the basis'
     avail = FactorBudget.available_memory()
-    b_ = make_backend(budget=FactorBudget(deadline=deadline,
+    b_ = make_backend(backend, ordering,
+                      budget=FactorBudget(deadline=deadline,
                                           memory_bytes=0.8 * avail if avail else None))
     if isinstance(b_, AutoBackend):
         b_ = b_.small if A.shape[0] < AUTO_SYMMETRIC_MIN_N else b_.large
