@@ -80,6 +80,9 @@ def _dynamic_cge_crash(monkeypatch, **consts):
     from compass_sparse.generators.cge import ramsey_cge
 
     monkeypatch.undo()                    # the module's own constants, then these
+    # the default LU whatever COMPASS_SPARSE_LU asks: the reuse holds SuperLU's factors
+    # (the UMFPACK route keeps none), and another ordering takes other crash steps
+    monkeypatch.delenv("COMPASS_SPARSE_LU", raising=False)
     for k, v in consts.items():
         monkeypatch.setattr(crash_module, k, v)
     p = ramsey_cge(periods=20, sectors=10, seed=0).with_shock(capital_tax=0.25).problem

@@ -233,7 +233,7 @@ def test_time_limit_holds_through_the_crash_factorizations(clock, monkeypatch):
     FACTOR = 0.3
     calls = {"n": 0}
 
-    def slow_singular(A, b, deadline=None, labels=None, keep=False):
+    def slow_singular(A, b, deadline=None, labels=None, keep=False, **lu):
         calls["n"] += 1
         clock.now += FACTOR
         raise SingularFactorError("singular (simulated)")
