@@ -29,7 +29,7 @@ def _path(M, q, lb, ub, bm, x, warm=None):
 
 def test_path_on_reused_factors_agrees_with_fresh():
     M, q, lb, ub, z_star = _interior_lcp(400, 0)
-    bm = BasisManager(M, BasisOptions(reuse_factors=True))
+    bm = BasisManager(M, BasisOptions(reuse_factors=True, reuse_min_nnz=0))
     x0 = np.zeros(M.shape[0])
     r1 = _path(M, q, lb, ub, bm, x0)
     assert r1.code is LinearCode.SOLVED and r1.pivots == 0
@@ -47,7 +47,7 @@ def test_path_on_reused_factors_agrees_with_fresh():
 
 def test_path_whose_reused_basis_is_singular_restarts_on_fresh_factors():
     M, q, lb, ub, _ = _interior_lcp(400, 1)
-    bm = BasisManager(M, BasisOptions(reuse_factors=True))
+    bm = BasisManager(M, BasisOptions(reuse_factors=True, reuse_min_nnz=0))
     x0 = np.zeros(M.shape[0])
     r1 = _path(M, q, lb, ub, bm, x0)
     M2 = M.copy()
@@ -77,3 +77,39 @@ def test_solve_with_factor_reuse_agrees_with_fresh_factorizations(shock):
     z = a.x
     f = m.F(z)
     assert np.abs(z - np.clip(z - f, p.lb, p.ub)).max() <= 1e-6
+
+
+def test_factor_reuse_does_not_stall_the_ramsey_model_above_the_acceptance_test(monkeypatch):
+    """With a reuse backward-error tolerance of 1e-12 the Newton iterates of the one-sector
+    Ramsey model (n = 2703, 25% capital tax) stalled at a residual of 4e-9 that the
+    acceptance test rejects; the solve failed after 50 restarts and the homotopy (89 s)
+    where fresh factors take 3 major iterations.  The reuse is forced here below its
+    minimum fill so that every Newton step after the first runs on reused factors."""
+    import compass_sparse.basis.types as types
+    from compass_sparse.generators.cge import ramsey_cge
+
+    init = types.BasisOptions.__init__
+
+    def forced(self, *a, **k):
+        k.setdefault("reuse_min_nnz", 0)
+        init(self, *a, **k)
+
+    monkeypatch.setattr(types.BasisOptions, "__init__", forced)
+    m = ramsey_cge(periods=300, sectors=1).with_shock(capital_tax=0.25)
+    p = m.problem
+    r = solve_mcp(p, options={"factor_reuse": True, "restart_limit": 0, "homotopy": "off",
+                              "major_iteration_limit": 8})
+    assert r.status is Status.SOLVED and r.nit <= 4
+    assert r.lu["reuses"] >= 1
+    z = r.x
+    assert np.abs(z - np.clip(z - m.F(z), p.lb, p.ub)).max() <= 1e-6
+
+
+def test_small_factors_are_not_reused():
+    # below reuse_min_nnz entries in L + U a fresh factorization is the cheaper solve
+    from compass_sparse.generators.cge import ramsey_cge
+
+    p = ramsey_cge(periods=110, sectors=1).with_shock(capital_tax=0.25).problem
+    r = solve_mcp(p, options={"factor_reuse": True})
+    assert r.status is Status.SOLVED and r.lu["max_nnz_lu"] < 50000
+    assert r.lu["reuses"] == 0

@@ -288,6 +288,7 @@ class BasisManager:
     def _can_reuse(self):
         h = self._held
         ok = (self.options.reuse_factors and h is not None and not self._reuse_aged
+              and self._nnz_base >= self.options.reuse_min_nnz
               and np.array_equal(h[0], self._kinds) and np.array_equal(h[1], self._indices)
               and np.array_equal(h[2], self._signs))
         if ok:
@@ -305,6 +306,8 @@ class BasisManager:
                 and labels.size and np.all(np.diff(labels) > 0) and labels[-1] < self.n):
             return
         est, nnz = held.ordering.nnz_lu, int(getattr(held.lu, "nnz", 0))
+        if nnz < self.options.reuse_min_nnz:
+            return      # a fresh factorization is cheaper than GMRES on these
         if est > 0 and nnz > est:
             # Pivoting left the diagonal the ordering counted on (the crash's points are
             # far from the solution): each solve with these factors costs more than with

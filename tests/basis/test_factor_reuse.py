@@ -24,7 +24,7 @@ def _setup(n=80, seed=0, **opts):
     rng = np.random.default_rng(seed)
     M = dominant_matrix(n, 0.06, rng)
     r = dominant_dense_column(M, 0, rng)
-    bm = BasisManager(M, BasisOptions(reuse_factors=True, **opts))
+    bm = BasisManager(M, BasisOptions(reuse_factors=True, reuse_min_nnz=0, **opts))
     bm.set_dense_column(r)
     table = family_start(n, rng)
     bm.factor(*table)
@@ -184,6 +184,8 @@ def test_reuse_option_validation():
         BasisOptions(reuse_tolerance=1e-3)
     with pytest.raises(OptionError):
         BasisOptions(reuse_iterations=0)
+    with pytest.raises(OptionError):
+        BasisOptions(reuse_min_nnz=-1)
 
 
 def _offer_setup(seed, move):
@@ -211,7 +213,7 @@ def _offer_setup(seed, move):
 @pytest.mark.parametrize("move", [1e-3, 3e-2])
 def test_offered_crash_factors_solve_the_first_basis_like_a_fresh_factorization(move):
     M, labels, held, table, rng = _offer_setup(7, move)
-    bm = BasisManager(M, BasisOptions(reuse_factors=True))
+    bm = BasisManager(M, BasisOptions(reuse_factors=True, reuse_min_nnz=0))
     bm.offer_factors(labels, held)
     bm.factor(*table)
     assert bm.reusing and bm.stats.factorizations == 0
@@ -225,7 +227,7 @@ def test_offered_crash_factors_solve_the_first_basis_like_a_fresh_factorization(
 
 def test_offered_factors_of_another_block_are_not_used_and_bad_ones_fall_back():
     M, labels, held, table, rng = _offer_setup(8, 1e-3)
-    bm = BasisManager(M, BasisOptions(reuse_factors=True))
+    bm = BasisManager(M, BasisOptions(reuse_factors=True, reuse_min_nnz=0))
     bm.offer_factors(labels[1:], held)               # another block's size: ignored
     bm.factor(*table)
     assert not bm.reusing and bm.stats.factorizations == 1
@@ -235,14 +237,14 @@ def test_offered_factors_of_another_block_are_not_used_and_bad_ones_fall_back():
     est = held.ordering
     if est.method in ("amd", "metis"):
         low = Ordering(est.method, est.rows, est.cols, nnz_lu=held.lu.nnz - 1)
-        bm1 = BasisManager(M, BasisOptions(reuse_factors=True))
+        bm1 = BasisManager(M, BasisOptions(reuse_factors=True, reuse_min_nnz=0))
         bm1.offer_factors(labels, type(held)(held.lu, low, held.n))
         bm1.factor(*table)
         assert not bm1.reusing
     # a useless preconditioner: the solve falls back to a fresh factorization
     bad = type(held)(held.lu, held.ordering, held.n)
     bad.solve = lambda v: -0.01 * v
-    bm2 = BasisManager(M, BasisOptions(reuse_factors=True))
+    bm2 = BasisManager(M, BasisOptions(reuse_factors=True, reuse_min_nnz=0))
     bm2.offer_factors(labels, bad)
     bm2.factor(*table)
     assert bm2.reusing
