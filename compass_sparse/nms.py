@@ -51,6 +51,7 @@ from ._csc import trusted_csc
 from ._merit_kernels import csc_matvec
 from .acceptance import Acceptance
 from .crash import crash
+from .direct_step import direct_step_applies
 from .exceptions import FactorBudgetError
 from .fallback import gradient_steps, lm_step
 from .merit import fb_gradient, fb_phi, fb_psi, normal_map_at, project
@@ -256,6 +257,7 @@ class NMSSolver:
         self.passes = {"crash": PassStats(), "path": PassStats(), "fallback": PassStats()}
         self.linearizer = None
         self.bm = None
+        self._direct = False  # Newton paths try the direct step (set with the basis)
         self._crash_factors = None  # the crash's last LU, offered to the next basis
         self.basis: WarmBasis | None = None
         self._rng = None
@@ -356,6 +358,7 @@ class NMSSolver:
         q = cur.f - Mz
         if self.bm is None:
             self.bm = self.manager_factory(M)
+            self._direct = direct_step_applies(M, opt)
         else:
             self.bm.set_matrix(M)
         if self._crash_factors is not None and hasattr(self.bm, "offer_factors"):
@@ -368,7 +371,8 @@ class NMSSolver:
         # A warm path that stalls before half-way is retried from the Lemke start.
         res = solve_linear_mcp(M, q, self.lb, self.ub, self.bm, opt, x, warm=self.basis, r=r,
                                ray_start=start_ray, retry_below=0.5, minor_limit=limit,
-                               deadline=self.deadline, log=self.log_minor)
+                               deadline=self.deadline, log=self.log_minor,
+                               direct=self._direct)
         st = self.passes["path"]
         st.ran = True
         st.time += time.perf_counter() - t0
