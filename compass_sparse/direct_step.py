@@ -39,9 +39,10 @@ import numpy as np
 
 from ._jit import njit
 from ._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
+from .basis.types import BasisOptions
 
-__all__ = ["DIRECT_MAX_DENSITY", "DIRECT_MAX_N", "DIRECT_MIN_N", "direct_step",
-           "direct_step_applies"]
+__all__ = ["DIRECT_MAX_DENSITY", "DIRECT_MAX_N", "DIRECT_MIN_N", "REUSE_BEATS_REFACTOR_NNZ",
+           "direct_step", "direct_step_applies"]
 
 DIRECT_MIN_N = 50
 """Below this order the compiled engine's dense factorization costs less than a sparse
@@ -54,6 +55,11 @@ than a fresh factorization per major iteration; the direct step is not tried."""
 DIRECT_MAX_DENSITY = 0.05
 """Largest nnz(M) / n^2: denser matrices keep the dense engine (whose factorization then
 costs about what a sparse one would)."""
+
+REUSE_BEATS_REFACTOR_NNZ = BasisOptions.reuse_min_nnz
+"""A sparse basis (n > 500) solves on held factors of at least this many entries by GMRES
+(option ``factor_reuse``), which costs less than a fresh factorization: the solver stops
+trying the direct step once its LU is this large, or when the crash's factors are taken."""
 
 FEASIBILITY_TOLERANCE = 1e-12
 RESIDUAL_TOLERANCE = 1e-9
@@ -155,9 +161,10 @@ def _end_point(indptr, indices, data, q, lb, ub, basic, z, w, v, tol):
 
 
 def direct_step(M, q, lb, ub, z, basic):
-    """(z, w, v) of the end point at t = 1 of the path from ``z`` in the start basis
-    ``basic`` (per index: VAR_Z, VAR_W, VAR_V or VAR_S) when that path makes no pivot,
-    else None.  ``M``: CSC (n x n); ``z``: the current z, at its bounds off F."""
+    """(z, w, v, nnz of the LU) of the end point at t = 1 of the path from ``z`` in the
+    start basis ``basic`` (per index: VAR_Z, VAR_W, VAR_V or VAR_S) when that path makes
+    no pivot, else (None, nnz of the LU).  ``M``: CSC (n x n); ``z``: the current z, at
+    its bounds off F."""
     from scipy.sparse import csc_matrix
     from scipy.sparse.linalg import splu
 
@@ -165,6 +172,7 @@ def direct_step(M, q, lb, ub, z, basic):
     free = basic == VAR_Z
     nf = int(np.count_nonzero(free))
     zt = np.array(z, dtype=float)
+    nnz_lu = 0
     if nf:
         pos = np.full(n, -1, dtype=np.int64)
         pos[free] = np.arange(nf, dtype=np.int64)
@@ -178,18 +186,19 @@ def direct_step(M, q, lb, ub, z, basic):
         try:
             lu = splu(K, permc_spec="COLAMD")
         except RuntimeError:  # exactly singular: the path's rank repair decides
-            return None
+            return None, 0
+        nnz_lu = int(lu.nnz)
         zf = lu.solve(rhs)
         if not np.all(np.isfinite(zf)):
-            return None
+            return None, nnz_lu
         zt[free] = zf
     w = np.empty(n)
     v = np.empty(n)
     res, mz = _end_point(M.indptr, M.indices, M.data, q, lb, ub, basic.astype(np.int64), zt,
                          w, v, FEASIBILITY_TOLERANCE)
     if res < 0.0:
-        return None
+        return None, nnz_lu
     qmax = float(np.max(np.abs(q))) if n else 0.0
     if res > RESIDUAL_TOLERANCE * (1.0 + mz + qmax):
-        return None
-    return zt, w, v
+        return None, nnz_lu
+    return (zt, w, v), nnz_lu

@@ -51,7 +51,7 @@ from ._csc import trusted_csc
 from ._merit_kernels import csc_matvec
 from .acceptance import Acceptance
 from .crash import crash
-from .direct_step import direct_step_applies
+from .direct_step import REUSE_BEATS_REFACTOR_NNZ, direct_step_applies
 from .exceptions import FactorBudgetError
 from .fallback import gradient_steps, lm_step
 from .merit import fb_gradient, fb_phi, fb_psi, normal_map_at, project
@@ -363,6 +363,10 @@ class NMSSolver:
             self.bm.set_matrix(M)
         if self._crash_factors is not None and hasattr(self.bm, "offer_factors"):
             self.bm.offer_factors(*self._crash_factors)
+            if self.bm.holds_offer:
+                # the basis will solve on the crash's factors, cheaper than the direct
+                # step's factorization, and reuse its own factors after that
+                self._direct = False
         self._crash_factors = None
         r = cur.f + x - cur.z  # normal map of the linearization at x
         limit = opt.minor_limit(self.n)
@@ -373,6 +377,11 @@ class NMSSolver:
                                ray_start=start_ray, retry_below=0.5, minor_limit=limit,
                                deadline=self.deadline, log=self.log_minor,
                                direct=self._direct)
+        if res.direct_lu_nnz >= REUSE_BEATS_REFACTOR_NNZ and opt.factor_reuse and \
+                not getattr(self.bm, "runs_paths", False):
+            # factors this large are cheaper to reuse (the sparse basis' GMRES) than to
+            # compute afresh in every major iteration
+            self._direct = False
         st = self.passes["path"]
         st.ran = True
         st.time += time.perf_counter() - t0

@@ -100,6 +100,7 @@ class PathResult:
     ray_base: np.ndarray | None = None  #: unbounded: the z where the ray starts
     time: float = 0.0
     message: str = ""
+    direct_lu_nnz: int = 0  #: entries of the direct step's LU (0: not tried)
 
     @property
     def x(self) -> np.ndarray:
@@ -220,6 +221,7 @@ class PivotalPath:
         self.deadline = deadline
         self.log = log
         self.direct = direct
+        self.direct_lu_nnz = 0  # entries of the direct step's LU (0: not tried)
 
     # ------------------------------------------------------------------ set-up
     def _columns_for(self, kinds, idx):
@@ -295,11 +297,13 @@ class PivotalPath:
         if self.direct and not ray_start and self.log is None:
             # A path without pivots ends where one sparse solve says (direct_step.py);
             # a minor-iteration log keeps the path, which it describes.
-            end = direct_step(self.M, self.q, lb, ub, z, basic)
+            end, self.direct_lu_nnz = direct_step(self.M, self.q, lb, ub, z, basic)
+            if self.direct_lu_nnz:
+                self.bm.stats.factorizations += 1  # the user's count of factorizations
             if end is not None:
-                self.bm.stats.factorizations += 1
                 res = PathResult(LinearCode.SOLVED, *end, 1.0, factorizations=1,
-                                 basis=WarmBasis(basic.copy()), ray_start=False)
+                                 basis=WarmBasis(basic.copy()), ray_start=False,
+                                 direct_lu_nnz=self.direct_lu_nnz)
                 res.time = time.perf_counter() - t0
                 return res
         self._reset_slots(basic, z, w, v)
@@ -663,6 +667,7 @@ class PivotalPath:
             breakpoints=self.st.breakpoints,
             basis=WarmBasis(basic), ray_start=ray_start, message=msg,
         )
+        res.direct_lu_nnz = self.direct_lu_nnz
         res.unbounded = code is LinearCode.RAY and self.st.unbounded
         if res.unbounded and self.st.ray is not None:
             res.ray_base, res.ray = self.st.ray

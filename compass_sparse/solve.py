@@ -246,7 +246,8 @@ def _presolve_pass(problem, opt, f0, J0):
         st.reason = "preprocessor unavailable"
         return None, st
     t0 = time.perf_counter()
-    pre = run_presolve(problem, f0=f0, J0=J0)
+    # l = u variables alone are kept fixed by the solver itself (no reduced problem)
+    pre = run_presolve(problem, f0=f0, J0=J0, keep_fixed_only=True)
     st.ran = True
     st.time = time.perf_counter() - t0
     return pre, st

@@ -295,6 +295,11 @@ class BasisManager:
             self._psolve = self._solve_quiet
         return ok
 
+    @property
+    def holds_offer(self) -> bool:
+        """Whether offered factors (:meth:`offer_factors`) wait for the next factor()."""
+        return self._offered is not None
+
     def offer_factors(self, labels, held):
         """Offer the LU ``held`` (a :class:`~compass_sparse.basis.backends.HeldLU`) of a
         matrix close to the principal block ``M[labels, labels]`` (increasing labels), e.g.
