@@ -75,6 +75,12 @@ class DensePathEngine:
         self.stats = BasisStats()
         self._dense = None
         self.set_matrix(M)
+        self.L = None  # work areas: allocated by the first path (see _allocate)
+        self.r = np.zeros(self.n)
+
+    def _allocate(self):
+        """The factors' and the path's work areas, once per engine: a solve whose paths
+        all end by the direct step (direct_step.py) never needs them."""
         n = self.n
         self.L, self.U, self.R, self.perm, self.fwork = K.allocate_factors(n, self.update_limit)
         self.work = np.zeros((8, n))
@@ -84,7 +90,6 @@ class DensePathEngine:
         self.best_x = np.zeros(n)
         self.enter_count = np.zeros((6, n), dtype=np.int64)
         self.displaced = np.full(n, -1, dtype=np.int64)
-        self.r = np.zeros(n)
 
     def set_matrix(self, M):
         """Take M (sparse or dense); its dense column-major copy is made when a path
@@ -124,6 +129,8 @@ class DensePathEngine:
     def run_path(self, path, z, w, v, slack_basis):
         """Factor, pivot and check on ``path``'s slot table (set by PivotalPath.run).
         Leaves the path's fields as its own loop would and returns (LinearCode, message)."""
+        if self.L is None:
+            self._allocate()
         lb = np.ascontiguousarray(path.lb, dtype=float)
         ub = np.ascontiguousarray(path.ub, dtype=float)
         path.lb, path.ub = lb, ub

@@ -36,13 +36,15 @@ check (:meth:`compass_sparse.path.PivotalPath._verify_solution`).
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
+from ._csc import trusted_csc
 from ._jit import njit
 from ._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
 from .basis.types import BasisOptions
 
 __all__ = ["DIRECT_MAX_DENSITY", "DIRECT_MAX_N", "DIRECT_MIN_N", "REUSE_BEATS_REFACTOR_NNZ",
-           "direct_step", "direct_step_applies"]
+           "direct_step", "direct_step_applies", "reduced_system"]
 
 DIRECT_MIN_N = 50
 """Below this order the compiled engine's dense factorization costs less than a sparse
@@ -160,29 +162,38 @@ def _end_point(indptr, indices, data, q, lb, ub, basic, z, w, v, tol):
     return res, mz
 
 
+def reduced_system(M, free, z, q):
+    """(M_FF as CSC, -(q + M_FN z_N)_F) for the indices F where ``free`` is True (M: CSC,
+    sorted indices give sorted indices), in one compiled pass without scipy's slicing."""
+    if not (sp.issparse(M) and M.format == "csc"):
+        M = sp.csc_matrix(M)
+    n = free.shape[0]
+    nf = int(np.count_nonzero(free))
+    pos = np.full(n, -1, dtype=np.int64)
+    pos[free] = np.arange(nf, dtype=np.int64)
+    nnz = M.indptr[-1]
+    Kp = np.zeros(nf + 1, dtype=np.int32)
+    Ki = np.empty(nnz, dtype=np.int32)
+    Kx = np.empty(nnz)
+    rhs = np.empty(nf)
+    k = _free_block(M.indptr, M.indices, M.data, pos, np.asarray(z, dtype=float),
+                    np.asarray(q, dtype=float), Kp, Ki, Kx, rhs)
+    return trusted_csc(Kx[:k], Ki[:k], Kp, (nf, nf)), rhs
+
+
 def direct_step(M, q, lb, ub, z, basic):
     """(z, w, v, nnz of the LU) of the end point at t = 1 of the path from ``z`` in the
     start basis ``basic`` (per index: VAR_Z, VAR_W, VAR_V or VAR_S) when that path makes
     no pivot, else (None, nnz of the LU).  ``M``: CSC (n x n); ``z``: the current z, at
     its bounds off F."""
-    from scipy.sparse import csc_matrix
     from scipy.sparse.linalg import splu
 
     n = z.shape[0]
     free = basic == VAR_Z
-    nf = int(np.count_nonzero(free))
     zt = np.array(z, dtype=float)
     nnz_lu = 0
-    if nf:
-        pos = np.full(n, -1, dtype=np.int64)
-        pos[free] = np.arange(nf, dtype=np.int64)
-        nnz = M.indptr[-1]
-        Kp = np.zeros(nf + 1, dtype=np.int32)
-        Ki = np.empty(nnz, dtype=np.int32)
-        Kx = np.empty(nnz)
-        rhs = np.empty(nf)
-        k = _free_block(M.indptr, M.indices, M.data, pos, zt, q, Kp, Ki, Kx, rhs)
-        K = csc_matrix((Kx[:k], Ki[:k], Kp), shape=(nf, nf))
+    if free.any():
+        K, rhs = reduced_system(M, free, zt, q)
         try:
             lu = splu(K, permc_spec="COLAMD")
         except RuntimeError:  # exactly singular: the path's rank repair decides

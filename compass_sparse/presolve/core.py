@@ -235,6 +235,11 @@ def _reduce(problem, opts, J0, const, warnings, stats):
                    nonlinear_rows=nonlinear)
     infeasible = None
     try:
+        # Fixed variables first, on their own: every other pass of the first round would
+        # skip the rows and columns they touch (often all of a model's rows through one
+        # fixed price) and a second round would be needed only to look at them again.
+        if _run_phase(ws, (fixed,), stats, opts):
+            ws.refresh()
         for rnd in range(opts.max_rounds):
             if rnd > 0:
                 ws.refresh()
