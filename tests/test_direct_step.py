@@ -33,9 +33,9 @@ def _paths(lcp, x, manager):
 @pytest.mark.parametrize("seed", range(4))
 def test_direct_step_agrees_with_the_path(manager, seed):
     """From points near (the normal-map point of) the solution of P-matrix LCPs: where the
-    path makes no pivot the
-    direct step returns its end point (same z, one factorization); where it pivots the
-    direct step declines and the path's result is unchanged."""
+    path makes no pivot the direct step returns its end point (same z, one
+    factorization); where it pivots the direct step declines and the path's result is
+    unchanged."""
     kinds = set()
     for structure, bounds in (("banded", "box"), ("grid", "mixed")):
         g = gen.p_matrix_lcp(120, structure, seed, bounds)
