@@ -297,9 +297,10 @@ class PivotalPath:
         if self.direct and not ray_start and self.log is None:
             # A path without pivots ends where one sparse solve says (direct_step.py);
             # a minor-iteration log keeps the path, which it describes.
+            td = time.perf_counter()
             end, self.direct_lu_nnz = direct_step(self.M, self.q, lb, ub, z, basic)
             if self.direct_lu_nnz:
-                self.bm.stats.factorizations += 1  # the user's count of factorizations
+                self.bm.stats.record_direct_lu(self.direct_lu_nnz, time.perf_counter() - td)
             if end is not None:
                 res = PathResult(LinearCode.SOLVED, *end, 1.0, factorizations=1,
                                  basis=WarmBasis(basic.copy()), ray_start=False,
