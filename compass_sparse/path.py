@@ -55,7 +55,7 @@ import scipy.sparse as sp
 from ._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
 from ._slot_kernels import slot_basis, slot_point, slot_table, start_basis
 from .basis import KIND_DENSE, KIND_M, KIND_UNIT, FactorReuseFailed, UpdateStatus
-from .direct_step import direct_step
+from .direct_step import DirectFactors, direct_step
 from .exceptions import ShapeError, SingularBasisError
 
 _VAR_NAMES = "zwvatS"
@@ -149,13 +149,13 @@ def default_basis(z, lb, ub, previous: WarmBasis | None = None) -> np.ndarray:
 def solve_linear_mcp(M, q, lb, ub, basis, options, x, *, warm: WarmBasis | None = None,
                      r=None, ray_start: bool = False, retry_below: float = np.inf,
                      keep_ray: bool = False, minor_limit=None, deadline=None,
-                     log=None, direct: bool = False) -> PathResult:
+                     log=None, direct: DirectFactors | None = None) -> PathResult:
     """One linear MCP by the pivotal path from x (warm-started from ``warm``), retried
     from the Lemke ray start when ``options.lemke_start`` is "automatic", the first path
     failed and reached only t < ``retry_below``.  The retry's result is kept when it
     solves, reaches a larger t, or (``keep_ray``) ends in a genuine ray, which is what
     an infeasibility verdict needs; pivots and factorizations of both paths are counted.
-    ``direct``: first try the path's end point by one sparse solve
+    ``direct``: first try the path's end point by one sparse solve with these factors
     (:mod:`compass_sparse.direct_step`; the first path only, not the ray-start retry).
     """
     kw = dict(minor_limit=minor_limit, deadline=deadline, log=log)
@@ -208,7 +208,7 @@ class PivotalPath:
     """
 
     def __init__(self, M, q, lb, ub, manager, options, *, minor_limit=None, deadline=None,
-                 log=None, direct: bool = False):
+                 log=None, direct: DirectFactors | None = None):
         # No copy when M is already CSC (every major iteration builds a new path).
         self.M = M if (sp.issparse(M) and M.format == "csc") else sp.csc_matrix(M)
         self.n = self.M.shape[0]
@@ -294,13 +294,15 @@ class PivotalPath:
                              ray_start=ray_start)
             res.time = time.perf_counter() - t0
             return res
-        if self.direct and not ray_start and self.log is None:
+        if self.direct is not None and not ray_start and self.log is None:
             # A path without pivots ends where one sparse solve says (direct_step.py);
             # a minor-iteration log keeps the path, which it describes.
             td = time.perf_counter()
-            end, self.direct_lu_nnz = direct_step(self.M, self.q, lb, ub, z, basic)
+            end, self.direct_lu_nnz = direct_step(self.M, self.q, lb, ub, z, basic,
+                                                  self.direct)
             if self.direct_lu_nnz:
-                self.bm.stats.record_direct_lu(self.direct_lu_nnz, time.perf_counter() - td)
+                self.bm.stats.record_direct_lu(self.direct_lu_nnz, time.perf_counter() - td,
+                                               self.direct.method)
             if end is not None:
                 res = PathResult(LinearCode.SOLVED, *end, 1.0, factorizations=1,
                                  basis=WarmBasis(basic.copy()), ray_start=False,

@@ -25,7 +25,8 @@ def _paths(lcp, x, manager):
     out = []
     for direct in (False, True):
         bm = manager(M)
-        out.append(PivotalPath(M, q, lb, ub, bm, Options(), direct=direct).run(x))
+        out.append(PivotalPath(M, q, lb, ub, bm, Options(),
+                                   direct=ds.DirectFactors() if direct else None).run(x))
     return out
 
 
@@ -181,6 +182,7 @@ def test_newton_steps_without_pivots_take_no_dense_factorization(monkeypatch):
     assert r.success and r.minor_iterations == 0
     assert engines and all(e._dense is None and e.L is None for e in engines)
     assert r.passes["path"].factorizations == r.passes["path"].iterations
+    assert r.lu["backend"] == "klu"  # the Ramsey model's blocks barely fill
     monkeypatch.setattr("compass_sparse.nms.direct_step_applies", lambda M, o: False)
     ref = solve_mcp(p)
     assert ref.status is r.status and ref.nit == r.nit
@@ -197,3 +199,40 @@ def test_direct_step_leaves_large_factors_to_reuse():
     r = solve_mcp(p)
     assert r.success
     assert r.passes["path"].iterations >= 1 and r.passes["path"].factorizations == 0
+
+
+def _random_block(n, density, seed):
+    rng = np.random.default_rng(seed)
+    A = sp.random(n, n, density=density, random_state=seed, format="csc")
+    return sp.csc_matrix(A + sp.diags(rng.uniform(1.0, 2.0, n))), rng.standard_normal(n)
+
+
+@pytest.mark.parametrize("n,density", [(60, 0.05), (300, 0.01), (300, 0.05)])
+def test_klu_and_superlu_agree(n, density):
+    """Both factorizations of the direct step solve the block to working accuracy."""
+    K, b = _random_block(n, density, seed=n)
+    ref = np.linalg.solve(K.toarray(), b)
+    for klu in (True, False):
+        x = ds.DirectFactors(klu=klu).solve(K, b)
+        assert np.max(np.abs(x - ref)) <= 1e-10 * (1.0 + np.max(np.abs(ref)))
+
+
+def test_klu_gives_way_to_superlu_on_a_block_that_fills():
+    """KLU keeps factoring low-fill blocks; a block whose LU holds more than
+    KLU_FILL_LIMIT times its entries hands the rest of the solve to SuperLU."""
+    f = ds.DirectFactors(klu=True)
+    K, b = _random_block(300, 0.003, seed=1)   # little fill
+    f.solve(K, b)
+    assert f.klu and f.method[0] == "klu" and f.lu_nnz <= ds.KLU_FILL_LIMIT * K.nnz
+    K, b = _random_block(300, 0.05, seed=2)    # fills most of L and U
+    x = f.solve(K, b)
+    assert f.lu_nnz > ds.KLU_FILL_LIMIT * K.nnz and not f.klu
+    np.testing.assert_allclose(K @ x, b, atol=1e-9)
+    f.solve(K, b)
+    assert f.method == ("superlu", "colamd")
+
+
+@pytest.mark.parametrize("klu", [True, False])
+def test_singular_block_gives_no_solution(klu):
+    K = sp.csc_matrix(np.array([[1.0, 2.0, 0.0], [2.0, 4.0, 0.0], [0.0, 0.0, 1.0]]))
+    assert ds.DirectFactors(klu=klu).solve(K, np.ones(3)) is None
