@@ -43,7 +43,7 @@ from ._jit import njit
 from ._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
 from .basis.types import BasisOptions
 
-__all__ = ["DIRECT_MAX_DENSITY", "DIRECT_MAX_N", "DIRECT_MIN_N", "KLU_FILL_LIMIT",
+__all__ = ["DIRECT_MAX_DENSITY", "DIRECT_MAX_N", "DIRECT_MIN_N", "KLU_FILL_LIMIT", "KLU_FROM_FILL",
            "REUSE_BEATS_REFACTOR_NNZ", "DirectFactors", "direct_step", "direct_step_applies",
            "reduced_system"]
 
@@ -51,9 +51,11 @@ DIRECT_MIN_N = 50
 """Below this order the compiled engine's dense factorization costs less than a sparse
 LU's set-up."""
 
-DIRECT_MAX_N = 20_000
-"""Above this order the basis manager's factor reuse (GMRES on held factors) is cheaper
-than a fresh factorization per major iteration; the direct step is not tried."""
+DIRECT_MAX_N = 2000
+"""Above this order the direct step is not tried: the basis manager's own set-up is small
+next to its factorization there, and its fill-reducing orderings (AMD or METIS, chosen by
+a symbolic estimate) and factor reuse serve large blocks better (the dynamic CGE model at
+n = 1e4: 0.3 s per factorization in the manager's ordering, 10 s in KLU's)."""
 
 DIRECT_MAX_DENSITY = 0.05
 """Largest nnz(M) / n^2: denser matrices keep the dense engine (whose factorization then
@@ -185,20 +187,22 @@ def reduced_system(M, free, z, q):
 class DirectFactors:
     """The sparse LUs of one solve's direct steps.
 
-    KLU (SuiteSparse, through kvxopt: block triangular form, AMD, diagonal preference,
-    no supernodes) factors the low-fill blocks of dynamic and network models 3-5x faster
-    than SuperLU (0.13 against 0.40 ms at n = 362, 0.33 against 0.83 ms at n = 992 on the
-    Ramsey model's M_FF), whose set-up costs dominate there; on blocks that fill (the
-    static CGE model's: 1.3e5 entries from 8e3) SuperLU with COLAMD is 2x faster.  So KLU
-    factors until one of its LUs holds more than ``KLU_FILL_LIMIT`` times the entries of
-    its block, and SuperLU from then on (for the rest of the solve).  Without kvxopt:
-    SuperLU throughout.  ``lu_nnz`` is the size of the last LU (L + U, and KLU's
-    off-diagonal blocks)."""
+    SuperLU with COLAMD factors the first block.  When its LU holds at most
+    ``KLU_FROM_FILL`` times the block's entries, later blocks (the same active set, or
+    nearly) are factored by KLU (SuiteSparse, through kvxopt: block triangular form, AMD,
+    a diagonal preference, no supernodes), which on such low-fill blocks is 3-5x faster,
+    SuperLU's set-up dominating there (0.13 against 0.40 ms at n = 362, 0.33 against
+    0.83 ms at n = 992 on the Ramsey model's M_FF).  On blocks that fill, SuperLU is the
+    faster (2x on the static CGE model's, 1.3e5 entries from 8e3), so a KLU factorization
+    holding more than ``KLU_FILL_LIMIT`` times its block's entries returns the rest of the
+    solve to SuperLU.  ``lu_nnz`` is the size of the last LU (L + U, and KLU's
+    off-diagonal blocks); ``method`` its (backend, ordering)."""
 
-    def __init__(self, klu: bool | None = None):
-        self.klu = _klu_module() is not None if klu is None else klu
+    def __init__(self, klu: bool = False):
+        self.klu = klu and _klu_module() is not None
+        self.klu_allowed = _klu_module() is not None
         self.lu_nnz = 0
-        self.method = ("", "")  #: (backend, ordering) of the last LU
+        self.method = ("", "")
 
     def solve(self, K, rhs):
         """x with K x = rhs, or None when K is singular (as the factorization finds)."""
@@ -213,6 +217,7 @@ class DirectFactors:
             self.lu_nnz = 0
             return None
         self.lu_nnz = int(lu.nnz)
+        self.klu = self.klu_allowed and self.lu_nnz <= KLU_FROM_FILL * max(K.nnz, 1)
         return lu.solve(rhs)
 
     def _klu_solve(self, K, rhs):
@@ -232,15 +237,19 @@ class DirectFactors:
         parts = klu.get_numeric(A, Fs, Fn)  # L, U, P, Q, R, F (copies: ~10 us at n = 1e3)
         self.lu_nnz = len(parts[0]) + len(parts[1]) + len(parts[5])
         if self.lu_nnz > KLU_FILL_LIMIT * max(K.nnz, 1):
-            self.klu = False
+            self.klu_allowed = self.klu = False
         b = matrix(np.ascontiguousarray(rhs, dtype=np.float64))
         klu.solve(A, Fs, Fn, b)
         return np.array(b, dtype=np.float64).ravel()
 
 
+KLU_FROM_FILL = 4.0
+"""Largest nnz(LU) / nnz(block) of a SuperLU factorization after which the direct step
+factors with KLU (see :class:`DirectFactors`)."""
+
 KLU_FILL_LIMIT = 8.0
-"""Largest nnz(LU) / nnz(block) of a KLU factorization before the direct step switches
-to SuperLU (see :class:`DirectFactors`)."""
+"""Largest nnz(LU) / nnz(block) of a KLU factorization before the direct step returns
+to SuperLU for the rest of the solve."""
 
 
 def _klu_module():
@@ -256,7 +265,7 @@ def direct_step(M, q, lb, ub, z, basic, factors: DirectFactors | None = None):
     start basis ``basic`` (per index: VAR_Z, VAR_W, VAR_V or VAR_S) when that path makes
     no pivot, else (None, nnz of the LU).  ``M``: CSC (n x n); ``z``: the current z, at
     its bounds off F; ``factors``: the solve's :class:`DirectFactors` (default: SuperLU)."""
-    factors = DirectFactors(klu=False) if factors is None else factors
+    factors = DirectFactors() if factors is None else factors
     n = z.shape[0]
     free = basic == VAR_Z
     zt = np.array(z, dtype=float)

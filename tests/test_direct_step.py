@@ -217,19 +217,27 @@ def test_klu_and_superlu_agree(n, density):
         assert np.max(np.abs(x - ref)) <= 1e-10 * (1.0 + np.max(np.abs(ref)))
 
 
-def test_klu_gives_way_to_superlu_on_a_block_that_fills():
-    """KLU keeps factoring low-fill blocks; a block whose LU holds more than
-    KLU_FILL_LIMIT times its entries hands the rest of the solve to SuperLU."""
-    f = ds.DirectFactors(klu=True)
-    K, b = _random_block(300, 0.003, seed=1)   # little fill
-    f.solve(K, b)
-    assert f.klu and f.method[0] == "klu" and f.lu_nnz <= ds.KLU_FILL_LIMIT * K.nnz
-    K, b = _random_block(300, 0.05, seed=2)    # fills most of L and U
-    x = f.solve(K, b)
-    assert f.lu_nnz > ds.KLU_FILL_LIMIT * K.nnz and not f.klu
-    np.testing.assert_allclose(K @ x, b, atol=1e-9)
-    f.solve(K, b)
-    assert f.method == ("superlu", "colamd")
+def test_superlu_first_then_klu_while_blocks_do_not_fill():
+    """SuperLU factors the first block; one that fills at most KLU_FROM_FILL times its
+    entries sends the next to KLU, which keeps them while its own LU stays within
+    KLU_FILL_LIMIT times the block; a block that fills more returns the rest of the
+    solve to SuperLU for good."""
+    f = ds.DirectFactors()
+    low, b = _random_block(300, 0.003, seed=1)   # little fill
+    f.solve(low, b)
+    assert f.method == ("superlu", "colamd") and f.lu_nnz <= ds.KLU_FROM_FILL * low.nnz
+    assert f.klu
+    f.solve(low, b)
+    assert f.method[0] == "klu" and f.klu
+    high, b2 = _random_block(300, 0.05, seed=2)  # fills most of L and U
+    x = f.solve(high, b2)
+    assert f.method[0] == "klu" and f.lu_nnz > ds.KLU_FILL_LIMIT * high.nnz and not f.klu
+    np.testing.assert_allclose(high @ x, b2, atol=1e-9)
+    f.solve(low, b)
+    assert f.method == ("superlu", "colamd") and not f.klu  # for good
+    g = ds.DirectFactors()
+    g.solve(high, b2)                               # SuperLU fills it: KLU never tried
+    assert g.lu_nnz > ds.KLU_FROM_FILL * high.nnz and not g.klu
 
 
 @pytest.mark.parametrize("klu", [True, False])
