@@ -301,6 +301,23 @@ def test_fixed_variables_alone_are_left_to_the_solver():
         r.passes["presolve"].reason
 
 
+def test_large_problems_still_solve_a_reduced_problem_without_fixed_variables():
+    """Above KEEP_FIXED_MAX_N the preprocessor's reduced problem is kept even when it only
+    fixes l = u variables (a different trajectory had cost the dynamic CGE model at
+    n = 1e4 its crash-only solve)."""
+    from compass_sparse.solve import KEEP_FIXED_MAX_N
+
+    n = KEEP_FIXED_MAX_N + 1
+    d = np.linspace(1.0, 2.0, n)
+    lb, ub = np.zeros(n), np.full(n, np.inf)
+    lb[::7] = ub[::7] = 0.5
+    p = MCP(lambda z: d * z - 1.0, lambda z: sp.diags(d, format="csc"), lb, ub, np.ones(n))
+    r = solve_mcp(p)
+    assert r.success and r.passes["presolve"].reason.startswith(
+        f"Preprocessor removed {lb[::7].size} rows/cols")
+    np.testing.assert_allclose(r.x[::7], 0.5)
+
+
 # ----------------------------------------------------------------------------- Jacobian forms
 def test_jac_true_and_fd_forms():
     p = kp.kojima_shindo()
