@@ -102,3 +102,23 @@ def test_compiled_scaling_passes_match_the_array_formulas(n, density):
     out = np.empty(A.nnz)
     csc_scale(A.indptr, A.indices, A.data, row, col, out)
     assert np.array_equal(out, A.data * row[A.indices] * col[_columns(A)], equal_nan=True)
+
+
+def test_scale_entries_is_the_diagonal_products_and_undoes_itself():
+    """diag(r) J diag(c) entry by entry, bit for bit what the two sparse products give;
+    with power-of-two factors scaling by 1/r, 1/c restores J exactly (the acceptance test
+    judges the user's J this way)."""
+    from compass_sparse.scaling import scale_entries
+
+    rng = np.random.default_rng(3)
+    n = 40
+    J = sp.csc_matrix(sp.random(n, n, density=0.1, random_state=3, format="csc")
+                      + sp.identity(n))
+    r = 2.0 ** rng.integers(-30, 30, n)
+    c = 2.0 ** rng.integers(-30, 30, n)
+    S = scale_entries(J, r, c)
+    ref = sp.csc_matrix(sp.diags(r) @ J @ sp.diags(c))
+    assert np.array_equal(S.indptr, J.indptr) and np.array_equal(S.indices, J.indices)
+    assert np.array_equal(S.toarray(), ref.toarray())
+    back = scale_entries(S, 1.0 / r, 1.0 / c)
+    assert np.array_equal(back.data, J.data) and back.data is not S.data
