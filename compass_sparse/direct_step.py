@@ -15,17 +15,19 @@ rest (z_N at its current values),
 
     M_FF z_F = -(q + M_FN z_N)_F,      s_N = (M z + q)_N = w_N - v_N,
 
-one sparse LU of M_FF (SuperLU, COLAMD) and a product.  It is the path's end point when
-z_F lies in its box and each slack has its sign (w basic: s >= 0; v basic: s <= 0; the
-slack of a fixed variable is free).  Otherwise, or when M_FF is singular or the residual
-check fails, nothing is returned and the caller runs the path as always: the answer is
-then exactly the path's, and the cost of the attempt is one sparse factorization.
+one sparse LU of M_FF (:class:`DirectFactors`: SuperLU, then KLU while the blocks do not
+fill) and a product.  It is the path's end point when z_F lies in its box and each slack
+has its sign (w basic: s >= 0; v basic: s <= 0; the slack of a fixed variable is free).
+Otherwise, or when M_FF is singular or the residual check fails, nothing is returned and
+the caller runs the path as always: the answer is then exactly the path's, and the cost
+of the attempt is one sparse factorization.
 
 For a sparse M this replaces the compiled engine's dense O(n^3) factorization (n <= 500)
 or the basis manager's general factorization with rank repair and update structures
-(measured on the Ramsey model at n = 363 and 993: benchmarks/small.md, "Direct Newton
-steps").  Dense M (the thesis families) and tiny n keep the engine: see
-:func:`direct_step_applies`.
+(measured on the Ramsey model at n = 363 and 993: benchmarks/small.md, "Round 4").  Dense
+M (the thesis families), tiny n and large n keep the engine or the basis manager: see
+:func:`direct_step_applies`; so do solves whose basis reuses large factors (the crash's,
+or its own: ``REUSE_BEATS_REFACTOR_NNZ``).
 
 Tolerances: a basic value may lie outside its bound by at most ``FEASIBILITY_TOLERANCE``
 (1e-12) relative to max(1, |bound|) and is then put on the bound (the path's own values
