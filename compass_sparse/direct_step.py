@@ -120,8 +120,8 @@ def _free_block(indptr, indices, data, pos, z, q, Kp, Ki, Kx, rhs):
 @njit(cache=True)
 def _end_point(indptr, indices, data, q, lb, ub, basic, z, w, v, tol):
     """w, v of the end point from s = M z + q; z_F put on its bound when outside by at
-    most ``tol`` (relative).  Returns the largest |residual| over F (-1.0: infeasible)
-    and max|M z|."""
+    most ``tol`` (relative).  Returns the largest |residual| over F (-1.0: infeasible, or
+    a non-finite s) and max|M z|."""
     n = z.shape[0]
     for i in range(n):
         if basic[i] == VAR_Z:
@@ -144,6 +144,8 @@ def _end_point(indptr, indices, data, q, lb, ub, basic, z, w, v, tol):
     res = 0.0
     for i in range(n):
         si = s[i] + q[i]
+        if not np.isfinite(si):
+            return -1.0, 0.0
         w[i] = 0.0
         v[i] = 0.0
         b = basic[i]
@@ -288,6 +290,6 @@ def direct_step(M, q, lb, ub, z, basic, factors: DirectFactors | None = None):
     if res < 0.0:
         return None, nnz_lu
     qmax = float(np.max(np.abs(q))) if n else 0.0
-    if res > RESIDUAL_TOLERANCE * (1.0 + mz + qmax):
+    if not res <= RESIDUAL_TOLERANCE * (1.0 + mz + qmax):  # (NaN fails too)
         return None, nnz_lu
     return (zt, w, v), nnz_lu

@@ -244,3 +244,16 @@ def test_superlu_first_then_klu_while_blocks_do_not_fill():
 def test_singular_block_gives_no_solution(klu):
     K = sp.csc_matrix(np.array([[1.0, 2.0, 0.0], [2.0, 4.0, 0.0], [0.0, 0.0, 1.0]]))
     assert ds.DirectFactors(klu=klu).solve(K, np.ones(3)) is None
+
+
+def test_non_finite_data_give_no_end_point():
+    """A NaN in a column outside F (its slack would be NaN) or in q: no end point."""
+    M = sp.csc_matrix(np.array([[2.0, np.nan], [1.0, 1.0]]))
+    lb, ub = np.zeros(2), np.ones(2)
+    basic = np.array([VAR_Z, VAR_W], dtype=np.int8)
+    end, _ = ds.direct_step(M, np.array([-1.0, 0.5]), lb, ub, np.array([0.3, 0.0]), basic)
+    assert end is None
+    M = sp.csc_matrix(np.eye(2))
+    end, _ = ds.direct_step(M, np.array([np.nan, -0.5]), lb, ub, np.full(2, 0.5),
+                            np.full(2, VAR_Z, np.int8))
+    assert end is None
