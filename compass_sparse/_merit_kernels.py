@@ -126,6 +126,26 @@ def csc_scaled_abs_maxima(indptr, indices, data, row, col, rows, cols):
 
 
 @njit(cache=True)
+def csc_is_canonical(indptr, indices, nrows, nnz):
+    """Whether CSC index arrays are valid and canonical: indptr runs from 0 to nnz without
+    decreasing, and every column's row indices lie in [0, nrows) strictly increasing
+    (sorted, no duplicates)."""
+    if indptr[0] != 0 or indptr[indptr.shape[0] - 1] != nnz or indices.shape[0] < nnz:
+        return False
+    for j in range(indptr.shape[0] - 1):
+        a, b = indptr[j], indptr[j + 1]
+        if b < a:
+            return False
+        prev = -1
+        for k in range(a, b):
+            i = indices[k]
+            if i <= prev or i >= nrows:
+                return False
+            prev = i
+    return True
+
+
+@njit(cache=True)
 def csc_scale(indptr, indices, data, row, col, out):
     """out[k] = (a_k row_i) col_j for every stored entry k = (i, j) of a CSC matrix."""
     for j in range(indptr.shape[0] - 1):
