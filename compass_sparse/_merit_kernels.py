@@ -108,6 +108,51 @@ def csc_abs_maxima(indptr, indices, data, rows, cols, diag):
         diag[j] = d
 
 
+@njit(cache=True)
+def csc_scaled_abs_maxima(indptr, indices, data, row, col, rows, cols):
+    """Row and column max-norms of diag(row) A diag(col) for a canonical CSC A, entry
+    (|a_ij| row_i) col_j as scaling._maxnorms' array formula (NaN propagates as in
+    np.maximum); the caller zeroes rows and cols."""
+    for j in range(cols.shape[0]):
+        c = 0.0
+        for k in range(indptr[j], indptr[j + 1]):
+            i = indices[k]
+            a = abs(data[k]) * row[i] * col[j]
+            if a > c or a != a:
+                c = a
+            if a > rows[i] or a != a:
+                rows[i] = a
+        cols[j] = c
+
+
+@njit(cache=True)
+def csc_is_canonical(indptr, indices, nrows, nnz):
+    """Whether CSC index arrays are valid and canonical: indptr runs from 0 to nnz without
+    decreasing, and every column's row indices lie in [0, nrows) strictly increasing
+    (sorted, no duplicates)."""
+    if indptr[0] != 0 or indptr[indptr.shape[0] - 1] != nnz or indices.shape[0] < nnz:
+        return False
+    for j in range(indptr.shape[0] - 1):
+        a, b = indptr[j], indptr[j + 1]
+        if b < a:
+            return False
+        prev = -1
+        for k in range(a, b):
+            i = indices[k]
+            if i <= prev or i >= nrows:
+                return False
+            prev = i
+    return True
+
+
+@njit(cache=True)
+def csc_scale(indptr, indices, data, row, col, out):
+    """out[k] = (a_k row_i) col_j for every stored entry k = (i, j) of a CSC matrix."""
+    for j in range(indptr.shape[0] - 1):
+        for k in range(indptr[j], indptr[j + 1]):
+            out[k] = data[k] * row[indices[k]] * col[j]
+
+
 @njit(cache=True, inline="always")
 def _absorbed(zi, fi, li, ui):
     """(w, v) of merit.normal_map_at for one index: the part of F absorbed by the normal

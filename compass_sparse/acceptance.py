@@ -33,6 +33,7 @@ import scipy.sparse as sp
 
 from ._merit_kernels import flat_step_kernel
 from .merit import fb_jacobian_diagonals, fb_phi, min_map
+from .scaling import scale_entries
 
 __all__ = ["FLAT_STEP_RTOL", "Verdict", "judge", "residuals_small", "Acceptance"]
 
@@ -152,7 +153,9 @@ class Acceptance:
             J = jac(z)
             if J is None:
                 return J
-            return sp.diags(1.0 / self.row) @ J @ sp.diags(1.0 / self.col)
+            # R^-1 J C^-1 (power-of-two factors: exact) in one compiled pass: two sparse
+            # products cost a small model ~0.5 ms per verdict
+            return scale_entries(J, 1.0 / self.row, 1.0 / self.col)
 
         return judge(zu, fu, self.lb, self.ub, self.tol,
                      jac=None if jac is None else user_jac, small=small)

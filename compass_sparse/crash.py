@@ -36,6 +36,7 @@ import scipy.sparse as sp
 
 from ._matching import column_matching
 from .basis.backends import SingularFactorError, solve_sparse
+from .direct_step import reduced_system
 from .exceptions import FactorBudgetError
 from .merit import fb_phi, normal_map_at, project
 
@@ -238,11 +239,8 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
         d[act_l] = z[act_l] - lb[act_l]
         d[act_u] = z[act_u] - ub[act_u]
         if inact.size:
-            Jc = J[inact]
-            rhs = f[inact]
-            act = np.flatnonzero(active)
-            if act.size:
-                rhs = rhs - Jc[:, act] @ d[act]
+            # J_II and f_I - J_IA d_A (d is 0 on I), in one compiled pass
+            Jii, rhs = reduced_system(J, ~active, d, -f)
             di = None
             if (factors is not None and not aged
                     and np.setxor1d(factors[0], inact).size <= REUSE_MAX_CHANGES):
@@ -253,9 +251,8 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
                 # a slow convergence says the factors have aged: factor at the next step
                 aged = di is None or steps > REUSE_ITERATIONS // 2
             if di is None:
-                Jii = Jc[:, inact]
                 di, eps, nf, why, held = _solve_reduced(
-                    Jii.tocsc(), rhs, opt.crash_perturb, eps_scale * max(1.0, nm_norm),
+                    Jii, rhs, opt.crash_perturb, eps_scale * max(1.0, nm_norm),
                     deadline, labels=inact, lu=(opt.lu_backend, opt.lu_ordering))
                 nfact += nf
                 if stats is not None:

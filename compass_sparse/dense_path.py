@@ -73,7 +73,14 @@ class DensePathEngine:
         self.stability_tolerance = float(stability_tolerance)
         self.growth_limit = float(growth_limit)
         self.stats = BasisStats()
+        self._dense = None
         self.set_matrix(M)
+        self.L = None  # work areas: allocated by the first path (see _allocate)
+        self.r = np.zeros(self.n)
+
+    def _allocate(self):
+        """The factors' and the path's work areas, once per engine: a solve whose paths
+        all end by the direct step (direct_step.py) never needs them."""
         n = self.n
         self.L, self.U, self.R, self.perm, self.fwork = K.allocate_factors(n, self.update_limit)
         self.work = np.zeros((8, n))
@@ -83,20 +90,29 @@ class DensePathEngine:
         self.best_x = np.zeros(n)
         self.enter_count = np.zeros((6, n), dtype=np.int64)
         self.displaced = np.full(n, -1, dtype=np.int64)
-        self.r = np.zeros(n)
 
     def set_matrix(self, M):
-        """M (sparse or dense) into the engine's dense column-major copy, which is
-        allocated once per order and refilled by every later linearization."""
-        n = M.shape[0]
-        A = getattr(self, "M", None)
-        if A is None or A.shape != (n, n):
-            A = self.M = np.zeros((n, n), order="F")
-        if sp.issparse(M) and M.format == "csc":
-            csc_to_dense(M.indptr, M.indices, M.data, A)
-        else:
-            A[...] = M.toarray() if sp.issparse(M) else np.asarray(M, dtype=float)
-        self.n = n
+        """Take M (sparse or dense); its dense column-major copy is made when a path
+        first needs it (a path ended by the direct step never does)."""
+        self.n = M.shape[0]
+        self._pending = M
+
+    @property
+    def M(self):
+        """The dense column-major copy of M, allocated once per order and refilled for
+        every later linearization."""
+        M = self._pending
+        if M is not None:
+            n = M.shape[0]
+            A = self._dense
+            if A is None or A.shape != (n, n):
+                A = self._dense = np.zeros((n, n), order="F")
+            if sp.issparse(M) and M.format == "csc":
+                csc_to_dense(M.indptr, M.indices, M.data, A)
+            else:
+                A[...] = M.toarray() if sp.issparse(M) else np.asarray(M, dtype=float)
+            self._pending = None
+        return self._dense
 
     def set_dense_column(self, r):
         self.r = np.ascontiguousarray(r, dtype=float)
@@ -113,6 +129,8 @@ class DensePathEngine:
     def run_path(self, path, z, w, v, slack_basis):
         """Factor, pivot and check on ``path``'s slot table (set by PivotalPath.run).
         Leaves the path's fields as its own loop would and returns (LinearCode, message)."""
+        if self.L is None:
+            self._allocate()
         lb = np.ascontiguousarray(path.lb, dtype=float)
         ub = np.ascontiguousarray(path.ub, dtype=float)
         path.lb, path.ub = lb, ub

@@ -51,6 +51,7 @@ from ._csc import trusted_csc
 from ._merit_kernels import csc_matvec
 from .acceptance import Acceptance
 from .crash import crash
+from .direct_step import REUSE_BEATS_REFACTOR_NNZ, DirectFactors, direct_step_applies
 from .exceptions import FactorBudgetError
 from .fallback import gradient_steps, lm_step
 from .merit import fb_gradient, fb_phi, fb_psi, normal_map_at, project
@@ -256,6 +257,7 @@ class NMSSolver:
         self.passes = {"crash": PassStats(), "path": PassStats(), "fallback": PassStats()}
         self.linearizer = None
         self.bm = None
+        self._direct = None  # DirectFactors when Newton paths try the direct step
         self._crash_factors = None  # the crash's last LU, offered to the next basis
         self.basis: WarmBasis | None = None
         self._rng = None
@@ -356,10 +358,15 @@ class NMSSolver:
         q = cur.f - Mz
         if self.bm is None:
             self.bm = self.manager_factory(M)
+            self._direct = DirectFactors() if direct_step_applies(M, opt) else None
         else:
             self.bm.set_matrix(M)
         if self._crash_factors is not None and hasattr(self.bm, "offer_factors"):
             self.bm.offer_factors(*self._crash_factors)
+            if self.bm.holds_offer:
+                # the basis will solve on the crash's factors, cheaper than the direct
+                # step's factorization, and reuse its own factors after that
+                self._direct = None
         self._crash_factors = None
         r = cur.f + x - cur.z  # normal map of the linearization at x
         limit = opt.minor_limit(self.n)
@@ -368,7 +375,13 @@ class NMSSolver:
         # A warm path that stalls before half-way is retried from the Lemke start.
         res = solve_linear_mcp(M, q, self.lb, self.ub, self.bm, opt, x, warm=self.basis, r=r,
                                ray_start=start_ray, retry_below=0.5, minor_limit=limit,
-                               deadline=self.deadline, log=self.log_minor)
+                               deadline=self.deadline, log=self.log_minor,
+                               direct=self._direct)
+        if res.direct_lu_nnz >= REUSE_BEATS_REFACTOR_NNZ and opt.factor_reuse and \
+                not getattr(self.bm, "runs_paths", False):
+            # factors this large are cheaper to reuse (the sparse basis' GMRES) than to
+            # compute afresh in every major iteration
+            self._direct = None
         st = self.passes["path"]
         st.ran = True
         st.time += time.perf_counter() - t0

@@ -55,6 +55,7 @@ import scipy.sparse as sp
 from ._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
 from ._slot_kernels import slot_basis, slot_point, slot_table, start_basis
 from .basis import KIND_DENSE, KIND_M, KIND_UNIT, FactorReuseFailed, UpdateStatus
+from .direct_step import DirectFactors, direct_step
 from .exceptions import ShapeError, SingularBasisError
 
 _VAR_NAMES = "zwvatS"
@@ -99,6 +100,7 @@ class PathResult:
     ray_base: np.ndarray | None = None  #: unbounded: the z where the ray starts
     time: float = 0.0
     message: str = ""
+    direct_lu_nnz: int = 0  #: entries of the direct step's LU (0: not tried)
 
     @property
     def x(self) -> np.ndarray:
@@ -147,16 +149,18 @@ def default_basis(z, lb, ub, previous: WarmBasis | None = None) -> np.ndarray:
 def solve_linear_mcp(M, q, lb, ub, basis, options, x, *, warm: WarmBasis | None = None,
                      r=None, ray_start: bool = False, retry_below: float = np.inf,
                      keep_ray: bool = False, minor_limit=None, deadline=None,
-                     log=None) -> PathResult:
+                     log=None, direct: DirectFactors | None = None) -> PathResult:
     """One linear MCP by the pivotal path from x (warm-started from ``warm``), retried
     from the Lemke ray start when ``options.lemke_start`` is "automatic", the first path
     failed and reached only t < ``retry_below``.  The retry's result is kept when it
     solves, reaches a larger t, or (``keep_ray``) ends in a genuine ray, which is what
     an infeasibility verdict needs; pivots and factorizations of both paths are counted.
+    ``direct``: first try the path's end point by one sparse solve with these factors
+    (:mod:`compass_sparse.direct_step`; the first path only, not the ray-start retry).
     """
     kw = dict(minor_limit=minor_limit, deadline=deadline, log=log)
-    res = PivotalPath(M, q, lb, ub, basis, options, **kw).run(x, warm=warm,
-                                                              ray_start=ray_start, r=r)
+    res = PivotalPath(M, q, lb, ub, basis, options, direct=direct, **kw).run(
+        x, warm=warm, ray_start=ray_start, r=r)
     if (res.code is LinearCode.SOLVED or ray_start or options.lemke_start != "automatic"
             or res.t >= retry_below
             or (deadline is not None and time.perf_counter() > deadline)):
@@ -204,7 +208,7 @@ class PivotalPath:
     """
 
     def __init__(self, M, q, lb, ub, manager, options, *, minor_limit=None, deadline=None,
-                 log=None):
+                 log=None, direct: DirectFactors | None = None):
         # No copy when M is already CSC (every major iteration builds a new path).
         self.M = M if (sp.issparse(M) and M.format == "csc") else sp.csc_matrix(M)
         self.n = self.M.shape[0]
@@ -216,6 +220,8 @@ class PivotalPath:
         self.minor_limit = minor_limit or options.minor_limit(self.n)
         self.deadline = deadline
         self.log = log
+        self.direct = direct
+        self.direct_lu_nnz = 0  # entries of the direct step's LU (0: not tried)
 
     # ------------------------------------------------------------------ set-up
     def _columns_for(self, kinds, idx):
@@ -288,6 +294,21 @@ class PivotalPath:
                              ray_start=ray_start)
             res.time = time.perf_counter() - t0
             return res
+        if self.direct is not None and not ray_start and self.log is None:
+            # A path without pivots ends where one sparse solve says (direct_step.py);
+            # a minor-iteration log keeps the path, which it describes.
+            td = time.perf_counter()
+            end, self.direct_lu_nnz = direct_step(self.M, self.q, lb, ub, z, basic,
+                                                  self.direct)
+            if self.direct_lu_nnz:
+                self.bm.stats.record_direct_lu(self.direct_lu_nnz, time.perf_counter() - td,
+                                               self.direct.method)
+            if end is not None:
+                res = PathResult(LinearCode.SOLVED, *end, 1.0, factorizations=1,
+                                 basis=WarmBasis(basic.copy()), ray_start=False,
+                                 direct_lu_nnz=self.direct_lu_nnz)
+                res.time = time.perf_counter() - t0
+                return res
         self._reset_slots(basic, z, w, v)
         self.bm.set_dense_column(r)
         if getattr(self.bm, "runs_paths", False):
@@ -649,6 +670,7 @@ class PivotalPath:
             breakpoints=self.st.breakpoints,
             basis=WarmBasis(basic), ray_start=ray_start, message=msg,
         )
+        res.direct_lu_nnz = self.direct_lu_nnz
         res.unbounded = code is LinearCode.RAY and self.st.unbounded
         if res.unbounded and self.st.ray is not None:
             res.ray_base, res.ray = self.st.ray

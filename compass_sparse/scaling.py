@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from ._csc import trusted_csc
 from .evaluation import Evaluator
 from .problem import MCP
 
@@ -60,14 +61,23 @@ class Scaling:
 
     def scale_jacobian(self, J) -> sp.csc_matrix:
         """R J C entry by entry (the stored entries, explicit zeros included, are kept)."""
-        J = sp.csc_matrix(J)
-        cols = _columns(J)
-        return sp.csc_matrix((J.data * self.row[J.indices] * self.col[cols], J.indices.copy(),
-                              J.indptr.copy()), shape=J.shape)
+        return scale_entries(J, self.row, self.col)
 
     def summary(self) -> str:
         return (f"row/column max-norm spread {self.spread_before:.1e} -> "
                 f"{self.spread_after:.1e}")
+
+
+def scale_entries(J, row, col) -> sp.csc_matrix:
+    """diag(row) J diag(col) as a new CSC matrix, entry by entry in one compiled pass
+    ((a_ij row_i) col_j, the value diag(row) @ J @ diag(col) computes; the stored entries,
+    explicit zeros included, are kept)."""
+    from ._merit_kernels import csc_scale
+
+    J = J if sp.issparse(J) and J.format == "csc" else sp.csc_matrix(J)
+    data = np.empty(J.data.shape)
+    csc_scale(J.indptr, J.indices, J.data.astype(float, copy=False), row, col, data)
+    return trusted_csc(data, J.indices.copy(), J.indptr.copy(), J.shape)
 
 
 def _columns(A: sp.csc_matrix) -> np.ndarray:
@@ -94,6 +104,11 @@ def _maxnorms(A: sp.csc_matrix, row=None, col=None):
         from ._merit_kernels import csc_abs_maxima
 
         csc_abs_maxima(A.indptr, A.indices, A.data, rows, cols, np.empty(A.shape[1]))
+        return rows, cols
+    if row is not None and A.shape[0] == A.shape[1]:
+        from ._merit_kernels import csc_scaled_abs_maxima
+
+        csc_scaled_abs_maxima(A.indptr, A.indices, A.data, row, col, rows, cols)
         return rows, cols
     a = np.abs(A.data)
     if row is not None:

@@ -193,3 +193,36 @@ def test_memo_compares_points_as_equal_values_signed_zeros_alike_nan_never():
     assert m.get(np.array([5.0, 5.0])) == "c"
     m.clear()
     assert m.get(np.array([5.0, 5.0])) is None
+
+
+@pytest.mark.parametrize("case", ["canonical", "unsorted", "duplicates", "int64", "zeros"])
+def test_canonical_csc_fast_path_matches_scipys_canonical_form(case):
+    """A canonical float CSC Jacobian is copied without scipy's constructor; every other
+    form goes through scipy: both give the same sorted, duplicate-free matrix (explicit
+    zeros kept) that owns its arrays."""
+    from compass_sparse._merit_kernels import csc_is_canonical
+    from compass_sparse.evaluation import canonical_csc
+
+    n = 5
+    indptr = np.array([0, 2, 3, 3, 5, 6], dtype=np.int32)
+    indices = np.array([0, 3, 1, 2, 4, 0], dtype=np.int32)
+    data = np.arange(1.0, 7.0)
+    if case == "unsorted":
+        indices[[0, 1]] = indices[[1, 0]]
+    elif case == "duplicates":
+        indices[4] = 2
+    elif case == "zeros":
+        data[2] = 0.0
+    J = sp.csc_matrix((data, indices, indptr), shape=(n, n))
+    if case == "int64":
+        J.indices, J.indptr = J.indices.astype(np.int64), J.indptr.astype(np.int64)
+    assert csc_is_canonical(indptr, indices, n, 6) is (case in ("canonical", "int64", "zeros"))
+    C = canonical_csc(J, n)
+    ref = J.copy()
+    ref.sum_duplicates()
+    ref.sort_indices()
+    assert C.has_canonical_format
+    assert np.array_equal(C.indptr, ref.indptr) and np.array_equal(C.indices, ref.indices)
+    assert np.array_equal(C.data, ref.data)
+    assert C.data is not J.data and C.indices is not J.indices
+    assert not csc_is_canonical(np.array([0, 1], np.int32), np.array([7], np.int32), 5, 1)

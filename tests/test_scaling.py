@@ -72,3 +72,53 @@ def test_scaling_pass_stays_off_for_a_well_scaled_jacobian():
     assert spread(sp.csc_matrix(M)) <= SPREAD_TRIGGER
     r = solve_mcp(lambda z: M @ z + q, lambda z: sp.csc_matrix(M), 0.0, np.inf, np.zeros(10))
     assert r.success and not r.passes["scaling"].ran
+
+
+@pytest.mark.parametrize("n,density", [(1, 1.0), (6, 0.6), (50, 0.1)])
+def test_compiled_scaling_passes_match_the_array_formulas(n, density):
+    """The compiled max-norms of R A C and the entrywise R J C agree bit for bit with the
+    array formulas they replace ((|a| r) c and (a r) c; a NaN entry poisons its row and
+    column maxima as np.maximum does)."""
+    from compass_sparse._merit_kernels import csc_scale, csc_scaled_abs_maxima
+    from compass_sparse.scaling import _columns
+
+    rng = np.random.default_rng(n)
+    A = sp.csc_matrix(sp.random(n, n, density=density, format="csc", random_state=n)
+                      - 0.5 * sp.random(n, n, density=density, format="csc",
+                                        random_state=n + 1))
+    A.sum_duplicates()
+    if A.nnz and n > 1:
+        A.data[A.nnz // 2] = np.nan
+    row = 2.0 ** rng.integers(-20, 20, n)
+    col = 2.0 ** rng.integers(-20, 20, n)
+    rows, cols = np.zeros(n), np.zeros(n)
+    csc_scaled_abs_maxima(A.indptr, A.indices, A.data, row, col, rows, cols)
+    a = np.abs(A.data) * row[A.indices] * col[_columns(A)]
+    ref_r, ref_c = np.zeros(n), np.zeros(n)
+    np.maximum.at(ref_r, A.indices, a)
+    np.maximum.at(ref_c, _columns(A), a)
+    assert np.array_equal(rows, ref_r, equal_nan=True)
+    assert np.array_equal(cols, ref_c, equal_nan=True)
+    out = np.empty(A.nnz)
+    csc_scale(A.indptr, A.indices, A.data, row, col, out)
+    assert np.array_equal(out, A.data * row[A.indices] * col[_columns(A)], equal_nan=True)
+
+
+def test_scale_entries_is_the_diagonal_products_and_undoes_itself():
+    """diag(r) J diag(c) entry by entry, bit for bit what the two sparse products give;
+    with power-of-two factors scaling by 1/r, 1/c restores J exactly (the acceptance test
+    judges the user's J this way)."""
+    from compass_sparse.scaling import scale_entries
+
+    rng = np.random.default_rng(3)
+    n = 40
+    J = sp.csc_matrix(sp.random(n, n, density=0.1, random_state=3, format="csc")
+                      + sp.identity(n))
+    r = 2.0 ** rng.integers(-30, 30, n)
+    c = 2.0 ** rng.integers(-30, 30, n)
+    S = scale_entries(J, r, c)
+    ref = sp.csc_matrix(sp.diags(r) @ J @ sp.diags(c))
+    assert np.array_equal(S.indptr, J.indptr) and np.array_equal(S.indices, J.indices)
+    assert np.array_equal(S.toarray(), ref.toarray())
+    back = scale_entries(S, 1.0 / r, 1.0 / c)
+    assert np.array_equal(back.data, J.data) and back.data is not S.data

@@ -283,6 +283,41 @@ def test_manufactured_with_fixed_variables_goes_through_presolve():
     assert r.passes["presolve"].ran
 
 
+def test_fixed_variables_alone_are_left_to_the_solver():
+    """Fixing l = u variables is the only reduction: the solver keeps them fixed in the
+    user's problem (no reduced problem to build and evaluate through) and says so."""
+    from compass_sparse.presolve import presolve
+
+    g, F, lb, ub, zstar, fix = fixed_variables_case()
+    pre = presolve(g.problem, keep_fixed_only=True)
+    assert pre.reduced is g.problem and pre.stats.kept_fixed == fix.size
+    assert pre.stats.removed == 0 and len(pre.stack) == 0
+    full = presolve(g.problem)
+    assert full.stats.removed == fix.size and full.reduced is not g.problem
+    r = solve_mcp(g.problem)
+    check_success(r, F, lb, ub)
+    np.testing.assert_array_equal(r.x[fix], zstar[fix])
+    assert f"{fix.size} fixed variables (l = u) left to the solver" in \
+        r.passes["presolve"].reason
+
+
+def test_large_problems_still_solve_a_reduced_problem_without_fixed_variables():
+    """Above KEEP_FIXED_MAX_N the preprocessor's reduced problem is kept even when it only
+    fixes l = u variables (a different trajectory had cost the dynamic CGE model at
+    n = 1e4 its crash-only solve)."""
+    from compass_sparse.solve import KEEP_FIXED_MAX_N
+
+    n = KEEP_FIXED_MAX_N + 1
+    d = np.linspace(1.0, 2.0, n)
+    lb, ub = np.zeros(n), np.full(n, np.inf)
+    lb[::7] = ub[::7] = 0.5
+    p = MCP(lambda z: d * z - 1.0, lambda z: sp.diags(d, format="csc"), lb, ub, np.ones(n))
+    r = solve_mcp(p)
+    assert r.success and r.passes["presolve"].reason.startswith(
+        f"Preprocessor removed {lb[::7].size} rows/cols")
+    np.testing.assert_allclose(r.x[::7], 0.5)
+
+
 # ----------------------------------------------------------------------------- Jacobian forms
 def test_jac_true_and_fd_forms():
     p = kp.kojima_shindo()
@@ -542,6 +577,23 @@ def test_evaluation_counts_through_presolve():
     assert r.njev <= r.nit + r.crash_iterations + 8
 
 
+def _with_linear_singleton(problem):
+    """``problem`` with one more variable z_n >= 0 and the row F_n = 2 z_n - 1 declared
+    linear: a singleton row that presolve removes (fixing l = u variables alone leaves the
+    problem to the solver, which keeps them fixed itself)."""
+    n = problem.n
+
+    def F(z):
+        return np.append(problem.F(z[:n]), 2.0 * z[n] - 1.0)
+
+    def J(z):
+        return sp.block_diag((problem.J(z[:n]), sp.csc_matrix([[2.0]])), format="csc")
+
+    const = sp.csc_matrix(([1.0], ([n], [n])), shape=(n + 1, n + 1))
+    return MCP(F, J, np.append(problem.lb, 0.0), np.append(problem.ub, np.inf),
+               np.append(problem.x0, 1.0), constant_jac=const)
+
+
 def test_warm_basis_survives_presolve():
     """Result.basis is in the user's index space after presolve removed variables, and a
     re-solve from it (presolve runs again) needs no pivots; a basis of the wrong size is
@@ -551,12 +603,14 @@ def test_warm_basis_survives_presolve():
 
     n = 40
     g, F, lb, ub, zstar, fix = fixed_variables_case(n)
+    problem = _with_linear_singleton(g.problem)
 
-    r = solve_mcp(g.problem, options={"convergence_tolerance": 1e-8})
-    check_success(r, F, lb, ub)
+    r = solve_mcp(problem, options={"convergence_tolerance": 1e-8})
+    assert r.success and r.residual.natural <= 1e-8 and abs(r.x[n] - 0.5) <= 1e-12
+    np.testing.assert_array_equal(r.x[fix], zstar[fix])
     assert r.passes["presolve"].ran and r.passes["presolve"].reason.startswith(
-        "Preprocessor removed")
-    assert r.basis.basic.shape == (n,)
+        "Preprocessor removed 9 rows/cols")
+    assert r.basis.basic.shape == (n + 1,)
     warm_seen = []
     run = path_mod.PivotalPath.run
 
@@ -567,7 +621,7 @@ def test_warm_basis_survives_presolve():
     path_mod.PivotalPath.run = spy
     try:
         # A tighter tolerance makes the re-solve take a Newton step from the solution.
-        again = solve_mcp(g.problem, x0=r.x, basis=r.basis,
+        again = solve_mcp(problem, x0=r.x, basis=r.basis,
                           options={"convergence_tolerance": 1e-13, "major_iteration_limit": 1,
                                    "crash_method": "none"})
     finally:
@@ -578,4 +632,4 @@ def test_warm_basis_survives_presolve():
     assert again.nit == 1 and again.minor_iterations == 0
     assert again.residual.fb_norm <= r.residual.fb_norm
     with pytest.raises(ShapeError, match="warm-start basis"):
-        solve_mcp(g.problem, basis=type(r.basis)(r.basis.basic[:-1]))
+        solve_mcp(problem, basis=type(r.basis)(r.basis.basic[:-1]))

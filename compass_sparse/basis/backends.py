@@ -103,14 +103,29 @@ class FactorBudget:
 
     @staticmethod
     def available_memory() -> float | None:
+        """Bytes the system reports available, read at most every ``MEMINFO_MAX_AGE``
+        seconds (a small solve creates several budgets; each read cost ~40 us)."""
+        now = time.monotonic()
+        if _MEMINFO and now - _MEMINFO[0] <= MEMINFO_MAX_AGE:
+            return _MEMINFO[1]
+        value = None
         try:
             with open("/proc/meminfo") as fh:
                 for line in fh:
                     if line.startswith("MemAvailable:"):
-                        return float(line.split()[1]) * 1024.0
+                        value = float(line.split()[1]) * 1024.0
+                        break
         except OSError:
             pass
-        return None
+        _MEMINFO[:] = [now, value]
+        return value
+
+
+MEMINFO_MAX_AGE = 0.5
+"""Seconds a reading of the available memory is reused (memory budgets of
+factorizations: a factorization that may take 80% of it is refused)."""
+
+_MEMINFO: list = []  # [time.monotonic() of the reading, bytes or None]
 
 
 @dataclass

@@ -118,7 +118,8 @@ class BasisManager:
             mem = 0.8 * avail if avail is not None else None
         self.budget = FactorBudget(o.deadline, None if mem == np.inf else mem)
         self._backend = make_backend(o.backend, o.ordering, o.diag_pivot_thresh, self.budget)
-        self._load_matrix(M, first=True)
+        self._Mc = self._absMc = None
+        self._check_matrix(M, first=True)
         n = self.n
         self._r = None
         self._kinds = np.full(n, KIND_UNIT, dtype=_I)
@@ -142,35 +143,53 @@ class BasisManager:
         kern.warmup()
 
     # ------------------------------------------------------------------ input
-    def _load_matrix(self, M, first=False):
+    def _check_matrix(self, M, first=False):
+        """Validate M now; its canonical copy is made when first needed (:attr:`_M`): a
+        Newton path that ends by the direct step never factors, so never needs it."""
         if not sp.issparse(M):
             raise ShapeError("M must be a scipy.sparse matrix")
-        M = sp.csc_matrix(M, dtype=np.float64, copy=True)
         if M.shape[0] != M.shape[1]:
             raise ShapeError(f"M must be square, got {M.shape}")
         if not first and M.shape[0] != self.n:
             raise ShapeError(f"M must be {self.n} x {self.n}, got {M.shape}")
-        if M.nnz and not np.all(np.isfinite(M.data)):
+        data = getattr(M, "data", None)
+        if isinstance(data, np.ndarray) and data.size and not np.all(np.isfinite(data)):
             raise ProblemError("M contains NaN or Inf")
-        M.sum_duplicates()
-        M.sort_indices()
-        self._M = M
-        self._absM = abs(M)
+        self._pending = M
         self.n = M.shape[0]
+
+    @property
+    def _M(self):
+        """M as canonical CSC (float64, summed duplicates, sorted indices; a copy)."""
+        if self._pending is not None:
+            M = sp.csc_matrix(self._pending, dtype=np.float64, copy=True)
+            self._pending = None
+            if M.nnz and not np.all(np.isfinite(M.data)):
+                raise ProblemError("M contains NaN or Inf")
+            M.sum_duplicates()
+            M.sort_indices()
+            old = self._Mc
+            if old is not None and not (
+                    M.indptr.size == old.indptr.size and M.indices.size == old.indices.size
+                    and np.array_equal(M.indptr, old.indptr)
+                    and np.array_equal(M.indices, old.indices)):
+                self._held = None   # another pattern: the held factors are no preconditioner
+            self._Mc, self._absMc = M, abs(M)
+        return self._Mc
+
+    @property
+    def _absM(self):
+        """|M| (of the canonical copy)."""
+        self._M  # noqa: B018 - loads a pending matrix
+        return self._absMc
 
     def set_matrix(self, M):
         """Replace M (same order; the pattern may change). The factors become stale:
         call :meth:`factor` or :meth:`refactor` before the next solve (with
         ``reuse_factors`` and an unchanged pattern, :meth:`factor` may keep them as the
         preconditioner of the new basis)."""
-        old = self._M
-        self._load_matrix(M)
+        self._check_matrix(M)
         self._invalidate()
-        new = self._M
-        if not (new.indptr.size == old.indptr.size and new.indices.size == old.indices.size
-                and np.array_equal(new.indptr, old.indptr)
-                and np.array_equal(new.indices, old.indices)):
-            self._held = None   # another pattern: the held factors are no preconditioner
 
     def set_dense_column(self, r):
         """Set the dense column (covering vector) r, float64 of length n. If a slot holds
@@ -255,6 +274,7 @@ class BasisManager:
     # ---------------------------------------------------------- factorization
     def factor(self, kinds, indices, signs) -> FactorReport:
         """Set the slot table and factorize B from scratch (with rank repair)."""
+        self._M  # noqa: B018 - a pending matrix decides whether held factors still fit
         n = self.n
         kinds = np.asarray(kinds).astype(_I).ravel()
         indices = np.asarray(indices).astype(_I).ravel()
@@ -294,6 +314,11 @@ class BasisManager:
         if ok:
             self._psolve = self._solve_quiet
         return ok
+
+    @property
+    def holds_offer(self) -> bool:
+        """Whether offered factors (:meth:`offer_factors`) wait for the next factor()."""
+        return self._offered is not None
 
     def offer_factors(self, labels, held):
         """Offer the LU ``held`` (a :class:`~compass_sparse.basis.backends.HeldLU`) of a

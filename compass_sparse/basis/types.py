@@ -220,6 +220,14 @@ class BasisStats:
     reuse_steps: int = 0  #: GMRES steps of those solves
     reuse_fallbacks: int = 0  #: reuses ended by a fresh factorization (doubt or update)
 
+    def record_direct_lu(self, nnz_lu: int, seconds: float, method=("superlu", "colamd")):
+        """Count a sparse LU made for the basis' path outside it (the direct Newton step,
+        :mod:`compass_sparse.direct_step`; ``method``: its (backend, ordering))."""
+        self.factorizations += 1
+        self.time_factor += seconds
+        self.max_nnz_lu = max(self.max_nnz_lu, int(nnz_lu))
+        self.backend, self.ordering = method
+
 
 class UpdateStatus(enum.IntEnum):
     """Outcome of :meth:`BasisManager.replace`."""

@@ -64,6 +64,7 @@ class PresolveStats:
     time: float = 0.0
     f_evals: int = 0
     passes: dict = field(default_factory=dict)
+    kept_fixed: int = 0  #: l = u variables left in the problem (``keep_fixed_only``)
 
     @property
     def removed(self) -> int:
@@ -119,6 +120,8 @@ class PresolveResult:
         line = (f"Preprocessor removed {s.removed} rows/cols and {s.nnz_removed} non-zeros; "
                 f"preprocessed size {s.n_reduced} (nnz {s.nnz_reduced}) from {s.n_original} "
                 f"(nnz {s.nnz_original}) in {s.rounds} rounds, {s.time:.3f} s")
+        if s.kept_fixed:
+            line += f"; {s.kept_fixed} fixed variables (l = u) left to the solver"
         if self.infeasible is not None:
             line += f"; INFEASIBLE: {self.infeasible.message}"
         return line
@@ -139,9 +142,14 @@ def _has_structure(problem, J0) -> bool:
 
 
 def presolve(problem, options: PresolveOptions | dict | None = None, *, f0=None,
-             J0=None) -> PresolveResult:
+             J0=None, keep_fixed_only: bool = False) -> PresolveResult:
     """Reduce ``problem`` (an :class:`~compass_sparse.problem.MCP`); see the module docs.
-    ``f0``, ``J0``: F and J at ``problem.x0`` when the caller has them."""
+    ``f0``, ``J0``: F and J at ``problem.x0`` when the caller has them.
+
+    ``keep_fixed_only``: when fixing l = u variables is the only reduction found, return
+    the problem itself (an identity stack; ``stats.kept_fixed`` counts them): a solver
+    that keeps such variables at their value needs no reduced problem, whose set-up and
+    restricted evaluations cost more than they save."""
     opts = PresolveOptions.coerce(options)
     t0 = time.perf_counter()
     warnings: list = []
@@ -149,12 +157,9 @@ def presolve(problem, options: PresolveOptions | dict | None = None, *, f0=None,
         J0 = problem.J(problem.x0)
     nnz = int(J0.indptr[-1])
     stats = PresolveStats(n_original=problem.n, nnz_original=nnz)
-    for mod in PHASE_ONE + PHASE_TWO:
-        stats.passes[mod.NAME] = ReductionStats(mod.NAME, enabled=getattr(opts, mod.NAME))
     if not _has_structure(problem, J0):
-        stack = PostsolveStack(n=problem.n, evaluate_F=problem.F,
-                               base=problem.x0.copy(), cols=np.arange(problem.n),
-                               rows=np.arange(problem.n))
+        _reset_passes(stats, opts)
+        stack = _identity_stack(problem)
         stats.n_reduced, stats.nnz_reduced = problem.n, nnz
         structural = structural_rank_check(problem) if opts.structural_check else None
         if structural is not None and not structural.ok:
@@ -162,38 +167,42 @@ def presolve(problem, options: PresolveOptions | dict | None = None, *, f0=None,
         stats.time = time.perf_counter() - t0
         return PresolveResult(problem, problem, stack, stats, opts, warnings=warnings,
                               structural=structural)
-    declared = problem.constant_mask is not None and problem.constant_mask.any()
-    samples = sample_evaluations(problem, opts) if declared else []
-    if J0.nnz != problem.pattern.nnz:  # an undeclared pattern grew at the sample points
-        J0 = problem.evaluator.on_pattern(J0)
-        stats.nnz_original = nnz = int(J0.indptr[-1])
     if f0 is None:
         f0 = problem.F(problem.x0)
-    const = declared_constant_mask(problem, J0, f0, opts, warnings, samples)
-    certain, nonlinear = empty_row_status(problem, J0)
-    ws = Workspace(problem, opts, J0, const, warnings, certain_rows=certain,
-                   nonlinear_rows=nonlinear)
-    infeasible = None
-    try:
-        for rnd in range(opts.max_rounds):
-            if rnd > 0:
-                ws.refresh()
-            stats.rounds = rnd + 1
-            changed = _run_phase(ws, PHASE_ONE, stats, opts)
-            if not changed:
-                changed = _run_phase(ws, PHASE_TWO, stats, opts)
-            if not changed:
-                break
-    except PresolveInfeasible as exc:
-        infeasible = exc.diagnostic
-        logger.warning("presolve: %s", infeasible.message)
-    reduced = build_reduced(ws)
-    if len(ws.stack) == 0:
+    # The passes first run on the declared linear structure; the check of the declaration
+    # at sample points (``verify_linear``, two more F and J evaluations) only matters when
+    # a reduction or a verdict rests on it, and then the passes run again when the check
+    # withdrew anything.  The result is the same as checking first (the check only ever
+    # removes linear information), at no evaluation cost when nothing rests on it.
+    declared = problem.constant_mask is not None and problem.constant_mask.any()
+    const = declared_constant_mask(problem, J0, f0, opts, warnings, samples=[])
+    ws, infeasible = _reduce(problem, opts, J0, const, warnings, stats)
+    if declared and opts.verify_linear and _rests_on_linearity(stats, infeasible):
+        samples = sample_evaluations(problem, opts)
+        J0v = J0
+        if J0.nnz != problem.pattern.nnz:  # an undeclared pattern grew at the sample points
+            J0v = problem.evaluator.on_pattern(J0)
+            stats.nnz_original = nnz = int(J0v.indptr[-1])
+        checked = []
+        const_v = declared_constant_mask(problem, J0v, f0, opts, checked, samples)
+        if J0v is not J0 or not np.array_equal(const_v, const):
+            warnings[:] = checked
+            stats.rounds = 0
+            ws, infeasible = _reduce(problem, opts, J0v, const_v, warnings, stats)
+        else:
+            warnings.extend(checked)
+    stats.kept_fixed = 0
+    if keep_fixed_only and infeasible is None and _fixed_only(stats):
+        stats.kept_fixed = stats.passes[fixed.NAME].removed
+        _reset_passes(stats, opts)
+    if len(ws.stack) == 0 or stats.kept_fixed:
         reduced = problem
-        ws.stack.cols = np.arange(problem.n)
-        ws.stack.rows = np.arange(problem.n)
-    stats.n_reduced = int(ws.stack.cols.size)
-    stats.nnz_reduced = ws.live_nnz()
+        ws.stack = _identity_stack(problem)
+        stats.n_reduced, stats.nnz_reduced = problem.n, nnz
+    else:
+        reduced = build_reduced(ws)
+        stats.n_reduced = int(ws.stack.cols.size)
+        stats.nnz_reduced = ws.live_nnz()
     stats.f_evals = ws.f_evals
     warnings[:] = list(dict.fromkeys(warnings))
     structural = None
@@ -206,6 +215,55 @@ def presolve(problem, options: PresolveOptions | dict | None = None, *, f0=None,
                          warnings=warnings, structural=structural)
     logger.info(res.summary_line())
     return res
+
+
+def _identity_stack(problem):
+    return PostsolveStack(n=problem.n, evaluate_F=problem.F, base=problem.x0.copy(),
+                          cols=np.arange(problem.n), rows=np.arange(problem.n))
+
+
+def _reset_passes(stats, opts):
+    for mod in PHASE_ONE + PHASE_TWO:
+        stats.passes[mod.NAME] = ReductionStats(mod.NAME, enabled=getattr(opts, mod.NAME))
+
+
+def _reduce(problem, opts, J0, const, warnings, stats):
+    """The rounds of passes on a fresh workspace: (workspace, infeasibility or None)."""
+    _reset_passes(stats, opts)
+    certain, nonlinear = empty_row_status(problem, J0)
+    ws = Workspace(problem, opts, J0, const, warnings, certain_rows=certain,
+                   nonlinear_rows=nonlinear)
+    infeasible = None
+    try:
+        # Fixed variables first, on their own: every other pass of the first round would
+        # skip the rows and columns they touch (often all of a model's rows through one
+        # fixed price) and a second round would be needed only to look at them again.
+        if _run_phase(ws, (fixed,), stats, opts):
+            ws.refresh()
+        for rnd in range(opts.max_rounds):
+            if rnd > 0:
+                ws.refresh()
+            stats.rounds = rnd + 1
+            changed = _run_phase(ws, PHASE_ONE, stats, opts)
+            if not changed:
+                changed = _run_phase(ws, PHASE_TWO, stats, opts)
+            if not changed:
+                break
+    except PresolveInfeasible as exc:
+        infeasible = exc.diagnostic
+        logger.warning("presolve: %s", infeasible.message)
+    return ws, infeasible
+
+
+def _fixed_only(stats) -> bool:
+    """Whether fixing l = u variables is all the passes did."""
+    return all(ps.removed == 0 for name, ps in stats.passes.items() if name != fixed.NAME)
+
+
+def _rests_on_linearity(stats, infeasible) -> bool:
+    """Whether a reduction or the verdict may rest on declared-constant entries: anything
+    but fixing l = u variables (conservative: empty rows and columns are included)."""
+    return infeasible is not None or not _fixed_only(stats)
 
 
 def _run_phase(ws, passes, stats, opts) -> int:

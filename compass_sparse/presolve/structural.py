@@ -17,6 +17,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._matching import matching
+from ..direct_step import reduced_system
 
 __all__ = ["StructuralReport", "structural_rank_check"]
 
@@ -60,11 +61,11 @@ def structural_rank_check(problem, *, include_fixed: bool = False) -> Structural
     n = problem.n
     keep = np.ones(n, dtype=bool) if include_fixed else problem.lb < problem.ub
     idx = np.flatnonzero(keep)
-    S = sp.csr_matrix(P)[idx][:, idx]
-    S.eliminate_zeros()
     m = idx.size
     if m == 0:
         return StructuralReport(n=0, rank=0, message="no non-fixed variables")
+    # P[keep, keep] (the pattern's data are ones: no stored zeros to drop)
+    S = reduced_system(P, keep, np.zeros(n), np.zeros(n))[0]
     row_of_col, col_of_row = matching(S)
     rank = int(np.count_nonzero(col_of_row >= 0))
     ur = idx[col_of_row < 0]

@@ -52,3 +52,29 @@ def test_solve_stops_with_memory_limit_when_the_factors_would_not_fit(
         return
     assert res.status is Status.MEMORY_LIMIT and res.status.path_code() == 10
     assert "GiB" in res.message and np.all(np.isfinite(res.x))
+
+
+def test_available_memory_is_read_at_most_every_max_age(monkeypatch):
+    """The memory budget's reading of /proc/meminfo is reused for MEMINFO_MAX_AGE
+    seconds, then read again."""
+    import builtins
+
+    backends._MEMINFO.clear()
+    clock = [100.0]
+    monkeypatch.setattr(backends.time, "monotonic", lambda: clock[0])
+    opened = []
+    real_open = builtins.open
+
+    def spy(path, *a, **kw):
+        opened.append(path)
+        return real_open(path, *a, **kw)
+
+    monkeypatch.setattr(builtins, "open", spy)
+    first = backends.FactorBudget.available_memory()
+    clock[0] += 0.5 * backends.MEMINFO_MAX_AGE
+    assert backends.FactorBudget.available_memory() == first
+    reads = opened.count("/proc/meminfo")
+    assert reads == 1
+    clock[0] += backends.MEMINFO_MAX_AGE
+    backends.FactorBudget.available_memory()
+    assert opened.count("/proc/meminfo") == reads + 1

@@ -234,19 +234,55 @@ def test_nonlinear_entries_are_never_used():
     solve_ok(p)
 
 
-def test_wrong_linear_declaration_is_caught_by_verification():
-    # F_0 = z_0^2 + 1 - z_1 with the (0, 0) entry falsely declared constant
+def _falsely_declared(third_row: bool):
+    """F_0 = z_0^2 + 1 - z_1 with the (0, 0) entry falsely declared constant; with
+    ``third_row`` a correct linear singleton row F_2 = 3 z_2 - 1 that presolve removes."""
+    n = 3 if third_row else 2
+    calls = {"F": 0, "J": 0}
+
     def F(z):
-        return np.array([z[0] ** 2 + 1 - z[1], z[0] + 2 * z[1] - 1])
+        calls["F"] += 1
+        f = [z[0] ** 2 + 1 - z[1], z[0] + 2 * z[1] - 1]
+        return np.array(f + ([3 * z[2] - 1] if third_row else []))
 
     def J(z):
-        return sp.csc_matrix(np.array([[2 * z[0], -1.0], [1.0, 2.0]]))
+        calls["J"] += 1
+        D = np.zeros((n, n))
+        D[:2, :2] = [[2 * z[0], -1.0], [1.0, 2.0]]
+        if third_row:
+            D[2, 2] = 3.0
+        return sp.csc_matrix(D)
 
-    p = MCP(F, J, 0.0, INF, np.array([0.3, 0.2]),
-            constant_jac=sp.csc_matrix(np.ones((2, 2))))
+    pattern = np.zeros((n, n))
+    pattern[:2, :2] = 1.0
+    if third_row:
+        pattern[2, 2] = 1.0
+    p = MCP(F, J, 0.0, INF, np.array([0.3, 0.2, 0.5][:n]), jac_sparsity=pattern,
+            constant_jac=sp.csc_matrix(pattern))
+    return p, calls
+
+
+def test_wrong_linear_declaration_is_caught_by_verification():
+    # a reduction rests on the declaration (row 2): the sample points are evaluated, the
+    # wrong entry found, and the passes run again without it
+    p, _ = _falsely_declared(third_row=True)
     res = presolve(p)
     assert res.warnings and "change value" in res.warnings[0]
-    assert res.stats.removed == 0
+    assert res.stats.removed == 1 and list(res.cols) == [0, 1]
+    solve_ok(p)
+
+
+def test_declared_linearity_is_verified_only_when_a_reduction_rests_on_it():
+    # no reduction: no sample evaluations (only F at the start point and at the rounds'
+    # base point), the same outcome as with the check
+    p, calls = _falsely_declared(third_row=False)
+    J0 = p.J(p.x0)
+    calls["F"] = calls["J"] = 0
+    res = presolve(p, J0=J0)
+    assert res.stats.removed == 0 and calls["J"] == 0
+    assert res.reduced is p
+    checked = presolve(p, J0=J0, options=PresolveOptions(verify_linear=False))
+    assert checked.stats.removed == 0
 
 
 def test_pass_switches_and_counters():

@@ -1,0 +1,295 @@
+"""The direct Newton step: a pivotal path that needs no pivot, found by one sparse solve.
+
+A path of the linearization ``M z + q - w + v = (1 - t) r`` starts at t = 0 from the
+current point in the start basis B (thesis §3.3: z_i basic between its bounds, or where
+the warm or inward guess keeps it basic at a bound; the slack w_i, v_i or the free s_i
+basic elsewhere).  Its basic values are affine in t.  If they are feasible at t = 0 (they
+are: the covering vector r makes the current point the t = 0 point) and at t = 1, they
+are feasible on the whole segment, so the ratio test never blocks and the path reaches
+t = 1 with no pivot.  Near the solution of a smooth model this is the common case: the
+active set has settled and every major iteration is a Newton step (the Ramsey CGE models
+at n = 100-1000 solve in 3 major iterations and 0 pivots).
+
+The point at t = 1 needs no basis manager: with F the indices whose z is basic and N the
+rest (z_N at its current values),
+
+    M_FF z_F = -(q + M_FN z_N)_F,      s_N = (M z + q)_N = w_N - v_N,
+
+one sparse LU of M_FF (:class:`DirectFactors`: SuperLU, then KLU while the blocks do not
+fill) and a product.  It is the path's end point when z_F lies in its box and each slack
+has its sign (w basic: s >= 0; v basic: s <= 0; the slack of a fixed variable is free).
+Otherwise, or when M_FF is singular or the residual check fails, nothing is returned and
+the caller runs the path as always: the answer is then exactly the path's, and the cost
+of the attempt is one sparse factorization.
+
+For a sparse M this replaces the compiled engine's dense O(n^3) factorization (n <= 500)
+or the basis manager's general factorization with rank repair and update structures
+(measured on the Ramsey model at n = 363 and 993: benchmarks/small.md, "Round 4").  Dense
+M (the thesis families), tiny n and large n keep the engine or the basis manager: see
+:func:`direct_step_applies`; so do solves whose basis reuses large factors (the crash's,
+or its own: ``REUSE_BEATS_REFACTOR_NNZ``).
+
+Tolerances: a basic value may lie outside its bound by at most ``FEASIBILITY_TOLERANCE``
+(1e-12) relative to max(1, |bound|) and is then put on the bound (the path's own values
+carry rounding of that order); the end point must satisfy the linear equations to
+``RESIDUAL_TOLERANCE`` (1e-9) relative to 1 + max|M z| + max|q|, the path's own solution
+check (:meth:`compass_sparse.path.PivotalPath._verify_solution`).
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from ._csc import trusted_csc
+from ._jit import njit
+from ._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
+from .basis.types import BasisOptions
+
+__all__ = ["DIRECT_MAX_DENSITY", "DIRECT_MAX_N", "DIRECT_MIN_N", "KLU_FILL_LIMIT", "KLU_FROM_FILL",
+           "REUSE_BEATS_REFACTOR_NNZ", "DirectFactors", "direct_step", "direct_step_applies",
+           "reduced_system"]
+
+DIRECT_MIN_N = 50
+"""Below this order the compiled engine's dense factorization costs less than a sparse
+LU's set-up."""
+
+DIRECT_MAX_N = 2000
+"""Above this order the direct step is not tried: the basis manager's own set-up is small
+next to its factorization there, and its fill-reducing orderings (AMD or METIS, chosen by
+a symbolic estimate) and factor reuse serve large blocks better (the dynamic CGE model at
+n = 1e4: 0.3 s per factorization in the manager's ordering, 10 s in KLU's)."""
+
+DIRECT_MAX_DENSITY = 0.05
+"""Largest nnz(M) / n^2: denser matrices keep the dense engine (whose factorization then
+costs about what a sparse one would)."""
+
+REUSE_BEATS_REFACTOR_NNZ = BasisOptions.reuse_min_nnz
+"""A sparse basis (n > 500) solves on held factors of at least this many entries by GMRES
+(option ``factor_reuse``), which costs less than a fresh factorization: the solver stops
+trying the direct step once its LU is this large, or when the crash's factors are taken."""
+
+FEASIBILITY_TOLERANCE = 1e-12
+RESIDUAL_TOLERANCE = 1e-9
+
+
+def direct_step_applies(M, options) -> bool:
+    """Whether the Newton paths of a linearization with matrix M try the direct step:
+    a sparse M of moderate order, and no LU backend or ordering forced by the user (the
+    direct step factors with SuperLU and COLAMD)."""
+    n = M.shape[0]
+    if not DIRECT_MIN_N <= n <= DIRECT_MAX_N:
+        return False
+    if getattr(options, "lu_backend", "auto") != "auto" or \
+            getattr(options, "lu_ordering", "auto") != "auto":
+        return False
+    from .basis.backends import _ENV
+    import os
+
+    if os.environ.get(_ENV):
+        return False
+    return M.nnz <= DIRECT_MAX_DENSITY * float(n) * n
+
+
+@njit(cache=True)
+def _free_block(indptr, indices, data, pos, z, q, Kp, Ki, Kx, rhs):
+    """The CSC arrays of M_FF (``pos[i]``: position of i in F, or -1) into Kp/Ki/Kx and
+    rhs = -(q + M_FN z_N)_F; returns nnz(M_FF)."""
+    nf = rhs.shape[0]
+    for i in range(pos.shape[0]):
+        if pos[i] >= 0:
+            rhs[pos[i]] = -q[i]
+    k = 0
+    Kp[0] = 0
+    for j in range(pos.shape[0]):
+        pj = pos[j]
+        for e in range(indptr[j], indptr[j + 1]):
+            pi = pos[indices[e]]
+            if pi < 0:
+                continue
+            if pj >= 0:
+                Ki[k] = pi
+                Kx[k] = data[e]
+                k += 1
+            else:
+                rhs[pi] -= data[e] * z[j]
+        if pj >= 0:
+            Kp[pj + 1] = k
+    return k
+
+
+@njit(cache=True)
+def _end_point(indptr, indices, data, q, lb, ub, basic, z, w, v, tol):
+    """w, v of the end point from s = M z + q; z_F put on its bound when outside by at
+    most ``tol`` (relative).  Returns the largest |residual| over F (-1.0: infeasible, or
+    a non-finite s) and max|M z|."""
+    n = z.shape[0]
+    for i in range(n):
+        if basic[i] == VAR_Z:
+            if z[i] < lb[i]:
+                if lb[i] - z[i] > tol * max(1.0, abs(lb[i])):
+                    return -1.0, 0.0
+                z[i] = lb[i]
+            elif z[i] > ub[i]:
+                if z[i] - ub[i] > tol * max(1.0, abs(ub[i])):
+                    return -1.0, 0.0
+                z[i] = ub[i]
+    s = np.zeros(n)
+    for j in range(n):
+        zj = z[j]
+        for e in range(indptr[j], indptr[j + 1]):
+            s[indices[e]] += data[e] * zj
+    mz = 0.0
+    for i in range(n):
+        mz = max(mz, abs(s[i]))
+    res = 0.0
+    for i in range(n):
+        si = s[i] + q[i]
+        if not np.isfinite(si):
+            return -1.0, 0.0
+        w[i] = 0.0
+        v[i] = 0.0
+        b = basic[i]
+        if b == VAR_Z:
+            res = max(res, abs(si))
+        elif b == VAR_W:
+            if si < 0.0:
+                return -1.0, 0.0
+            w[i] = si
+        elif b == VAR_V:
+            if si > 0.0:
+                return -1.0, 0.0
+            v[i] = -si
+        elif b == VAR_S:
+            if si >= 0.0:
+                w[i] = si
+            else:
+                v[i] = -si
+        else:
+            return -1.0, 0.0
+    return res, mz
+
+
+def reduced_system(M, free, z, q):
+    """(M_FF as CSC, -(q + M_FN z_N)_F) for the indices F where ``free`` is True (M: CSC,
+    sorted indices give sorted indices), in one compiled pass without scipy's slicing."""
+    if not (sp.issparse(M) and M.format == "csc"):
+        M = sp.csc_matrix(M)
+    n = free.shape[0]
+    nf = int(np.count_nonzero(free))
+    pos = np.full(n, -1, dtype=np.int64)
+    pos[free] = np.arange(nf, dtype=np.int64)
+    nnz = M.indptr[-1]
+    Kp = np.zeros(nf + 1, dtype=np.int32)
+    Ki = np.empty(nnz, dtype=np.int32)
+    Kx = np.empty(nnz)
+    rhs = np.empty(nf)
+    k = _free_block(M.indptr, M.indices, M.data, pos, np.asarray(z, dtype=float),
+                    np.asarray(q, dtype=float), Kp, Ki, Kx, rhs)
+    return trusted_csc(Kx[:k], Ki[:k], Kp, (nf, nf)), rhs
+
+
+class DirectFactors:
+    """The sparse LUs of one solve's direct steps.
+
+    SuperLU with COLAMD factors the first block.  When its LU holds at most
+    ``KLU_FROM_FILL`` times the block's entries, later blocks (the same active set, or
+    nearly) are factored by KLU (SuiteSparse, through kvxopt: block triangular form, AMD,
+    a diagonal preference, no supernodes), which on such low-fill blocks is 3-5x faster,
+    SuperLU's set-up dominating there (0.13 against 0.40 ms at n = 362, 0.33 against
+    0.83 ms at n = 992 on the Ramsey model's M_FF).  On blocks that fill, SuperLU is the
+    faster (2x on the static CGE model's, 1.3e5 entries from 8e3), so a KLU factorization
+    holding more than ``KLU_FILL_LIMIT`` times its block's entries returns the rest of the
+    solve to SuperLU.  ``lu_nnz`` is the size of the last LU (L + U, and KLU's
+    off-diagonal blocks); ``method`` its (backend, ordering)."""
+
+    def __init__(self, klu: bool = False):
+        self.klu = klu and _klu_module() is not None
+        self.klu_allowed = _klu_module() is not None
+        self.lu_nnz = 0
+        self.method = ("", "")
+
+    def solve(self, K, rhs):
+        """x with K x = rhs, or None when K is singular (as the factorization finds)."""
+        if self.klu:
+            return self._klu_solve(K, rhs)
+        from scipy.sparse.linalg import splu
+
+        self.method = ("superlu", "colamd")
+        try:
+            lu = splu(K, permc_spec="COLAMD")
+        except RuntimeError:  # exactly singular
+            self.lu_nnz = 0
+            return None
+        self.lu_nnz = int(lu.nnz)
+        self.klu = self.klu_allowed and self.lu_nnz <= KLU_FROM_FILL * max(K.nnz, 1)
+        return lu.solve(rhs)
+
+    def _klu_solve(self, K, rhs):
+        klu = _klu_module()
+        from kvxopt import matrix, spmatrix
+
+        self.method = ("klu", "btf+amd")
+        n = K.shape[0]
+        cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(K.indptr))
+        A = spmatrix(matrix(K.data), matrix(K.indices.astype(np.int64)), matrix(cols), (n, n))
+        try:
+            Fs = klu.symbolic(A)
+            Fn = klu.numeric(A, Fs)
+        except ArithmeticError:  # singular
+            self.lu_nnz = 0
+            return None
+        parts = klu.get_numeric(A, Fs, Fn)  # L, U, P, Q, R, F (copies: ~10 us at n = 1e3)
+        self.lu_nnz = len(parts[0]) + len(parts[1]) + len(parts[5])
+        if self.lu_nnz > KLU_FILL_LIMIT * max(K.nnz, 1):
+            self.klu_allowed = self.klu = False
+        b = matrix(np.ascontiguousarray(rhs, dtype=np.float64))
+        klu.solve(A, Fs, Fn, b)
+        return np.array(b, dtype=np.float64).ravel()
+
+
+KLU_FROM_FILL = 4.0
+"""Largest nnz(LU) / nnz(block) of a SuperLU factorization after which the direct step
+factors with KLU (see :class:`DirectFactors`)."""
+
+KLU_FILL_LIMIT = 8.0
+"""Largest nnz(LU) / nnz(block) of a KLU factorization before the direct step returns
+to SuperLU for the rest of the solve."""
+
+
+def _klu_module():
+    try:
+        from kvxopt import klu
+    except ImportError:  # pragma: no cover - kvxopt is a dependency
+        return None
+    return klu
+
+
+def direct_step(M, q, lb, ub, z, basic, factors: DirectFactors | None = None):
+    """(z, w, v, nnz of the LU) of the end point at t = 1 of the path from ``z`` in the
+    start basis ``basic`` (per index: VAR_Z, VAR_W, VAR_V or VAR_S) when that path makes
+    no pivot, else (None, nnz of the LU).  ``M``: CSC (n x n); ``z``: the current z, at
+    its bounds off F; ``factors``: the solve's :class:`DirectFactors` (default: SuperLU)."""
+    factors = DirectFactors() if factors is None else factors
+    n = z.shape[0]
+    free = basic == VAR_Z
+    zt = np.array(z, dtype=float)
+    nnz_lu = 0
+    if free.any():
+        K, rhs = reduced_system(M, free, zt, q)
+        zf = factors.solve(K, rhs)
+        nnz_lu = factors.lu_nnz
+        if zf is None:  # exactly singular: the path's rank repair decides
+            return None, nnz_lu
+        if not np.all(np.isfinite(zf)):
+            return None, nnz_lu
+        zt[free] = zf
+    w = np.empty(n)
+    v = np.empty(n)
+    res, mz = _end_point(M.indptr, M.indices, M.data, q, lb, ub, basic.astype(np.int64), zt,
+                         w, v, FEASIBILITY_TOLERANCE)
+    if res < 0.0:
+        return None, nnz_lu
+    qmax = float(np.max(np.abs(q))) if n else 0.0
+    if not res <= RESIDUAL_TOLERANCE * (1.0 + mz + qmax):  # (NaN fails too)
+        return None, nnz_lu
+    return (zt, w, v), nnz_lu

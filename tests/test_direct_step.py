@@ -1,0 +1,259 @@
+"""The direct Newton step (compass_sparse.direct_step): a path that makes no pivot ends
+where one sparse solve of M_FF says; otherwise the path runs as before.
+
+Checked against the pivotal path itself (both bases), against the linear MCP's own
+conditions recomputed here, and on its two tolerances from both sides.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+import compass_sparse.direct_step as ds
+import compass_sparse.generators as gen
+from compass_sparse import Options, solve_mcp
+from compass_sparse._path_kernels import VAR_V, VAR_W, VAR_Z
+from compass_sparse.basis import BasisManager
+from compass_sparse.dense_path import DensePathEngine
+from compass_sparse.path import LinearCode, PivotalPath, components, default_basis
+
+
+def _paths(lcp, x, manager):
+    M, q, lb, ub = lcp
+    M = sp.csc_matrix(M)
+    out = []
+    for direct in (False, True):
+        bm = manager(M)
+        out.append(PivotalPath(M, q, lb, ub, bm, Options(),
+                                   direct=ds.DirectFactors() if direct else None).run(x))
+    return out
+
+
+@pytest.mark.parametrize("manager", [BasisManager, DensePathEngine])
+@pytest.mark.parametrize("seed", range(4))
+def test_direct_step_agrees_with_the_path(manager, seed):
+    """From points near (the normal-map point of) the solution of P-matrix LCPs: where the
+    path makes no pivot the direct step returns its end point (same z, one
+    factorization); where it pivots the direct step declines and the path's result is
+    unchanged."""
+    kinds = set()
+    for structure, bounds in (("banded", "box"), ("grid", "mixed")):
+        g = gen.p_matrix_lcp(120, structure, seed, bounds)
+        M, q, lb, ub = g.lcp
+        rng = np.random.default_rng(seed)
+        xs = g.solution - (M @ g.solution + q)  # the normal-map point of the solution
+        for scale in (1e-4, 1e-2, 1.0):
+            x = xs + scale * rng.standard_normal(M.shape[0])
+            plain, direct = _paths(g.lcp, x, manager)
+            assert plain.code is LinearCode.SOLVED
+            assert direct.code is LinearCode.SOLVED
+            if plain.pivots == 0:
+                kinds.add("direct")
+                assert direct.direct_lu_nnz > 0 and direct.factorizations == 1
+                np.testing.assert_allclose(direct.z, plain.z, rtol=0, atol=1e-9)
+                np.testing.assert_allclose(direct.w - direct.v, plain.w - plain.v,
+                                           rtol=0, atol=1e-9)
+                np.testing.assert_array_equal(direct.basis.basic, plain.basis.basic)
+            else:
+                kinds.add("path")
+                assert direct.pivots == plain.pivots
+                np.testing.assert_array_equal(direct.z, plain.z)
+            f = M @ direct.z + q
+            assert np.max(np.abs(direct.z - np.clip(direct.z - f, lb, ub))) <= 1e-9
+    assert kinds == {"direct", "path"}  # both branches were exercised
+
+
+def _one_dim(target, lb=0.0):
+    """z = target solves M z + q = 0 with M = I (2 x 2), both z basic."""
+    M = sp.csc_matrix(np.eye(2))
+    q = -np.array([target, 0.5])
+    n = 2
+    return M, q, np.full(n, lb), np.full(n, 1.0), np.full(n, 0.5), np.full(n, VAR_Z, np.int8)
+
+
+def test_feasibility_tolerance_from_both_sides():
+    """A basic value outside its bound by at most FEASIBILITY_TOLERANCE (relative to
+    max(1, |bound|)) is rounding: it is put on the bound; beyond it the path must pivot."""
+    tol = ds.FEASIBILITY_TOLERANCE
+    end, _ = ds.direct_step(*_one_dim(-0.5 * tol))
+    assert end is not None and end[0][0] == 0.0
+    end, nnz = ds.direct_step(*_one_dim(-2.0 * tol))
+    assert end is None and nnz > 0
+    # relative to the bound's magnitude
+    end, _ = ds.direct_step(*_one_dim(-100.0 - 50.0 * tol, lb=-100.0))
+    assert end is not None and end[0][0] == -100.0
+    end, _ = ds.direct_step(*_one_dim(-100.0 - 200.0 * tol, lb=-100.0))
+    assert end is None
+
+
+def test_slack_signs_decide():
+    """A slack basic at a lower bound must end >= 0, at an upper bound <= 0."""
+    M = sp.csc_matrix(np.array([[2.0, 0.0], [1.0, 1.0]]))
+    lb, ub = np.zeros(2), np.ones(2)
+    basic = np.array([VAR_W, VAR_Z], dtype=np.int8)  # z_0 at its lower bound
+    z = np.array([0.0, 0.5])
+    end, _ = ds.direct_step(M, np.array([1.0, -0.5]), lb, ub, z, basic)
+    assert end is not None
+    np.testing.assert_allclose(end[1], [1.0, 0.0])  # w_0 = F_0 = 1 >= 0
+    end, _ = ds.direct_step(M, np.array([-1.0, -0.5]), lb, ub, z, basic)
+    assert end is None  # F_0 = -1 < 0 at the lower bound: z_0 must enter
+    basic = np.array([VAR_V, VAR_Z], dtype=np.int8)  # z_0 at its upper bound
+    z = np.array([1.0, 0.2])
+    end, _ = ds.direct_step(M, np.array([-3.0, -1.0]), lb, ub, z, basic)
+    assert end is not None and end[2][0] == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize("rel,accepted", [(1e-13, True), (1e-7, False)])
+def test_residual_tolerance_from_both_sides(monkeypatch, rel, accepted):
+    """An end point is returned only when it satisfies M z + q - w + v = 0 to
+    RESIDUAL_TOLERANCE relative to 1 + max|M z| + max|q|: an inaccurate solve (simulated by
+    perturbing the factor's solution) beyond it is declined."""
+    import scipy.sparse.linalg as sla
+
+    real = sla.splu
+
+    class Inaccurate:
+        def __init__(self, lu):
+            self.lu, self.nnz = lu, lu.nnz
+
+        def solve(self, b):
+            x = self.lu.solve(b)
+            return x * (1.0 + rel)
+
+    monkeypatch.setattr(sla, "splu", lambda K, **kw: Inaccurate(real(K, **kw)))
+    rng = np.random.default_rng(0)
+    n = 60
+    M = sp.random(n, n, density=0.05, random_state=1, format="csc") + 4.0 * sp.identity(n)
+    M = sp.csc_matrix(M)
+    q = rng.uniform(-1.0, 1.0, n)
+    lb, ub = np.full(n, -np.inf), np.full(n, np.inf)
+    end, _ = ds.direct_step(M, q, lb, ub, np.zeros(n), np.full(n, VAR_Z, np.int8))
+    assert (end is not None) is accepted
+    if end is not None:
+        z = end[0]
+        scale = 1.0 + np.max(np.abs(M @ z)) + np.max(np.abs(q))
+        assert np.max(np.abs(M @ z + q)) <= ds.RESIDUAL_TOLERANCE * scale
+
+
+def test_singular_block_is_left_to_the_path():
+    """An exactly singular M_FF: no end point (the path's rank repair decides)."""
+    M = sp.csc_matrix(np.array([[1.0, 1.0], [1.0, 1.0]]))
+    end, nnz = ds.direct_step(M, np.array([-1.0, -1.0]), np.full(2, -np.inf),
+                              np.full(2, np.inf), np.zeros(2), np.full(2, VAR_Z, np.int8))
+    assert end is None and nnz == 0
+
+
+def test_direct_step_applies_only_to_sparse_moderate_orders(monkeypatch):
+    monkeypatch.delenv("COMPASS_SPARSE_LU", raising=False)
+    o = Options()
+    sparse = sp.csc_matrix(sp.identity(100) + sp.eye(100, k=1))
+    assert ds.direct_step_applies(sparse, o)
+    assert not ds.direct_step_applies(sp.csc_matrix(np.ones((100, 100))), o)  # dense
+    assert not ds.direct_step_applies(sp.csc_matrix(sp.identity(20)), o)  # tiny
+    assert not ds.direct_step_applies(sparse, Options(lu_backend="superlu"))
+    assert not ds.direct_step_applies(sparse, Options(lu_ordering="amd"))
+    monkeypatch.setenv("COMPASS_SPARSE_LU", "umfpack")
+    assert not ds.direct_step_applies(sparse, o)
+
+
+def _ramsey(T):
+    from compass_sparse.generators.cge import ramsey_cge
+
+    return ramsey_cge(periods=T, sectors=1).with_shock(capital_tax=0.25).problem
+
+
+def test_newton_steps_without_pivots_take_no_dense_factorization(monkeypatch):
+    """The Ramsey CGE model (n = 363, 0 pivots in every major iteration) was factored
+    densely (O(n^3)) by the compiled engine in every major iteration; its Newton steps now
+    end by the direct step, and the engine never even makes its dense copy of M.  The
+    answer is the path's: same status and iterations, the same point to 1e-9."""
+    monkeypatch.delenv("COMPASS_SPARSE_LU", raising=False)
+    engines = []
+    real_init = DensePathEngine.__init__
+
+    def spy(self, *a, **kw):
+        engines.append(self)
+        real_init(self, *a, **kw)
+
+    monkeypatch.setattr(DensePathEngine, "__init__", spy)
+    p = _ramsey(40)
+    r = solve_mcp(p)
+    assert r.success and r.minor_iterations == 0
+    assert engines and all(e._dense is None and e.L is None for e in engines)
+    assert r.passes["path"].factorizations == r.passes["path"].iterations
+    assert r.lu["backend"] == "klu"  # the Ramsey model's blocks barely fill
+    monkeypatch.setattr("compass_sparse.nms.direct_step_applies", lambda M, o: False)
+    ref = solve_mcp(p)
+    assert ref.status is r.status and ref.nit == r.nit
+    np.testing.assert_allclose(r.x, ref.x, rtol=1e-9, atol=1e-9)
+
+
+def test_direct_step_leaves_large_factors_to_reuse():
+    """The static CGE model at n = 759 fills its LU to ~1.3e5 entries: the crash's factors
+    are reused by GMRES in every Newton step (no factorization in the paths), and the
+    direct step does not take that over."""
+    from compass_sparse.generators.cge import size_for, static_cge
+
+    p = static_cge(**size_for(830)).with_shock(tariff=0.25).problem
+    r = solve_mcp(p)
+    assert r.success
+    assert r.passes["path"].iterations >= 1 and r.passes["path"].factorizations == 0
+
+
+def _random_block(n, density, seed):
+    rng = np.random.default_rng(seed)
+    A = sp.random(n, n, density=density, random_state=seed, format="csc")
+    return sp.csc_matrix(A + sp.diags(rng.uniform(1.0, 2.0, n))), rng.standard_normal(n)
+
+
+@pytest.mark.parametrize("n,density", [(60, 0.05), (300, 0.01), (300, 0.05)])
+def test_klu_and_superlu_agree(n, density):
+    """Both factorizations of the direct step solve the block to working accuracy."""
+    K, b = _random_block(n, density, seed=n)
+    ref = np.linalg.solve(K.toarray(), b)
+    for klu in (True, False):
+        x = ds.DirectFactors(klu=klu).solve(K, b)
+        assert np.max(np.abs(x - ref)) <= 1e-10 * (1.0 + np.max(np.abs(ref)))
+
+
+def test_superlu_first_then_klu_while_blocks_do_not_fill():
+    """SuperLU factors the first block; one that fills at most KLU_FROM_FILL times its
+    entries sends the next to KLU, which keeps them while its own LU stays within
+    KLU_FILL_LIMIT times the block; a block that fills more returns the rest of the
+    solve to SuperLU for good."""
+    f = ds.DirectFactors()
+    low, b = _random_block(300, 0.003, seed=1)   # little fill
+    f.solve(low, b)
+    assert f.method == ("superlu", "colamd") and f.lu_nnz <= ds.KLU_FROM_FILL * low.nnz
+    assert f.klu
+    f.solve(low, b)
+    assert f.method[0] == "klu" and f.klu
+    high, b2 = _random_block(300, 0.05, seed=2)  # fills most of L and U
+    x = f.solve(high, b2)
+    assert f.method[0] == "klu" and f.lu_nnz > ds.KLU_FILL_LIMIT * high.nnz and not f.klu
+    np.testing.assert_allclose(high @ x, b2, atol=1e-9)
+    f.solve(low, b)
+    assert f.method == ("superlu", "colamd") and not f.klu  # for good
+    g = ds.DirectFactors()
+    g.solve(high, b2)                               # SuperLU fills it: KLU never tried
+    assert g.lu_nnz > ds.KLU_FROM_FILL * high.nnz and not g.klu
+
+
+@pytest.mark.parametrize("klu", [True, False])
+def test_singular_block_gives_no_solution(klu):
+    K = sp.csc_matrix(np.array([[1.0, 2.0, 0.0], [2.0, 4.0, 0.0], [0.0, 0.0, 1.0]]))
+    assert ds.DirectFactors(klu=klu).solve(K, np.ones(3)) is None
+
+
+def test_non_finite_data_give_no_end_point():
+    """A NaN in a column outside F (its slack would be NaN) or in q: no end point."""
+    M = sp.csc_matrix(np.array([[2.0, np.nan], [1.0, 1.0]]))
+    lb, ub = np.zeros(2), np.ones(2)
+    basic = np.array([VAR_Z, VAR_W], dtype=np.int8)
+    end, _ = ds.direct_step(M, np.array([-1.0, 0.5]), lb, ub, np.array([0.3, 0.0]), basic)
+    assert end is None
+    M = sp.csc_matrix(np.eye(2))
+    end, _ = ds.direct_step(M, np.array([np.nan, -0.5]), lb, ub, np.full(2, 0.5),
+                            np.full(2, VAR_Z, np.int8))
+    assert end is None
