@@ -174,3 +174,87 @@ def test_same_path_whatever_the_update_safeguards_decline(kw):
         _assert_same_path(py, cc, M, q)
         if kw.get("growth_limit") == 1.0 and py.pivots > 20:
             assert eng.stats.refactor_by_stability > 0
+
+
+def _fam2_n10_seed1_linearization():
+    """The first linearization of thesis family 2, n = 10, seed 1 at its start z0 (every
+    component at a bound; at four of them F pushes inwards, so the start vertex is
+    degenerate): M = J(z0), q = F(z0) - M z0, and the normal-map start x (x = z0 - F(z0)
+    where F pushes outwards, x = z0 where it pushes inwards)."""
+    g = gen.thesis_family(10, family=2, seed=1)
+    info = g.info
+    lb, ub = np.asarray(info["lb"], float), np.asarray(info["ub"], float)
+    z0 = np.clip(np.asarray(info["x0"], float), lb, ub)
+    D, A, b = info["D"], np.asarray(info["A"].todense() if hasattr(info["A"], "todense")
+                                    else info["A"], float), info["b"]
+    f = D * z0 * z0 + A @ z0 + b
+    M = A + np.diag(2.0 * D * z0)
+    q = f - M @ z0
+    x = np.where(((z0 <= lb) & (f > 0)) | ((z0 >= ub) & (f < 0)), z0 - f, z0)
+    return M, q, lb, ub, x
+
+
+def test_first_path_from_a_degenerate_start_vertex_does_not_stop_with_t_at_zero():
+    """At this start the first pivots make zero steps and t must go below 0 (PATH's path
+    goes to t = -0.97) before it rises to 1.  With t bounded below by 0 the path ended
+    after two pivots ("t decreased to 0"): on the second, t (at 2.5e-16) tied with z_1 (at
+    its upper bound) and t had the tie priority of t reaching 1.  Both implementations now
+    take PATH's 7 pivots and end in a solution of the linear MCP."""
+    import scipy.sparse as sps
+
+    M, q, lb, ub, x = _fam2_n10_seed1_linearization()
+    Ms = sps.csc_matrix(M)
+    py, cc = _both((Ms, q, lb, ub), x=x)
+    _assert_same_path(py, cc, Ms, q)
+    assert cc.code is LinearCode.SOLVED and cc.pivots == 7
+    for res in (py, cc):
+        z, w, v = res.z, res.w, res.v
+        assert np.all(z >= lb) and np.all(z <= ub) and np.all(w >= 0) and np.all(v >= 0)
+        # M z + q = w - v with w_i (z_i - l_i) = 0 and v_i (u_i - z_i) = 0
+        scale = 1.0 + np.abs(M @ z).max() + np.abs(q).max()
+        assert np.max(np.abs(M @ z + q - w + v)) <= 1e-9 * scale
+        assert np.max(np.abs(w * (z - lb))) <= 1e-9 * scale
+        assert np.max(np.abs(v * (ub - z))) <= 1e-9 * scale
+        f = M @ z + q
+        assert np.max(np.abs(z - np.clip(z - f, lb, ub))) <= 1e-9 * scale
+
+
+def test_artificial_zero_tolerance_decides_the_side_of_an_artificial_at_zero():
+    """An artificial within ARTIFICIAL_ZERO of 0 is at 0 from above whatever the sign of
+    its rounding: moving down it blocks at once; beyond the tolerance it is on the
+    negative side and moving down takes it away from 0, so another slot blocks."""
+    from compass_sparse._path_kernels import ARTIFICIAL_ZERO, project_slots, ratio_test
+
+    sk = np.array([K.VAR_A, K.VAR_W], np.int64)
+    si = np.array([0, 1], np.int64)
+    lb, ub = np.zeros(2), np.full(2, np.inf)
+    rate = np.array([-1.0, -1.0])
+    for val, blocks in ((-0.5 * ARTIFICIAL_ZERO, True), (-0.99 * ARTIFICIAL_ZERO, True),
+                        (-2.0 * ARTIFICIAL_ZERO, False), (1e-17, True)):
+        xb = np.array([val, 0.5])
+        slot, theta, up = ratio_test(sk, si, xb, rate, lb, ub, 1e-9, 0.0, -np.inf)
+        assert (slot == 0) is blocks, (val, slot, theta)
+        assert theta == (max(val, 0.0) if blocks else 0.5)
+        xb2 = xb.copy()
+        project_slots(sk, si, xb2, lb, ub, -np.inf)
+        assert xb2[0] == (max(val, 0.0) if blocks else val)
+
+
+def test_t_at_its_bound_wins_a_tie_and_is_free_below_on_a_path_from_the_current_point():
+    """t reaching 1 or falling to its lower bound 0 wins a tie (the path ends either way);
+    with no lower bound (a path from the current point before it has been above t = 0) t
+    never blocks going down and another slot leaves."""
+    from compass_sparse._path_kernels import ratio_test
+
+    sk = np.array([K.VAR_T, K.VAR_W], np.int64)
+    si = np.array([0, 1], np.int64)
+    lb, ub = np.zeros(2), np.full(2, np.inf)
+    slot, theta, up = ratio_test(sk, si, np.zeros(2), np.array([-0.01, -2.0]), lb, ub,
+                                 1e-9, 0.0, 0.0)
+    assert slot == 0 and theta == 0.0 and up == 0
+    slot, theta, up = ratio_test(sk, si, np.array([1.0, 0.0]), np.array([0.01, -2.0]), lb,
+                                 ub, 1e-9, 0.0, 0.0)
+    assert slot == 0 and up == 1
+    slot, theta, up = ratio_test(sk, si, np.array([0.0, 0.5]), np.array([-1.0, -1.0]),
+                                 lb, ub, 1e-9, 0.0, -np.inf)
+    assert slot == 1 and theta == 0.5
