@@ -107,8 +107,7 @@ from __future__ import annotations
 import numpy as np
 
 from ._jit import njit
-from ._path_kernels import (T_PROGRESS, VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z,
-                            project_slots, ratio_test)
+from ._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
 
 # path_loop return codes (mapped to LinearCode and messages by dense_path.py)
 RUNNING, SOLVED, RAY, CYCLE, MINOR_LIMIT, SINGULAR, TOLERANCE, ERROR = range(8)
@@ -634,12 +633,13 @@ def verify(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate, L, U,
 def path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_count,
               istate, fstate, L, U, R, perm, best_x, bp_t, bp_x, work, fwork,
               piv_tol_base, ratio_tol, rank_tol, update_tol, stab_tol, growth_limit,
-              minor_limit, cycle_limit, max_pivots, free_below, below_limit):
+              minor_limit, cycle_limit, max_pivots, free_below, below_limit,
+              t_progress):
     """PivotalPath._pivot_loop for at most max_pivots pivots (RUNNING when they are used
     up: the caller checks its clock and calls again).  t's lower bound is fstate[F_TLOW]:
     0, lifted (free_below: a path from the current point) when t blocks at 0 before the
-    path has been above 0, for at most below_limit pivots (istate[I_BELOW]: the pivot
-    that lifted it); see compass_sparse.path.  Returns (code, message)."""
+    path has been above t_progress, for at most below_limit pivots (istate[I_BELOW]: the
+    pivot that lifted it); see compass_sparse.path.  Returns (code, message)."""
     n = sk.shape[0]
     d = work[5]
     col = work[6]
@@ -649,7 +649,7 @@ def path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_coun
         if pivots >= minor_limit:
             return MINOR_LIMIT, MSG_LIMIT
         if istate[I_BELOW] >= 0:
-            if fstate[F_BEST_T] > T_PROGRESS:
+            if fstate[F_BEST_T] > t_progress:
                 fstate[F_TLOW] = 0.0  # above 0 now: 0 is t's bound again
             elif pivots - istate[I_BELOW] >= below_limit:
                 return RAY, MSG_T_STALL
@@ -686,7 +686,7 @@ def path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_coun
         leave, theta, leave_up = ratio_test(sk, si, xb, rate, lb, ub, piv_tol, ratio_tol,
                                             t_lower)
         if (leave >= 0 and theta < theta_self and sk[leave] == VAR_T and leave_up == 0
-                and free_below and istate[I_BELOW] < 0 and fstate[F_BEST_T] <= T_PROGRESS):
+                and free_below and istate[I_BELOW] < 0 and fstate[F_BEST_T] <= t_progress):
             # t blocks at 0 before the path has been above 0: lift its bound
             t_lower = -np.inf
             fstate[F_TLOW] = t_lower

@@ -145,7 +145,7 @@ class DensePathEngine:
                 self.fwork, opt.pivot_tolerance, opt.ratio_tolerance, self.rank_tolerance,
                 self.pivot_tolerance, self.stability_tolerance, self.growth_limit,
                 int(path.minor_limit), int(opt.lemke_cycle_limit), PIVOT_CHUNK,
-                st.free_below, int(PK.BELOW_ZERO_PIVOTS))
+                st.free_below, int(PK.BELOW_ZERO_PIVOTS), float(PK.T_PROGRESS))
             if code != K.RUNNING:
                 break
             if path.deadline is not None and time.perf_counter() > path.deadline:

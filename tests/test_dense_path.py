@@ -258,3 +258,83 @@ def test_t_at_its_bound_wins_a_tie_and_is_free_below_on_a_path_from_the_current_
     slot, theta, up = ratio_test(sk, si, np.array([0.0, 0.5]), np.array([-1.0, -1.0]),
                                  lb, ub, 1e-9, 0.0, -np.inf)
     assert slot == 1 and theta == 0.5
+
+
+def _degenerate_start_lcp():
+    """A 3-variable LCP whose start x = (0, 0, 1) is a degenerate vertex (z_0 = w_0 = 0,
+    z_1 = w_1 = 0): t enters with a zero step, on the second pivot t alone blocks at 0, and
+    the path goes on through t = -2 to t = 1 and the solution z = (0, 3, 0), w = (0, 0, 9)."""
+    M = np.array([[1.0, 1.0, -2.0], [1.0, 1.0, 3.0], [1.0, 3.0, 3.0]])
+    q = np.array([-3.0, -3.0, 0.0])
+    lb, ub = np.zeros(3), np.full(3, np.inf)
+    return (M, q, lb, ub), np.array([0.0, 0.0, 1.0])
+
+
+def test_path_blocked_by_t_at_zero_at_a_degenerate_start_vertex_goes_below_zero_to_t_one():
+    """With t >= 0 as a bound this path ended on its second pivot ("t decreased to 0")."""
+    lcp, x = _degenerate_start_lcp()
+    M, q, lb, ub = lcp
+    py, cc = _both(lcp, x=x)
+    _assert_same_path(py, cc, M, q)
+    assert cc.code is LinearCode.SOLVED and cc.pivots == 4
+    for res in (py, cc):
+        assert np.allclose(res.z, [0.0, 3.0, 0.0], atol=1e-12)
+        assert np.allclose(M @ res.z + q, [0.0, 0.0, 9.0], atol=1e-12)
+
+
+def test_lemke_ray_start_keeps_t_at_or_above_zero():
+    """The ray start never lifts t's bound (its t = 0 is the start at infinity): the same
+    path in both implementations, and no point of it below t = 0."""
+    lcp, x = _degenerate_start_lcp()
+    M, q, lb, ub = lcp
+    seen = []
+    for mgr in (DenseBasis, DensePathEngine):
+        path = PivotalPath(M, q, lb, ub, mgr(M), Options())
+        res = path.run(x, ray_start=True)
+        assert path.st.t_lower == 0.0 and path.st.below_from == -1
+        assert all(t >= 0.0 for t, _ in path.st.breakpoints)
+        seen.append(res)
+    _assert_same_path(*seen, M, q)
+
+
+@pytest.mark.parametrize("budget,code,pivots", [(1, LinearCode.RAY, 2), (2, LinearCode.RAY, 3),
+                                                 (3, LinearCode.SOLVED, 4)])
+def test_pivot_budget_below_zero_ends_paths_that_do_not_get_above_zero(monkeypatch, budget,
+                                                                       code, pivots):
+    """t's bound is lifted on the path's second pivot (pivot count 1) and t gets above 0
+    on its fourth: a budget of 1 or 2 pivots ends the path first ("t not above 0", the
+    start point returned at t = 0), 3 lets it reach t = 1; both implementations alike."""
+    from compass_sparse import _path_kernels as PK
+
+    monkeypatch.setattr(PK, "BELOW_ZERO_PIVOTS", budget)
+    lcp, x = _degenerate_start_lcp()
+    M, q, lb, ub = lcp
+    py, cc = _both(lcp, x=x)
+    _assert_same_path(py, cc, M, q)
+    assert cc.code is code and cc.pivots == pivots
+    if code is LinearCode.RAY:
+        assert cc.message == f"t not above 0 after {pivots} pivots" and not cc.unbounded
+        assert cc.t == 0.0 and np.array_equal(cc.z, np.clip(x, lb, ub))
+
+
+@pytest.mark.parametrize("eps,t_progress,code", [
+    (1e-10, None, LinearCode.SOLVED), (1e-8, None, LinearCode.RAY),
+    (1e-8, 1e-7, LinearCode.SOLVED), (1e-10, 1e-12, LinearCode.RAY)])
+def test_t_below_t_progress_is_not_progress_above_zero(monkeypatch, eps, t_progress, code):
+    """From x = (0, -eps, 1) the first pivot puts t at eps/3, and t blocks at 0 on the
+    third.  At most T_PROGRESS (1e-9) that is not progress: the bound is lifted and the path
+    reaches t = 1; above it the path has been above 0 and ends there, as with the
+    tolerance moved across eps/3 either way; both implementations alike."""
+    from compass_sparse import _path_kernels as PK
+
+    if t_progress is not None:
+        monkeypatch.setattr(PK, "T_PROGRESS", t_progress)
+    (M, q, lb, ub), _ = _degenerate_start_lcp()
+    py, cc = _both((M, q, lb, ub), x=np.array([0.0, -eps, 1.0]))
+    _assert_same_path(py, cc, M, q)
+    assert cc.code is code, cc.message
+    if code is LinearCode.RAY:
+        assert cc.message == "t decreased to 0" and cc.pivots <= 3
+        assert abs(cc.t - eps / 3.0) <= 1e-3 * eps  # the path's best point
+    else:
+        assert np.allclose(cc.z, [0.0, 3.0, 0.0], atol=1e-6)
