@@ -18,13 +18,14 @@ T_PROGRESS = 1e-9
 """A path has been above t = 0 once t exceeded this: smaller values are the rounding of
 zero steps at a degenerate start vertex, not progress."""
 
-BELOW_ZERO_PIVOTS = 20
+BELOW_ZERO_PIVOTS = 8
 """A path whose bound t >= 0 was lifted (t blocked at 0 before the path had been above 0)
 ends ("t not above 0") when it has not got above t = 0 within this many pivots from
-then: leaving a degenerate start vertex through t < 0 takes a few pivots (4 on thesis
-family 2, n = 10, seed 1), while paths that do not come back wander on to the cycle
-limit.  10 kept fewer of the restarts this saves on the thesis families, 40 cost more
-pivots on the paths that fail (benchmarks/small.md, "Degenerate ties")."""
+then.  Leaving a degenerate start vertex through t < 0 takes a few pivots (PATH's path
+on thesis family 2, n = 10, seed 1: 7 in all), and on the thesis families nearly all
+lifted paths that do not come back within 8 never do: with no limit they ran on to the
+cycle limit (1.3-1.6x the pivots at n = 100-200); 20 saved two more restarts there but
+cost 12 pivots on each of ~480 failing paths (benchmarks/small.md, "Degenerate ties")."""
 
 ARTIFICIAL_ZERO = 1e-12
 """An artificial within this of 0 (absolute) is at 0 and on its nonnegative side: it is

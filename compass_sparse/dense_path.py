@@ -169,6 +169,7 @@ class DensePathEngine:
                 dz[ei] += fstate[K.F_ES]
             st.ray = (path._current_point()[0], dz)
         st.t = float(fstate[K.F_T])
+        st.t_lower, st.below_from = float(fstate[K.F_TLOW]), int(istate[K.I_BELOW])
         st.t_slot = int(istate[K.I_TSLOT])
         st.pivots = int(istate[K.I_PIV])
         nbp = int(istate[K.I_NBP])

@@ -42,7 +42,7 @@ is larger than at the start, not an end of the path.  PATH's paths do go below t
 Here t's lower bound is 0, with one exception.  On a path from the current point that has
 not yet been above t = 0 (above T_PROGRESS = 1e-9: smaller values are rounding of zero
 steps), t blocking at 0 lifts the bound instead of ending the path, and from then on the
-path may make at most BELOW_ZERO_PIVOTS (20) pivots before t gets above 0; once it has,
+path may make at most BELOW_ZERO_PIVOTS (8) pivots before t gets above 0; once it has,
 0 is t's bound again.  A path that comes back to its bound ends in a ray ("t decreased to
 0"), one that uses up the pivots as well ("t not above 0"), and either is retried from the
 Lemke start.  This matters at a degenerate start vertex (basic variables at their bounds,
