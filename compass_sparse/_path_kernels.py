@@ -23,9 +23,9 @@ BELOW_ZERO_PIVOTS = 8
 ends ("t not above 0") when it has not got above t = 0 within this many pivots from
 then.  Leaving a degenerate start vertex through t < 0 takes a few pivots (PATH's path
 on thesis family 2, n = 10, seed 1: 7 in all), and on the thesis families nearly all
-lifted paths that do not come back within 8 never do: with no limit they ran on to the
-cycle limit (1.3-1.6x the pivots at n = 100-200); 20 saved two more restarts there but
-cost 12 pivots on each of ~480 failing paths (benchmarks/small.md, "Degenerate ties")."""
+lifted paths that do not come back within 8 never do (without a limit they ran on to the
+cycle limit); 20 saved two more restarts there but cost 12 more pivots on each of ~480
+failing paths (benchmarks/small.md, "Degenerate ties at the start vertex")."""
 
 ARTIFICIAL_ZERO = 1e-12
 """An artificial within this of 0 (absolute) is at 0 and on its nonnegative side: it is

@@ -155,8 +155,7 @@ class DensePathEngine:
             code, msg = K.verify(self.M, q, self.r, st.sk, st.si, st.xb, st.zval,
                                  st.art_sign, self.displaced, istate, fstate, self.L, self.U,
                                  self.R, self.perm, self.rank_tolerance, lb, ub,
-                                 fstate[K.F_TLOW],
-                                 self.work, self.fwork)
+                                 fstate[K.F_TLOW], self.work, self.fwork)
         st.unbounded = msg == K.MSG_RAY_UNBOUNDED
         if st.unbounded:
             # z moves along dz: basic z's at their rates, an entering z at its direction

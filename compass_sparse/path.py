@@ -50,8 +50,8 @@ so the first pivots make zero steps): t >= 0 ended such paths where they began a
 they go on through t < 0 to t = 1 (PATH's path on thesis family 2, n = 10, seed 1 goes to
 t = -0.97).  The bound is lifted only when t blocks, not from the start: a path that walks
 through degenerate bases at t = 0 without t blocking (duplicated columns) is as before.
-The pivot budget ends the paths that go below 0 and do not come back (with no bound they
-ran on to the cycle limit, 1.3-1.6x the pivots on the thesis families at n = 100-200).
+The pivot budget ends the paths that go below 0 and do not come back (without it they
+ran on to the cycle limit).
 Paths that have been above 0 keep the bound: letting them go below as well solved more
 first paths (benchmarks/small.md, "Degenerate ties at the start vertex"), but a path
 through t < 0 can end at a distant solution of the linearization and the sector-shutdown
