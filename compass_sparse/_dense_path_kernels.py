@@ -114,14 +114,14 @@ RUNNING, SOLVED, RAY, CYCLE, MINOR_LIMIT, SINGULAR, TOLERANCE, ERROR = range(8)
 # messages (second status word)
 MSG_NONE, MSG_RAY_UNBOUNDED, MSG_T_ZERO, MSG_CYCLE, MSG_LIMIT, MSG_SING_FACTOR, \
     MSG_SING_T, MSG_SING_SLACK, MSG_SING_ART, MSG_TOL, MSG_NO_DISPLACED, MSG_LEAVE_KIND, \
-    MSG_BOUNDED_SLACK = range(13)
+    MSG_BOUNDED_SLACK, MSG_T_STALL = range(14)
 
 # integer state (istate) and float state (fstate) layout
 I_EK, I_EI, I_PIV, I_TSLOT, I_NFAC, I_NUPD, I_NETA, I_NBP, I_MSG, I_REFUSED, \
-    I_UNSTABLE, I_GROWTH = range(12)
-N_ISTATE = 12
-F_ES, F_EV, F_T, F_BEST_T, F_RES = range(5)
-N_FSTATE = 5
+    I_UNSTABLE, I_GROWTH, I_BELOW = range(13)
+N_ISTATE = 13
+F_ES, F_EV, F_T, F_BEST_T, F_RES, F_TLOW = range(6)
+N_FSTATE = 6
 # rows of the integer factor array ``perm`` (N_PERM x (n + limit)): the pivot row of each
 # elimination step, the slot at each position (-1: replaced), the position of each slot,
 # the position eliminated by each row eta, and P_INFO; then the work of a factorization
@@ -491,7 +491,7 @@ def current_point(sk, si, xb, zval, lb, ub, z, w, v):
 
 @njit(cache=True)
 def _recompute(M, q, r, sk, si, zval, t, t_slot, L, U, R, perm, nupd, xb, rhs, w, fwork,
-               lb, ub):
+               lb, ub, t_lower):
     """x_B = B^{-1}(r (1 - t_nb) - q - M z_N) (PivotalPath._recompute_values); returns t."""
     n = sk.shape[0]
     t_nb = 0.0 if t_slot >= 0 else t
@@ -512,13 +512,13 @@ def _recompute(M, q, r, sk, si, zval, t, t_slot, L, U, R, perm, nupd, xb, rhs, w
         if sk[k] == VAR_T:
             t = xb[k]
             break
-    project_slots(sk, si, xb, lb, ub)
+    project_slots(sk, si, xb, lb, ub, t_lower)
     return t
 
 
 @njit(cache=True)
 def refactor(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate, L, U, R,
-             perm, rank_tol, lb, ub, work, fwork):
+             perm, rank_tol, lb, ub, t_lower, work, fwork):
     """PivotalPath._factor: factorize, repair dependent columns with artificials,
     recompute the basic values.  Returns 0 or a SINGULAR message code."""
     n = sk.shape[0]
@@ -557,7 +557,7 @@ def refactor(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate, L, 
             return MSG_SING_FACTOR
     istate[I_NETA] = 0
     fstate[F_T] = _recompute(M, q, r, sk, si, zval, fstate[F_T], istate[I_TSLOT], L, U, R,
-                             perm, 0, xb, work[0], work[1], fwork, lb, ub)
+                             perm, 0, xb, work[0], work[1], fwork, lb, ub, t_lower)
     return 0
 
 
@@ -593,7 +593,7 @@ def _record(sk, si, xb, zval, lb, ub, t, fstate, istate, best_x, bp_t, bp_x, wor
 
 @njit(cache=True)
 def verify(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate, L, U, R, perm,
-           rank_tol, lb, ub, work, fwork):
+           rank_tol, lb, ub, t_lower, work, fwork):
     """PivotalPath._verify_solution: (code, message)."""
     n = sk.shape[0]
     qmax = 0.0
@@ -623,7 +623,7 @@ def verify(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate, L, U,
             return SOLVED, MSG_NONE
         if attempt == 0:
             msg = refactor(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate,
-                           L, U, R, perm, rank_tol, lb, ub, work, fwork)
+                           L, U, R, perm, rank_tol, lb, ub, t_lower, work, fwork)
             if msg != 0:
                 return SINGULAR, msg
     return TOLERANCE, MSG_TOL
@@ -633,9 +633,13 @@ def verify(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate, L, U,
 def path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_count,
               istate, fstate, L, U, R, perm, best_x, bp_t, bp_x, work, fwork,
               piv_tol_base, ratio_tol, rank_tol, update_tol, stab_tol, growth_limit,
-              minor_limit, cycle_limit, max_pivots):
+              minor_limit, cycle_limit, max_pivots, free_below, below_limit,
+              t_progress):
     """PivotalPath._pivot_loop for at most max_pivots pivots (RUNNING when they are used
-    up: the caller checks its clock and calls again).  Returns (code, message)."""
+    up: the caller checks its clock and calls again).  t's lower bound is fstate[F_TLOW]:
+    0, lifted (free_below: a path from the current point) when t blocks at 0 before the
+    path has been above t_progress, for at most below_limit pivots (istate[I_BELOW]: the
+    pivot that lifted it); see compass_sparse.path.  Returns (code, message)."""
     n = sk.shape[0]
     d = work[5]
     col = work[6]
@@ -644,6 +648,12 @@ def path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_coun
         pivots = istate[I_PIV]
         if pivots >= minor_limit:
             return MINOR_LIMIT, MSG_LIMIT
+        if istate[I_BELOW] >= 0:
+            if fstate[F_BEST_T] > t_progress:
+                fstate[F_TLOW] = 0.0  # above 0 now: 0 is t's bound again
+            elif pivots - istate[I_BELOW] >= below_limit:
+                return RAY, MSG_T_STALL
+        t_lower = fstate[F_TLOW]
         if pivots - start >= max_pivots:
             return RUNNING, MSG_NONE
         ek = istate[I_EK]
@@ -657,29 +667,39 @@ def path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_coun
         ftran(L, U, R, perm, istate[I_NETA], col, d, fwork[0], fwork[1], True)
         t_slot = istate[I_TSLOT]
         t = fstate[F_T]
+        dmax = 0.0
+        for k in range(n):
+            dmax = max(dmax, abs(d[k]))
+        piv_tol = piv_tol_base * max(1.0, dmax)
         if ek == VAR_Z and es == 0.0:
-            # direction free (after an artificial left): increase t
-            if t_slot >= 0 and d[t_slot] != 0.0:
+            # direction free (after an artificial left): increase t; when t does not
+            # move with it (a rate within rounding), increase the variable
+            if t_slot >= 0 and abs(d[t_slot]) > piv_tol:
                 es = -np.sign(d[t_slot])
             else:
                 es = 1.0
             fstate[F_ES] = es
-        dmax = 0.0
-        for k in range(n):
-            dmax = max(dmax, abs(d[k]))
         rate = work[7]
         for k in range(n):
             rate[k] = -es * d[k]
         theta_self = _room_self(ek, ei, es, ev, t, lb, ub)
-        leave, theta, leave_up = ratio_test(sk, si, xb, rate, lb, ub,
-                                            piv_tol_base * max(1.0, dmax), ratio_tol)
+        leave, theta, leave_up = ratio_test(sk, si, xb, rate, lb, ub, piv_tol, ratio_tol,
+                                            t_lower)
+        if (leave >= 0 and theta < theta_self and sk[leave] == VAR_T and leave_up == 0
+                and free_below and istate[I_BELOW] < 0 and fstate[F_BEST_T] <= t_progress):
+            # t blocks at 0 before the path has been above 0: lift its bound
+            t_lower = -np.inf
+            fstate[F_TLOW] = t_lower
+            istate[I_BELOW] = pivots
+            leave, theta, leave_up = ratio_test(sk, si, xb, rate, lb, ub, piv_tol,
+                                                ratio_tol, t_lower)
         if leave < 0 and not np.isfinite(theta_self):
             return RAY, MSG_RAY_UNBOUNDED
         if leave < 0 or theta_self <= theta:
             theta = theta_self
             for k in range(n):
                 xb[k] += theta * rate[k]
-            project_slots(sk, si, xb, lb, ub)
+            project_slots(sk, si, xb, lb, ub, t_lower)
             if ek == VAR_T:
                 fstate[F_T] = 1.0
                 return SOLVED, MSG_NONE
@@ -735,10 +755,10 @@ def path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_coun
             elif upd == UPD_GROWTH:
                 istate[I_GROWTH] += 1
             msg = refactor(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate,
-                           L, U, R, perm, rank_tol, lb, ub, work, fwork)
+                           L, U, R, perm, rank_tol, lb, ub, t_lower, work, fwork)
             if msg != 0:
                 return SINGULAR, msg
-        project_slots(sk, si, xb, lb, ub)
+        project_slots(sk, si, xb, lb, ub, t_lower)
         if istate[I_TSLOT] >= 0:
             fstate[F_T] = xb[istate[I_TSLOT]]
         if lk == VAR_T:

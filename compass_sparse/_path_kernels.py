@@ -1,51 +1,76 @@
 """Compiled inner loops of the pivotal path: the two-pass ratio test and the projection
 of basic values onto their bounds, with each slot's bounds derived from its variable kind
-(z: [l, u]; w, v: [0, inf); fixed-variable slack: free; t: [0, 1]; artificial: towards 0
-from the side it is on)."""
+(z: [l, u]; w, v: [0, inf); fixed-variable slack: free; t: [t_lower, 1]; artificial:
+towards 0 from the side it is on).
+
+t's lower bound is the caller's (compass_sparse.path explains it): 0, or -inf while a path
+from the current point that has not been above t = 0 is allowed below it.
+
+Ties: t leaving at either bound wins every tie (at 1 the linear problem is solved, at its
+lower bound the path ends), then artificials, then the largest |rate|.
+"""
 import numpy as np
 from ._jit import njit
 
 VAR_Z, VAR_W, VAR_V, VAR_A, VAR_T, VAR_S = 0, 1, 2, 3, 4, 5
 
+T_PROGRESS = 1e-9
+"""A path has been above t = 0 once t exceeded this: smaller values are the rounding of
+zero steps at a degenerate start vertex, not progress."""
+
+BELOW_ZERO_PIVOTS = 8
+"""A path whose bound t >= 0 was lifted (t blocked at 0 before the path had been above 0)
+ends ("t not above 0") when it has not got above t = 0 within this many pivots from
+then.  Leaving a degenerate start vertex through t < 0 takes a few pivots (PATH's path
+on thesis family 2, n = 10, seed 1: 7 in all), and on the thesis families nearly all
+lifted paths that do not come back within 8 never do (without a limit they ran on to the
+cycle limit); 20 saved two more restarts there but cost 12 more pivots on each of ~480
+failing paths (benchmarks/small.md, "Degenerate ties at the start vertex")."""
+
+ARTIFICIAL_ZERO = 1e-12
+"""An artificial within this of 0 (absolute) is at 0 and on its nonnegative side: it is
+placed at exactly 0, and rounding of either sign must not decide which way it may move
+(the two path implementations, whose rounding differs, would take different pivots)."""
+
 
 @njit(cache=True, inline="always")
-def _slot_bounds(kind, idx, val, lb, ub):
+def _slot_bounds(kind, idx, val, lb, ub, t_lower):
     if kind == VAR_Z:
         return lb[idx], ub[idx]
     if kind == VAR_S:
         return -np.inf, np.inf
     if kind == VAR_T:
-        return 0.0, 1.0
+        return t_lower, 1.0
     if kind == VAR_A:
-        if val >= 0.0:
+        if val >= -ARTIFICIAL_ZERO:
             return 0.0, np.inf
         return -np.inf, 0.0
     return 0.0, np.inf
 
 
 @njit(cache=True, inline="always")
-def _room(kind, idx, val, r, lb, ub):
+def _room(kind, idx, val, r, lb, ub, t_lower):
     """(room to the bound the slot moves towards at rate r, that bound)."""
-    lo, hi = _slot_bounds(kind, idx, val, lb, ub)
+    lo, hi = _slot_bounds(kind, idx, val, lb, ub, t_lower)
     if r > 0.0:
         return max(hi - val, 0.0), hi
     return max(val - lo, 0.0), lo
 
 
 @njit(cache=True)
-def ratio_test(sk, si, xb, rate, lb, ub, piv_tol, tol):
+def ratio_test(sk, si, xb, rate, lb, ub, piv_tol, tol, t_lower):
     """Harris two-pass ratio test.  Returns (slot, theta, leaves_at_upper) or (-1, inf, 0).
 
     Pass 1: theta1 = min over blocking slots of (room + tol*max(1,|bound|)) / |rate|.
-    Pass 2: among slots with room/|rate| <= theta1 pick t (priority 2), then artificials
-    (priority 1), then the largest |rate|."""
+    Pass 2: among slots with room/|rate| <= theta1 pick t at a bound (priority 2), then
+    artificials (priority 1), then the largest |rate|."""
     n = sk.shape[0]
     theta1 = np.inf
     for k in range(n):
         r = rate[k]
         if -piv_tol <= r <= piv_tol:
             continue
-        room, bnd = _room(sk[k], si[k], xb[k], r, lb, ub)
+        room, bnd = _room(sk[k], si[k], xb[k], r, lb, ub, t_lower)
         if np.isfinite(bnd):
             theta1 = min(theta1, (room + tol * max(1.0, abs(bnd))) / abs(r))
     if not np.isfinite(theta1):
@@ -59,7 +84,7 @@ def ratio_test(sk, si, xb, rate, lb, ub, piv_tol, tol):
         r = rate[k]
         if -piv_tol <= r <= piv_tol:
             continue
-        room, bnd = _room(sk[k], si[k], xb[k], r, lb, ub)
+        room, bnd = _room(sk[k], si[k], xb[k], r, lb, ub, t_lower)
         if not np.isfinite(bnd) or room / abs(r) > theta1:
             continue
         kind = sk[k]
@@ -72,10 +97,10 @@ def ratio_test(sk, si, xb, rate, lb, ub, piv_tol, tol):
 
 
 @njit(cache=True)
-def project_slots(sk, si, xb, lb, ub):
+def project_slots(sk, si, xb, lb, ub, t_lower):
     """Clip basic values to their bounds (rounding: thesis §4.2.2)."""
     for k in range(sk.shape[0]):
-        lo, hi = _slot_bounds(sk[k], si[k], xb[k], lb, ub)
+        lo, hi = _slot_bounds(sk[k], si[k], xb[k], lb, ub, t_lower)
         v = xb[k]
         if v < lo:
             xb[k] = lo

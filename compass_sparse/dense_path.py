@@ -34,6 +34,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _dense_path_kernels as K
+from . import _path_kernels as PK
 from ._merit_kernels import csc_to_dense
 from .basis.types import BasisStats
 from .path import LinearCode
@@ -122,8 +123,8 @@ class DensePathEngine:
         st = path.st
         msg = K.refactor(self.M, path.q, self.r, st.sk, st.si, st.xb, st.zval,
                          st.art_sign, self.displaced, istate, fstate, self.L, self.U, self.R,
-                         self.perm, self.rank_tolerance, path.lb, path.ub, self.work,
-                         self.fwork)
+                         self.perm, self.rank_tolerance, path.lb, path.ub, st.t_lower,
+                         self.work, self.fwork)
         return msg
 
     def run_path(self, path, z, w, v, slack_basis):
@@ -138,6 +139,7 @@ class DensePathEngine:
         istate = np.zeros(K.N_ISTATE, dtype=np.int64)
         fstate = np.zeros(K.N_FSTATE)
         istate[K.I_TSLOT] = -1
+        istate[K.I_BELOW] = -1
         self.displaced[:] = -1
         st = path.st  # the run's PathState: slot table set by PivotalPath.run
         msg = self._factor(path, istate, fstate)
@@ -160,7 +162,8 @@ class DensePathEngine:
                 self.U, self.R, self.perm, self.best_x, self.bp_t, self.bp_x, self.work,
                 self.fwork, opt.pivot_tolerance, opt.ratio_tolerance, self.rank_tolerance,
                 self.pivot_tolerance, self.stability_tolerance, self.growth_limit,
-                int(path.minor_limit), int(opt.lemke_cycle_limit), PIVOT_CHUNK)
+                int(path.minor_limit), int(opt.lemke_cycle_limit), PIVOT_CHUNK,
+                st.free_below, int(PK.BELOW_ZERO_PIVOTS), float(PK.T_PROGRESS))
             if code != K.RUNNING:
                 break
             if path.deadline is not None and time.perf_counter() > path.deadline:
@@ -169,8 +172,8 @@ class DensePathEngine:
         if code == K.SOLVED:
             code, msg = K.verify(self.M, q, self.r, st.sk, st.si, st.xb, st.zval,
                                  st.art_sign, self.displaced, istate, fstate, self.L, self.U,
-                                 self.R, self.perm, self.rank_tolerance, lb, ub, self.work,
-                                 self.fwork)
+                                 self.R, self.perm, self.rank_tolerance, lb, ub,
+                                 fstate[K.F_TLOW], self.work, self.fwork)
         st.unbounded = msg == K.MSG_RAY_UNBOUNDED
         if st.unbounded:
             # z moves along dz: basic z's at their rates, an entering z at its direction
@@ -183,6 +186,7 @@ class DensePathEngine:
                 dz[ei] += fstate[K.F_ES]
             st.ray = (path._current_point()[0], dz)
         st.t = float(fstate[K.F_T])
+        st.t_lower, st.below_from = float(fstate[K.F_TLOW]), int(istate[K.I_BELOW])
         st.t_slot = int(istate[K.I_TSLOT])
         st.pivots = int(istate[K.I_PIV])
         nbp = int(istate[K.I_NBP])
@@ -211,6 +215,8 @@ class DensePathEngine:
             return f"{_NAMES[ek]}[{ei}] entered {path.opt.lemke_cycle_limit} times"
         if msg == K.MSG_RAY_UNBOUNDED:
             return f"ray: {_NAMES[ek]}[{ei}] unbounded"
+        if msg == K.MSG_T_STALL:
+            return f"t not above 0 after {int(istate[K.I_PIV])} pivots"
         if msg == K.MSG_TOL:
             return f"linear residual {fstate[K.F_RES]:.2e} after refactorization"
         return _MESSAGES[msg]

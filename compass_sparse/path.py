@@ -34,6 +34,31 @@ that block within that step, the one with the largest |pivot|, so near-ties neve
 tiny pivot.  Values that end slightly outside their bounds are projected back (thesis
 §4.2.2).  t reaching 1 wins every tie.
 
+t may decrease along the path (thesis §3.3: "the value of t can also decrease during the
+procedure").  With s = 1 - t, (*) reads M z - w + v = s r - q: Lemke's system with
+covering vector r and covering variable s, whose only bound is s >= 0 (t <= 1); the normal
+map of the linearization is s r along the path, so t < 0 is a point where that residual
+is larger than at the start, not an end of the path.  PATH's paths do go below t = 0.
+Here t's lower bound is 0, with one exception.  On a path from the current point that has
+not yet been above t = 0 (above T_PROGRESS = 1e-9: smaller values are rounding of zero
+steps), t blocking at 0 lifts the bound instead of ending the path, and from then on the
+path may make at most BELOW_ZERO_PIVOTS (8) pivots before t gets above 0; once it has,
+0 is t's bound again.  A path that comes back to its bound ends in a ray ("t decreased to
+0"), one that uses up the pivots as well ("t not above 0"), and either is retried from the
+Lemke start.  This matters at a degenerate start vertex (basic variables at their bounds,
+so the first pivots make zero steps): t >= 0 ended such paths where they began although
+they go on through t < 0 to t = 1 (PATH's path on thesis family 2, n = 10, seed 1 goes to
+t = -0.97).  The bound is lifted only when t blocks, not from the start: a path that walks
+through degenerate bases at t = 0 without t blocking (duplicated columns) is as before.
+The pivot budget ends the paths that go below 0 and do not come back (without it they
+ran on to the cycle limit).
+Paths that have been above 0 keep the bound: letting them go below as well solved more
+first paths (benchmarks/small.md, "Degenerate ties at the start vertex"), but a path
+through t < 0 can end at a distant solution of the linearization and the sector-shutdown
+CGE test then failed.  The Lemke ray start keeps t >= 0 throughout: its t = 0 is Lemke's
+start at infinity (lambda = inf), and a path that returns there ends in a secondary ray.
+A path that never gets above t = 0 returns its start point.
+
 Ray termination (§3.3.2): the entering variable can grow without bound.  The Lemke (ray)
 start is the classical Lemke method in this parametrization: with z at bounds and the
 covering vector r_i = F_i(z0) -+ delta_i, the slack values are w(t) = t q' + (1 - t) delta,
@@ -52,6 +77,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from . import _path_kernels as _PK
 from ._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
 from ._slot_kernels import slot_basis, slot_point, slot_table, start_basis
 from .basis import KIND_DENSE, KIND_M, KIND_UNIT, FactorReuseFailed, UpdateStatus
@@ -187,6 +213,10 @@ class PathState:
     r: np.ndarray | None = None  #: the covering vector
     displaced: dict = field(default_factory=dict)  #: artificial row -> z index it displaced
     t: float = 0.0  #: the path parameter
+    t_lower: float = 0.0  #: t's lower bound now: 0, or -inf once t went below 0 (see above)
+    free_below: bool = False  #: t may go below 0 (a path from the current point)
+    below_from: int = -1  #: the pivot at which t's lower bound was lifted (-1: not lifted)
+    start: tuple | None = None  #: (z, w, v) at t = 0: returned by a path that never reaches t > 0
     t_slot: int = -1  #: the slot holding t (-1: t nonbasic)
     best: tuple = (0.0, None)  #: (largest t, its x), for a path that does not reach t = 1
     breakpoints: list = field(default_factory=list)  #: (t, x) with t increasing
@@ -287,6 +317,9 @@ class PivotalPath:
                     slack_basis = basic.copy()
                     basic[inward] = VAR_Z
         self.st.r = r
+        self.st.t_lower, self.st.below_from = 0.0, -1
+        self.st.free_below = not ray_start
+        self.st.start = (z, w, v)
         self.st.zval = z.copy()  # values of z (basic or not); basic ones refreshed from xb
         if not r.any():
             # Already a solution of the linear problem: nothing to pivot.
@@ -450,7 +483,7 @@ class PivotalPath:
 
     # ------------------------------------------------------------------ pivoting
     def _project(self):
-        project_slots(self.st.sk, self.st.si, self.st.xb, self.lb, self.ub)
+        project_slots(self.st.sk, self.st.si, self.st.xb, self.lb, self.ub, self.st.t_lower)
 
     def _pivot_loop(self):
         opt = self.opt
@@ -464,6 +497,11 @@ class PivotalPath:
                 return LinearCode.MINOR_LIMIT, f"{pivots} pivots: minor iteration limit"
             if self.deadline is not None and time.perf_counter() > self.deadline:
                 return LinearCode.MINOR_LIMIT, "time limit during the path"
+            if self.st.below_from >= 0:
+                if self.st.best[0] > _PK.T_PROGRESS:
+                    self.st.t_lower = 0.0  # above 0 now: 0 is t's bound again
+                elif pivots - self.st.below_from >= _PK.BELOW_ZERO_PIVOTS:
+                    return LinearCode.RAY, f"t not above 0 after {pivots} pivots"
             ek, ei, es, ev = entering
             key = (ek, ei)
             enter_count[key] = enter_count.get(key, 0) + 1
@@ -471,16 +509,26 @@ class PivotalPath:
                 return LinearCode.CYCLE, f"{_VAR_NAMES[ek]}[{ei}] entered {cycle_limit} times"
             col = self._col_of(ek, ei)
             d = self.bm.ftran_column(*col)
+            # rates at most piv_tol are zero (the ratio test's pivot tolerance)
+            piv_tol = self.opt.pivot_tolerance * (max(1.0, float(np.max(np.abs(d))))
+                                                  if d.size else 1.0)
             if ek == VAR_Z and es == 0.0:
-                # direction free (after an artificial left): increase t.
-                if self.st.t_slot >= 0 and d[self.st.t_slot] != 0.0:
+                # direction free (after an artificial left): increase t; when t does not
+                # move with it (a rate within rounding), increase the variable.
+                if self.st.t_slot >= 0 and abs(d[self.st.t_slot]) > piv_tol:
                     es = -np.sign(d[self.st.t_slot])
                 else:
                     es = 1.0
                 entering = (ek, ei, es, ev)
             rate = -es * d  # d xb / d theta
             theta_self = self._entering_room(ek, ei, es, ev)
-            leave, theta, leave_up = self._ratio_test(rate, d)
+            leave, theta, leave_up = self._ratio_test(rate, piv_tol)
+            if (leave >= 0 and theta < theta_self and self.st.sk[leave] == VAR_T
+                    and not leave_up and self.st.free_below and self.st.below_from < 0
+                    and self.st.best[0] <= _PK.T_PROGRESS):
+                # t blocks at 0 before the path has been above 0: lift its bound.
+                self.st.t_lower, self.st.below_from = -np.inf, pivots
+                leave, theta, leave_up = self._ratio_test(rate, piv_tol)
             if leave < 0 and not np.isfinite(theta_self):
                 # Ray termination: the entering variable grows without bound; z moves
                 # along dz (basic z's at their rates, an entering z at its direction).
@@ -595,11 +643,10 @@ class PivotalPath:
             return abs(bound - ev) if np.isfinite(bound) else np.inf
         return np.inf
 
-    def _ratio_test(self, rate, d):
+    def _ratio_test(self, rate, piv_tol):
         """Two-pass (Harris) ratio test.  Returns (slot, theta, leaves_at_upper)."""
-        scale = max(1.0, float(np.max(np.abs(d)))) if d.size else 1.0
         return ratio_test(self.st.sk, self.st.si, self.st.xb, rate, self.lb, self.ub,
-                          self.opt.pivot_tolerance * scale, self.opt.ratio_tolerance)
+                          piv_tol, self.opt.ratio_tolerance, self.st.t_lower)
 
     def _record(self):
         if self.st.t > self.st.best[0] + 1e-15:
@@ -639,7 +686,13 @@ class PivotalPath:
 
     def _finish(self, code, t, t0, st0, ray_start, msg):
         s = self.bm.stats
-        if code is LinearCode.SOLVED or self.st.best[1] is None:
+        if (code is not LinearCode.SOLVED and self.st.best[1] is None
+                and self.st.start is not None and not ray_start):
+            # The path never got above t = 0 (it may have gone below): its start is its
+            # best point (thesis §3.3.2: no point of such a path is a candidate).
+            z, w, v = (c.copy() for c in self.st.start)
+            t = 0.0
+        elif code is LinearCode.SOLVED or self.st.best[1] is None:
             z, w, v = self._current_point() if self.st.xb is not None else (self.st.zval, 0, 0)
         else:
             # Not solved: return the point with the largest t (PATH's return-best-point).
