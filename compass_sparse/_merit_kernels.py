@@ -201,6 +201,17 @@ def positive_spread(v):
 
 
 @njit(cache=True)
+def csc_max_norm_spread(indptr, indices, data, n):
+    """max(positive_spread(rows), positive_spread(cols)) of the row and column max-norms
+    of a canonical square CSC matrix of order n (scaling.spread in one call: the scaling
+    trigger asks for it in every solve)."""
+    rows = np.zeros(n)
+    cols = np.zeros(n)
+    csc_abs_maxima(indptr, indices, data, rows, cols, np.empty(n))
+    return max(positive_spread(rows), positive_spread(cols))
+
+
+@njit(cache=True)
 def csc_matvec(indptr, indices, data, x, out):
     """out = A x for A in CSC form, column by column (scipy's csc_matvec order)."""
     out[:] = 0.0

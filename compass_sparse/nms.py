@@ -168,6 +168,15 @@ class Linearizer:
         return trusted_csc(data, self.M.indices, self.M.indptr, self.M.shape)
 
 
+def _linearizer_for(J, P):
+    """A Linearizer of J when J is stored on the pattern P (None otherwise: not kept)."""
+    if P is None or not (J.nnz == P.nnz and J.indptr.shape == P.indptr.shape
+                         and np.array_equal(J.indptr, P.indptr)
+                         and np.array_equal(J.indices, P.indices)):
+        return None
+    return Linearizer(J)
+
+
 @dataclass
 class NMSState:
     """The state of one NMS run from a start point (thesis §3.4)."""
@@ -598,6 +607,12 @@ class NMSSolver:
         status, message = Status.NO_PROGRESS, ""
         schedule = RestartSchedule(self.opt0)
         self._last_J = None
+        if self.linearizer is None and start.J is not None:
+            # M = J + eps I has the same pattern in every solve of this problem: its index
+            # arrays are made once per Jacobian pattern (a loop of small solves made them
+            # in every solve); a Jacobian off that pattern makes its own (_newton_point).
+            self.linearizer = self.ev.for_pattern("linearizer", lambda: _linearizer_for(
+                start.J, self.ev.pattern_ref))
         try:
             if self.opt0.homotopy == "only":
                 self._consider(start.z, start.f, start.phi, start.psi)

@@ -233,10 +233,16 @@ def _presolve_pass(problem, opt, f0, J0):
     # Every reduction but fixing l = u needs a row whose entries are all declared
     # constant; without one the pass would only cost time (17 s at n = 1e6, measured).
     has_fixed = bool((problem.lb == problem.ub).any())
-    P = J0 if J0 is not None else problem.pattern  # J0 is stored on the pattern
-    mask = problem.constant_mask
-    nonconst_rows = P.indices if mask is None else P.indices[~mask]
-    linear_rows = int(np.count_nonzero(np.bincount(nonconst_rows, minlength=problem.n) == 0))
+
+    def count_linear_rows():
+        P = J0 if J0 is not None else problem.pattern  # J0 is stored on the pattern
+        mask = problem.constant_mask
+        nonconst_rows = P.indices if mask is None else P.indices[~mask]
+        return int(np.count_nonzero(np.bincount(nonconst_rows, minlength=problem.n) == 0))
+
+    # A fact of the pattern and of the constant entries declared on it: counted once per
+    # pattern (a loop of solves of one problem counted it in every solve).
+    linear_rows = problem.evaluator.for_pattern("linear_rows", count_linear_rows)
     if linear_rows == 0 and not has_fixed:
         st.reason = "no linear rows (all entries declared constant) and no fixed variables"
         return None, st

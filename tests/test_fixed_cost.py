@@ -1,0 +1,146 @@
+"""The fixed cost of a solve: objects made once per Jacobian pattern and shared by the
+solves of one problem, the memo key made once per point, the scaling trigger's spread in
+one compiled call, the residual report of a small problem.  Each test checks that the
+shortcut computes what it replaces, and that a problem that needs the full work still
+gets it."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from compass_sparse import MCP, solve_mcp
+from compass_sparse.evaluation import _Memo
+from compass_sparse.merit import fb_phi, residual_report
+from compass_sparse.scaling import _canonical, _maxnorms, _spread, spread
+
+
+def _cournot():
+    def F(q):
+        return np.array([1.0, 2.0]) - (10.0 - q.sum()) + q
+
+    return MCP(F, lambda q: np.array([[2.0, 1.0], [1.0, 2.0]]), 0.0, np.inf, np.zeros(2))
+
+
+def test_linearizer_made_once_per_pattern_and_shared_by_the_solves_of_a_problem():
+    prob = _cournot()
+    first = solve_mcp(prob.with_start(np.zeros(2)))
+    lin = prob.evaluator._derived["linearizer"][1]
+    again = solve_mcp(prob.with_start(np.zeros(2)))
+    assert prob.evaluator._derived["linearizer"][1] is lin
+    # another problem object, nothing shared: the same answer and counts
+    fresh = solve_mcp(_cournot().with_start(np.zeros(2)))
+    for r in (first, again):
+        assert r.success
+        np.testing.assert_array_equal(r.x, fresh.x)
+        assert (r.nit, r.minor_iterations, r.nfev, r.njev) == (
+            fresh.nit, fresh.minor_iterations, fresh.nfev, fresh.njev)
+
+
+def test_pattern_store_rebuilds_when_an_undeclared_pattern_grows():
+    # J is diagonal at the start and gains an off-diagonal entry away from it: the stored
+    # pattern grows, so everything derived from the old pattern must be made again.
+    def F(x):
+        return np.array([x[0] - 1.0 + 0.5 * x[1] ** 2, x[1] - 2.0])
+
+    def J(x):
+        return sp.csc_matrix(np.array([[1.0, x[1]], [0.0, 1.0]]))
+
+    prob = MCP(F, J, -np.inf, np.inf, np.zeros(2))
+    ev = prob.evaluator
+    ev.fj(np.zeros(2))
+    built = []
+    assert ev.for_pattern("probe", lambda: built.append(1) or "a") == "a"
+    assert ev.for_pattern("probe", lambda: built.append(1) or "b") == "a"
+    ev.fj(np.ones(2))  # J now has the (0, 1) entry: the pattern grows
+    assert ev.pattern_growths == 1
+    assert ev.for_pattern("probe", lambda: built.append(1) or "c") == "c"
+    assert len(built) == 2
+    res = solve_mcp(prob.with_start(np.zeros(2)))
+    assert res.success
+    np.testing.assert_allclose(res.x, [-1.0, 2.0], atol=1e-8)
+
+
+def test_tiny_problem_with_a_declared_linear_row_still_presolved_in_every_solve():
+    # The count of linear rows is kept per pattern; a problem that has one must still
+    # reach the preprocessor on the second solve (and one without must not).
+    M = np.array([[2.0, 1.0], [0.0, 1.0]])
+
+    def F(x):
+        return np.array([2.0 * x[0] + x[1] + 0.1 * x[0] ** 3 - 4.0, x[1] - 1.0])
+
+    def J(x):
+        return np.array([[2.0 + 0.3 * x[0] ** 2, 1.0], [0.0, 1.0]])
+
+    # row 2 entirely constant (its stored zero at (1, 0) included)
+    const = sp.csc_matrix((np.ones(3), ([0, 1, 1], [1, 0, 1])), shape=(2, 2))
+    prob = MCP(F, J, 0.0, np.inf, np.zeros(2), constant_jac=const)
+    plain = MCP(F, J, 0.0, np.inf, np.zeros(2))
+    for _ in range(2):
+        r = solve_mcp(prob.with_start(np.zeros(2)))
+        assert r.success and r.passes["presolve"].ran
+        p = solve_mcp(plain.with_start(np.zeros(2)))
+        assert p.success and not p.passes["presolve"].ran
+        np.testing.assert_allclose(r.x, p.x, atol=1e-9)
+    del M
+
+
+@pytest.mark.parametrize("x, none", [
+    (np.array([1.0, np.nan]), True),
+    (np.array([np.inf, -np.inf, 1.0]), False),
+    (np.array([1e200, -1e300, 5e-324]), False),
+    (np.array([-0.0, 0.0]), False),
+])
+def test_memo_key_is_none_exactly_for_points_with_a_nan(x, none):
+    k = _Memo._key(x)
+    assert (k is None) == none
+    if not none:  # equal points (-0.0 == 0.0) share the key
+        assert k == _Memo._key(np.where(x == 0, 0.0, x))
+
+
+def test_memo_key_made_once_still_finds_the_pinned_start_point():
+    prob = _cournot()
+    ev = prob.evaluator.fresh()
+    x0 = np.array([0.5, 0.25])
+    f0, J0 = ev.fj(x0)
+    ev.pin(x0)
+    calls = ev.counters.nfev, ev.counters.njev
+    ev.fj(np.array([1.0, 1.0]))  # a later point replaces the last one, not the pinned one
+    f, J = ev.fj(x0.copy())
+    assert (ev.counters.nfev, ev.counters.njev) == (calls[0] + 1, calls[1] + 1)
+    np.testing.assert_array_equal(f, f0)
+    np.testing.assert_array_equal(J.toarray(), J0.toarray())
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_spread_in_one_kernel_equals_the_maxnorm_formula(seed):
+    rng = np.random.default_rng(seed)
+    n = 30
+    A = sp.random(n, n, density=0.2, random_state=seed, format="csc")
+    A.data *= 10.0 ** rng.integers(-200, 200, A.nnz)
+    A.data[:3] = [0.0, np.nan, -np.inf][: min(3, A.nnz)]  # explicit zero, NaN, inf
+    A = _canonical(A)
+    r, c = _maxnorms(A)
+    expected = max(_spread(r), _spread(c))
+    got = spread(A)
+    assert got == expected or (np.isnan(got) and np.isnan(expected))
+    assert spread(sp.csc_matrix((n, n))) == 1.0  # no positive entries
+
+
+def test_residual_report_of_a_small_problem_lists_every_row_ties_lower_first():
+    z = np.array([0.0, 1.0, 2.0, 3.0])
+    f = np.array([0.5, 0.0, -0.5, 0.0])
+    lb, ub = np.zeros(4), np.full(4, np.inf)
+    rep = residual_report(z, f, lb, ub)
+    aphi = np.abs(fb_phi(z, f, lb, ub))
+    order = sorted(range(4), key=lambda i: (-aphi[i], i))
+    assert aphi[1] == aphi[3] == 0.0  # a tie
+    assert [w[0] for w in rep.worst] == [f"F[{i}]" for i in order]
+    assert rep.worst_index == order[0]
+    # above k_worst rows the partition route lists the same k largest
+    big = residual_report(np.arange(9.0), np.linspace(-1, 1, 9), np.zeros(9),
+                          np.full(9, np.inf), k_worst=3)
+    assert len(big.worst) == 3
+    assert [w[1] for w in big.worst] == sorted(
+        np.abs(fb_phi(np.arange(9.0), np.linspace(-1, 1, 9), np.zeros(9),
+                      np.full(9, np.inf))), reverse=True)[:3]
