@@ -270,6 +270,11 @@ class NMSSolver:
         self._rng = None
         self.verdict = None  # set when a point is judged a solution
         self.flat_rejections = 0
+        #: the caller's acceptance verdict of the start Point handed to solve(), when
+        #: the solver works on the user's problem unscaled: the first run does not judge
+        #: that point again
+        self.start_verdict = None
+        self._start0 = None  # the start Point of solve()
 
     @property
     def rng(self):
@@ -283,15 +288,18 @@ class NMSSolver:
     def _past_deadline(self) -> bool:
         return self.deadline is not None and time.perf_counter() > self.deadline
 
-    def _consider(self, z, f, phi, psi):
+    def _consider(self, z, f, phi, psi, verdict=None):
         """Every evaluated trial point may be the best (and a solution).  Every loop that
         evaluates points passes through here, so the time limit is checked here too: it
-        holds to within one evaluation."""
+        holds to within one evaluation.  ``verdict``: the acceptance verdict of this
+        point, when it is known already."""
         if self.best is None or psi < self.best.psi:
             self.best = Point(z.copy(), f.copy(), phi.copy(), psi)
-        if self.acceptance.small(z, f, phi):
-            v = self.acceptance.judge(z, f, jac=lambda y: self.ev.jac(y, f), phi=phi,
-                                      small=True)
+        small = verdict.small_residual if verdict is not None else \
+            self.acceptance.small(z, f, phi)
+        if small:
+            v = verdict if verdict is not None else self.acceptance.judge(
+                z, f, jac=lambda y: self.ev.jac(y, f), phi=phi, small=True)
             if v.solved:
                 self.best = Point(z.copy(), f.copy(), phi.copy(), psi)
                 self.verdict = v
@@ -424,7 +432,10 @@ class NMSSolver:
         if cur is None:
             # only a restart's drawn point arrives unevaluated (the user's start was evaluated)
             return "F or J undefined at the last restart's point (not at the start point)"
-        self._consider(cur.z, cur.f, cur.phi, cur.psi)
+        # the caller's verdict holds for the start Point itself, in the first run only
+        v0 = self.start_verdict if start is self._start0 else None
+        self.start_verdict = None
+        self._consider(cur.z, cur.f, cur.phi, cur.psi, v0)
         x, _ = normal_map_at(cur.z, cur.f, lb, ub)
         # --- crash
         if (opt.crash_method == "pnewton" and self.n >= opt.crash_minimum_dimension
@@ -604,6 +615,7 @@ class NMSSolver:
         self.progress = ProgressLine(opt.progress)
         self._t_start = time.perf_counter()
         start0, z0 = start, start.z
+        self._start0 = start
         status, message = Status.NO_PROGRESS, ""
         schedule = RestartSchedule(self.opt0)
         self._last_J = None

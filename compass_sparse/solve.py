@@ -339,7 +339,8 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
             return _finish(problem, pre, Status.DOMAIN_ERROR, "F or J failed at the start "
                            f"point: {work.evaluator.last_error}", z0, opt, t0, passes)
     phi0 = fb_phi(z0, f0, work.lb, work.ub)
-    at_solution = _judge_on(work, z0, f0, opt, phi0).solved
+    verdict0 = _judge_on(work, z0, f0, opt, phi0)
+    at_solution = verdict0.solved
     if at_solution or opt.major_iteration_limit == 0:
         status = Status.SOLVED if at_solution else Status.MAJOR_ITERATION_LIMIT
         msg = ("the start point is a solution" if status is Status.SOLVED
@@ -361,6 +362,8 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
                        callback=callback, deadline=deadline, log_major=log_major,
                        log_minor=log_minor, acceptance=acceptance)
     solver.basis = basis
+    if sc is None:  # the solver's start Point is (z0, f0) of `work`, judged above
+        solver.start_verdict = verdict0
     if log_major is not None:
         log_major(f"{'major':>5} {'minor':>7} {'func':>6} {'grad':>5} {'residual':>12} "
                   f"type {'prox':>9} {'inorm':>10} (label)")

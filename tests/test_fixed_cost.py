@@ -144,3 +144,33 @@ def test_residual_report_of_a_small_problem_lists_every_row_ties_lower_first():
     assert [w[1] for w in big.worst] == sorted(
         np.abs(fb_phi(np.arange(9.0), np.linspace(-1, 1, 9), np.zeros(9),
                       np.full(9, np.inf))), reverse=True)[:3]
+
+
+def _flat_start():
+    # F = exp(-x) on [0, inf): at x = 14 the residual is 8e-7 but F is flat (not solved)
+    return MCP(np.exp, None, 0.0, np.inf, np.array([14.0]), jac_sparsity=np.ones((1, 1)))
+
+
+def _badly_scaled():
+    s = np.array([1e6, 1.0, 1e-5])
+
+    def F(x):
+        return s * (x - np.array([1.0, 2.0, 3.0]) + 0.1 * x ** 3)
+
+    return MCP(F, lambda x: np.diag(s * (1.0 + 0.3 * x ** 2)), 0.0, np.inf, np.zeros(3))
+
+
+@pytest.mark.parametrize("make", [_cournot, _flat_start, _badly_scaled])
+def test_start_verdict_handed_to_the_solver_gives_the_solve_it_recomputes(make, monkeypatch):
+    from compass_sparse import nms
+
+    def run():
+        r = solve_mcp(make().with_start(make().x0))
+        return r.status, r.x.tolist(), r.nit, r.minor_iterations, r.nfev, r.njev, r.message
+
+    handed = run()
+    # the same solve with the verdict recomputed inside the solver (the attribute ignores
+    # what the caller sets)
+    monkeypatch.setattr(nms.NMSSolver, "start_verdict",
+                        property(lambda self: None, lambda self, v: None), raising=False)
+    assert run() == handed
