@@ -201,6 +201,25 @@ def positive_spread(v):
 
 
 @njit(cache=True)
+def min_map_within(z, f, lb, ub, tol):
+    """Whether |z_i - pi(z_i - F_i)| <= tol for every i, with the min-map formed as
+    merit.min_map forms it, min(max(F, z - u), z - l), and a NaN anywhere in it (z - u
+    or z - l of infinite z, or F) failing the test as it does there."""
+    for i in range(z.shape[0]):
+        a = z[i] - ub[i]
+        b = z[i] - lb[i]
+        fi = f[i]
+        if a != a or b != b or fi != fi:
+            return False
+        m = fi if fi > a else a
+        if b < m:
+            m = b
+        if not abs(m) <= tol:
+            return False
+    return True
+
+
+@njit(cache=True)
 def csc_max_norm_spread(indptr, indices, data, n):
     """max(positive_spread(rows), positive_spread(cols)) of the row and column max-norms
     of a canonical square CSC matrix of order n (scaling.spread in one call: the scaling

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ._merit_kernels import flat_step_kernel
+from ._merit_kernels import flat_step_kernel, min_map_within
 from .merit import fb_jacobian_diagonals, fb_phi, min_map
 
 __all__ = ["FLAT_STEP_RTOL", "Verdict", "judge", "residuals_small", "Acceptance"]
@@ -59,8 +59,18 @@ def residuals_small(z, f, lb, ub, tol, phi=None) -> bool:
         phi = fb_phi(z, f, lb, ub)
     if float(np.sqrt(np.dot(phi, phi))) > tol:
         return False
+    if _float_vectors(z, f, lb, ub):  # the solver's points: one compiled pass
+        return bool(min_map_within(z, f, lb, ub, float(tol)))
     mm = min_map(z, f, lb, ub)
     return bool((np.abs(mm) <= tol).all())
+
+
+def _float_vectors(z, *others) -> bool:
+    """z and every other argument: float64 vectors of one length."""
+    if not (type(z) is np.ndarray and z.dtype == np.float64 and z.ndim == 1):
+        return False
+    return all(type(a) is np.ndarray and a.dtype == np.float64 and a.shape == z.shape
+               for a in others)
 
 
 def judge(z, f, lb, ub, tol, jac=None, phi=None, small=False) -> Verdict:

@@ -152,11 +152,12 @@ _FLAT_OVERRIDES = (Status.SOLVED, Status.NO_PROGRESS, Status.MAJOR_ITERATION_LIM
 
 
 def _result(problem: MCP, status: Status, message: str, z, f, opt: Options, t0, *,
-            start_z=None, verdict=None, **counts) -> Result:
-    """The Result of the point z with F values f on ``problem`` (the user's).  ``verdict``:
-    the acceptance verdict of exactly this (z, f) on this problem, when the solver has
-    just computed it (it is not computed again)."""
-    phi = fb_phi(z, f, problem.lb, problem.ub)
+            start_z=None, verdict=None, phi=None, **counts) -> Result:
+    """The Result of the point z with F values f on ``problem`` (the user's).  ``verdict``
+    and ``phi``: the acceptance verdict and Phi of exactly this (z, f) on this problem,
+    when the solver has just computed them (they are not computed again)."""
+    if phi is None:
+        phi = fb_phi(z, f, problem.lb, problem.ub)
     rep = residual_report(z, f, problem.lb, problem.ub, names=problem.row_label, phi=phi)
     if verdict is None:
         verdict = _judge_on(problem, z, f, opt, phi)
@@ -381,9 +382,10 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
     # The verdict that stopped the solve was taken on (zb, fb); when neither the
     # preprocessor nor the scaling changed the problem, that is the user's problem and
     # the verdict stands for the Result.
-    verdict = out.verdict if pre is None and sc is None else None
+    same = pre is None and sc is None
+    verdict = out.verdict if same else None
     res = _finish(problem, pre, out.status, out.message, zb, opt, t0, passes,
-                  start_z=problem.x0, verdict=verdict,
+                  start_z=problem.x0, verdict=verdict, phi=out.best.phi if same else None,
                   f_reduced=fb, nit=out.nit, minor_iterations=out.minor,
                   crash_iterations=out.crash_iterations, restarts=out.restarts,
                   gradient_steps=out.gradient_steps, lm_steps=out.lm_steps,

@@ -174,3 +174,30 @@ def test_start_verdict_handed_to_the_solver_gives_the_solve_it_recomputes(make, 
     monkeypatch.setattr(nms.NMSSolver, "start_verdict",
                         property(lambda self: None, lambda self, v: None), raising=False)
     assert run() == handed
+
+
+@pytest.mark.parametrize("seed", range(3))
+@pytest.mark.parametrize("tol", [1e-6, 1e-300, 0.0, 1e300])
+def test_compiled_min_map_test_gives_the_array_formula_verdict(seed, tol):
+    from compass_sparse._merit_kernels import min_map_within
+    from compass_sparse.merit import min_map
+
+    rng = np.random.default_rng(seed)
+    n = 400
+    lb = np.where(rng.random(n) < 0.4, -np.inf, rng.standard_normal(n))
+    ub = np.where(rng.random(n) < 0.4, np.inf, np.nan_to_num(lb, neginf=0.0) + rng.random(n))
+    z = np.clip(rng.standard_normal(n) * 10.0 ** rng.integers(-300, 10, n), lb, ub)
+    f = rng.standard_normal(n) * 10.0 ** rng.integers(-320, 10, n)
+    z[:4] = [np.inf, -np.inf, np.nan, 0.0]
+    f[4:6] = [np.nan, -0.0]
+    for k in range(n):  # every prefix: the first failing row moves along the vector
+        zs, fs, ls, us = z[k:], f[k:], lb[k:], ub[k:]
+        with np.errstate(invalid="ignore"):
+            expected = bool((np.abs(min_map(zs, fs, ls, us)) <= tol).all())
+        assert min_map_within(zs, fs, ls, us, tol) == expected
+    # rows that pass: a near-solution of every bound kind
+    zz = np.clip(rng.standard_normal(n), lb, ub)
+    ff = np.where(zz == lb, np.abs(f), np.where(zz == ub, -np.abs(f), 0.0)) * 1e-9
+    for t in (1e-6, 1e-12):
+        assert min_map_within(zz, ff, lb, ub, t) == bool(
+            (np.abs(min_map(zz, ff, lb, ub)) <= t).all())
