@@ -121,7 +121,7 @@ class _Memo:
     for the short vectors of small problems, where the memo is asked several times per
     evaluation."""
 
-    __slots__ = ("x", "value", "key", "px", "pvalue", "pkey")
+    __slots__ = ("value", "key", "pvalue", "pkey")
 
     def __init__(self):
         self.clear()
@@ -149,9 +149,9 @@ class _Memo:
         return None
 
     def put(self, x, value, k=None):
-        """Store the value at x; ``k``: _key(x) when the caller has it."""
-        self.x = np.array(x, dtype=float, copy=True)
-        self.key = self._key(self.x) if k is None else k
+        """Store the value at x; ``k``: _key(x) when the caller has it.  (Only the key
+        is kept: it is a copy of the point's bytes.)"""
+        self.key = self._key(np.asarray(x, dtype=float)) if k is None else k
         self.value = value
         if self.key is not None and self.key == self.pkey:
             self.pvalue = value
@@ -162,10 +162,10 @@ class _Memo:
         if k is None:
             k = self._key(np.asarray(x, dtype=float))
         if k is not None and k == self.key:
-            self.px, self.pvalue, self.pkey = self.x, self.value, self.key
+            self.pvalue, self.pkey = self.value, self.key
 
     def clear(self):
-        self.x = self.value = self.px = self.pvalue = self.key = self.pkey = None
+        self.value = self.pvalue = self.key = self.pkey = None
 
 
 class Evaluator:
@@ -381,11 +381,11 @@ class Evaluator:
         """F(x); raises what the user's F raises.  (``_k``: the memo key of x, when the
         caller has made it.)"""
         x = np.asarray(x, dtype=float)
+        if _k is None:  # one key for the look-up and, on a miss, the store
+            _k = _Memo._key(x)
         f = self._mf.get(x, _k)
         if f is None:
             f, J = self._call_F(x)
-            if _k is None:
-                _k = _Memo._key(x)
             self._mf.put(x, f, _k)
             if J is not None:
                 self._mj.put(x, (J, False), _k)  # counted when used
@@ -395,6 +395,8 @@ class Evaluator:
         """J(x) on the fixed pattern.  ``f`` = F(x) when the caller has it (differences
         reuse it).  (``_k``: the memo key of x, when the caller has made it.)"""
         x = np.asarray(x, dtype=float)
+        if _k is None:
+            _k = _Memo._key(x)
         hit = self._mj.get(x, _k)
         if hit is not None:
             J, counted = hit

@@ -201,3 +201,23 @@ def test_compiled_min_map_test_gives_the_array_formula_verdict(seed, tol):
     for t in (1e-6, 1e-12):
         assert min_map_within(zz, ff, lb, ub, t) == bool(
             (np.abs(min_map(zz, ff, lb, ub)) <= t).all())
+
+
+def test_memo_key_is_a_copy_so_a_point_changed_in_place_is_evaluated_again():
+    calls = []
+
+    def F(x):
+        calls.append(x.copy())
+        return x - 1.0
+
+    prob = MCP(F, lambda x: np.eye(2), -np.inf, np.inf, np.zeros(2))
+    ev = prob.evaluator.fresh()
+    x = np.array([3.0, 4.0])
+    np.testing.assert_array_equal(ev.F(x), [2.0, 3.0])
+    x[0] = 5.0  # the caller reuses its array
+    np.testing.assert_array_equal(ev.F(x), [4.0, 3.0])
+    np.testing.assert_array_equal(ev.F(np.array([5.0, 4.0])), [4.0, 3.0])  # memo hit
+    assert len(calls) == 2
+    assert ev.F(np.array([-0.0, 4.0])) is not None and len(calls) == 3
+    np.testing.assert_array_equal(ev.F(np.array([0.0, 4.0])), [-1.0, 3.0])  # -0.0 == 0.0
+    assert len(calls) == 3
