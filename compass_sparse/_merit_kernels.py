@@ -159,6 +159,19 @@ def flat_step_kernel(z, phi, da, db, indptr, indices, data, row_max, col_max, di
 
 
 @njit(cache=True)
+def scale_test_kernel(z, f, lb, ub, phi, indptr, indices, data):
+    """flat_step_kernel with the diagonals of fb_diagonals_kernel and the work areas made
+    inside: the whole scale test of a point in one call (z, f, lb, ub, phi float64
+    vectors of length n, J canonical CSC)."""
+    n = z.shape[0]
+    da = np.empty(n)
+    db = np.empty(n)
+    fb_diagonals_kernel(z, f, lb, ub, da, db)
+    return flat_step_kernel(z, phi, da, db, indptr, indices, data, np.zeros(n),
+                            np.empty(n), np.empty(n))
+
+
+@njit(cache=True)
 def residual_maxima_kernel(z, f, lb, ub, phi, mm):
     """The maxima of merit.residual_report in one pass: mm = |z - pi(z - F)| (as
     merit.min_map, the median form), and (max |Phi|, max mm, max |F_B|), NaN propagating

@@ -222,3 +222,28 @@ def test_memo_key_is_a_copy_so_a_point_changed_in_place_is_evaluated_again():
     assert ev.F(np.array([-0.0, 4.0])) is not None and len(calls) == 3
     np.testing.assert_array_equal(ev.F(np.array([0.0, 4.0])), [-1.0, 3.0])  # -0.0 == 0.0
     assert len(calls) == 3
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_scale_test_in_one_kernel_equals_diagonals_then_flat_step(seed):
+    from compass_sparse._merit_kernels import flat_step_kernel, scale_test_kernel
+    from compass_sparse.merit import fb_jacobian_diagonals
+
+    rng = np.random.default_rng(seed)
+    n = 40
+    lb = np.where(rng.random(n) < 0.4, -np.inf, rng.standard_normal(n))
+    ub = np.where(rng.random(n) < 0.4, np.inf, np.nan_to_num(lb, neginf=0.0) + rng.random(n))
+    z = np.clip(rng.standard_normal(n) * 10.0 ** rng.integers(-5, 5, n), lb, ub)
+    f = rng.standard_normal(n) * 10.0 ** rng.integers(-12, 3, n)
+    f[:3] = [0.0, -0.0, np.nan]
+    J = _canonical(sp.random(n, n, density=0.15, random_state=seed, format="csc")
+                   + sp.diags(rng.standard_normal(n)))
+    J.data *= 10.0 ** rng.integers(-14, 3, J.nnz)
+    phi = fb_phi(z, f, lb, ub)
+    da, db = fb_jacobian_diagonals(z, f, lb, ub)
+    two = flat_step_kernel(z, phi, da, db, J.indptr, J.indices, J.data, np.zeros(n),
+                           np.empty(n), np.empty(n))
+    one = scale_test_kernel(z, f, lb, ub, phi, J.indptr, J.indices, J.data)
+    assert one[0] == two[0]
+    for a, b in zip(one[1:], two[1:]):
+        assert a == b or (np.isnan(a) and np.isnan(b))
