@@ -33,6 +33,7 @@ import scipy.sparse as sp
 
 from ._merit_kernels import flat_step_kernel, min_map_within, scale_test_kernel
 from .merit import fb_jacobian_diagonals, fb_phi, min_map
+from .path import _floats
 
 __all__ = ["FLAT_STEP_RTOL", "Verdict", "judge", "residuals_small", "Acceptance"]
 
@@ -59,18 +60,10 @@ def residuals_small(z, f, lb, ub, tol, phi=None) -> bool:
         phi = fb_phi(z, f, lb, ub)
     if float(np.sqrt(np.dot(phi, phi))) > tol:
         return False
-    if _float_vectors(z, f, lb, ub):  # the solver's points: one compiled pass
+    if _floats(np.size(z), z, f, lb, ub):  # the solver's points: one compiled pass
         return bool(min_map_within(z, f, lb, ub, float(tol)))
     mm = min_map(z, f, lb, ub)
     return bool((np.abs(mm) <= tol).all())
-
-
-def _float_vectors(z, *others) -> bool:
-    """z and every other argument: float64 vectors of one length."""
-    if not (type(z) is np.ndarray and z.dtype == np.float64 and z.ndim == 1):
-        return False
-    return all(type(a) is np.ndarray and a.dtype == np.float64 and a.shape == z.shape
-               for a in others)
 
 
 def judge(z, f, lb, ub, tol, jac=None, phi=None, small=False) -> Verdict:
@@ -100,7 +93,7 @@ def _scale_test(z, f, lb, ub, phi, J) -> Verdict:
     if not J.has_canonical_format:
         J = J.copy()
         J.sum_duplicates()
-    if _float_vectors(z, f, lb, ub, phi) and J.data.dtype == np.float64:
+    if _floats(np.size(z), z, f, lb, ub, phi) and J.data.dtype == np.float64:
         # the solver's points: diagonals and test in one compiled call
         row, d, ratio = scale_test_kernel(z, f, lb, ub, phi, J.indptr, J.indices, J.data)
     else:
