@@ -247,3 +247,16 @@ def test_scale_test_in_one_kernel_equals_diagonals_then_flat_step(seed):
     assert one[0] == two[0]
     for a, b in zip(one[1:], two[1:]):
         assert a == b or (np.isnan(a) and np.isnan(b))
+
+
+def test_point_norm_by_math_sqrt_equals_the_numpy_square_root():
+    from compass_sparse.nms import Point
+
+    rng = np.random.default_rng(0)
+    psis = np.concatenate([rng.random(2000) * 10.0 ** rng.integers(-320, 308, 2000),
+                           [0.0, 5e-324, 1e308, np.inf, np.nan]])
+    e = np.zeros(1)
+    for psi in psis:
+        got = Point(e, e, e, float(psi)).fbn
+        ref = float(np.sqrt(2.0 * psi))
+        assert got == ref or (np.isnan(got) and np.isnan(ref))
