@@ -135,13 +135,23 @@ class _Memo:
             return None
         return x.shape, y.tobytes()
 
+    @staticmethod
+    def probe(x):
+        """The look-up key of a float64 array x: _key(x) without the NaN test (stored
+        keys have no NaN, so bytes with a NaN match none of them)."""
+        return x.shape, (x + 0.0).tobytes()
+
+    @staticmethod
+    def storable(x, k):
+        """The probe key k of x as a key to store: None when x has a NaN."""
+        return None if np.isnan(x).any() else k
+
     def get(self, x, k=None):
         """The value at x, or None; ``k``: _key(x) when the caller has it."""
         if self.key is None and self.pkey is None:
             return None
         if k is None:
-            # no NaN test: the stored keys have none, so bytes with a NaN match neither
-            k = (x.shape, (x + 0.0).tobytes())
+            k = self.probe(x)
         if k == self.key:
             return self.value
         if k == self.pkey:
@@ -381,42 +391,43 @@ class Evaluator:
         """F(x); raises what the user's F raises.  (``_k``: the memo key of x, when the
         caller has made it.)"""
         x = np.asarray(x, dtype=float)
-        if _k is None:  # one key for the look-up and, on a miss, the store
-            _k = _Memo._key(x)
-        f = self._mf.get(x, _k)
+        # one key for the look-up and, on a miss, the store (NaN-tested only then)
+        k = _k if _k is not None else _Memo.probe(x)
+        f = self._mf.get(x, k)
         if f is None:
             f, J = self._call_F(x)
-            self._mf.put(x, f, _k)
+            k = _k if _k is not None else _Memo.storable(x, k)
+            self._mf.put(x, f, k)
             if J is not None:
-                self._mj.put(x, (J, False), _k)  # counted when used
+                self._mj.put(x, (J, False), k)  # counted when used
         return f.copy()  # callers may write into their F values; the memo stays intact
 
     def J(self, x, f=None, _k=None) -> sp.csc_matrix:
         """J(x) on the fixed pattern.  ``f`` = F(x) when the caller has it (differences
         reuse it).  (``_k``: the memo key of x, when the caller has made it.)"""
         x = np.asarray(x, dtype=float)
-        if _k is None:
-            _k = _Memo._key(x)
-        hit = self._mj.get(x, _k)
+        k = _k if _k is not None else _Memo.probe(x)
+        hit = self._mj.get(x, k)
         if hit is not None:
             J, counted = hit
             if J.nnz != self._pattern.nnz:  # kept from before an undeclared pattern grew
                 J = self._fix_pattern(J)
             if not counted:
                 self.counters.njev += 1
-                self._mj.put(x, (J, True), _k)
+                self._mj.put(x, (J, True), k)  # (k matched a stored key: no NaN)
             return J
+        k = _k if _k is not None else _Memo.storable(x, k)
         if self._user_jac is True:  # one call gives both; F's memo takes the new f too
             f, J = self._call_F(x)
-            self._mf.put(x, f, _k)
+            self._mf.put(x, f, k)
             self.counters.njev += 1
         elif self._user_jac is None:
             if f is None:
-                f = self.F(x, _k)
+                f = self.F(x, k)
             J = self._fd_jacobian(x, np.asarray(f, dtype=float))
         else:
             J = self._call_J(x)
-        self._mj.put(x, (J, True), _k)
+        self._mj.put(x, (J, True), k)
         return J
 
     def FJ(self, x):
