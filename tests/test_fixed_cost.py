@@ -260,3 +260,25 @@ def test_point_norm_by_math_sqrt_equals_the_numpy_square_root():
         got = Point(e, e, e, float(psi)).fbn
         ref = float(np.sqrt(2.0 * psi))
         assert got == ref or (np.isnan(got) and np.isnan(ref))
+
+
+def test_memo_never_stores_or_matches_a_point_with_a_nan():
+    calls = []
+
+    def F(x):
+        calls.append(1)
+        return np.nan_to_num(x) - 1.0
+
+    prob = MCP(F, lambda x: np.eye(2), -np.inf, np.inf, np.zeros(2))
+    ev = prob.evaluator.fresh()
+    calls.clear()
+    bad = np.array([np.nan, 1.0])
+    ev.F(bad)
+    ev.F(bad)  # NaN equals nothing: evaluated again
+    ev.J(bad)
+    ev.J(bad)
+    assert len(calls) == 2 and ev.counters.njev == 2
+    good = np.array([2.0, 1.0])
+    ev.F(good)
+    ev.F(good.copy())
+    assert len(calls) == 3
