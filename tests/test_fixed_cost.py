@@ -176,18 +176,23 @@ def test_start_verdict_handed_to_the_solver_gives_the_solve_it_recomputes(make, 
     assert run() == handed
 
 
+def _random_point(rng, n, z_exponents, f_exponents):
+    """(z, f, lb, ub): every bound kind, z in the box, entries over the given decades."""
+    lb = np.where(rng.random(n) < 0.4, -np.inf, rng.standard_normal(n))
+    ub = np.where(rng.random(n) < 0.4, np.inf, np.nan_to_num(lb, neginf=0.0) + rng.random(n))
+    z = np.clip(rng.standard_normal(n) * 10.0 ** rng.integers(*z_exponents, n), lb, ub)
+    f = rng.standard_normal(n) * 10.0 ** rng.integers(*f_exponents, n)
+    return z, f, lb, ub
+
+
 @pytest.mark.parametrize("seed", range(3))
 @pytest.mark.parametrize("tol", [1e-6, 1e-300, 0.0, 1e300])
 def test_compiled_min_map_test_gives_the_array_formula_verdict(seed, tol):
     from compass_sparse._merit_kernels import min_map_within
     from compass_sparse.merit import min_map
 
-    rng = np.random.default_rng(seed)
-    n = 400
-    lb = np.where(rng.random(n) < 0.4, -np.inf, rng.standard_normal(n))
-    ub = np.where(rng.random(n) < 0.4, np.inf, np.nan_to_num(lb, neginf=0.0) + rng.random(n))
-    z = np.clip(rng.standard_normal(n) * 10.0 ** rng.integers(-300, 10, n), lb, ub)
-    f = rng.standard_normal(n) * 10.0 ** rng.integers(-320, 10, n)
+    rng, n = np.random.default_rng(seed), 400
+    z, f, lb, ub = _random_point(rng, n, (-300, 10), (-320, 10))
     z[:4] = [np.inf, -np.inf, np.nan, 0.0]
     f[4:6] = [np.nan, -0.0]
     for k in range(n):  # every prefix: the first failing row moves along the vector
@@ -229,12 +234,8 @@ def test_scale_test_in_one_kernel_equals_diagonals_then_flat_step(seed):
     from compass_sparse._merit_kernels import flat_step_kernel, scale_test_kernel
     from compass_sparse.merit import fb_jacobian_diagonals
 
-    rng = np.random.default_rng(seed)
-    n = 40
-    lb = np.where(rng.random(n) < 0.4, -np.inf, rng.standard_normal(n))
-    ub = np.where(rng.random(n) < 0.4, np.inf, np.nan_to_num(lb, neginf=0.0) + rng.random(n))
-    z = np.clip(rng.standard_normal(n) * 10.0 ** rng.integers(-5, 5, n), lb, ub)
-    f = rng.standard_normal(n) * 10.0 ** rng.integers(-12, 3, n)
+    rng, n = np.random.default_rng(seed), 40
+    z, f, lb, ub = _random_point(rng, n, (-5, 5), (-12, 3))
     f[:3] = [0.0, -0.0, np.nan]
     J = _canonical(sp.random(n, n, density=0.15, random_state=seed, format="csc")
                    + sp.diags(rng.standard_normal(n)))
@@ -258,7 +259,7 @@ def test_point_norm_by_math_sqrt_equals_the_numpy_square_root():
     e = np.zeros(1)
     for psi in psis:
         got = Point(e, e, e, float(psi)).fbn
-        ref = float(np.sqrt(2.0 * psi))
+        ref = float(np.sqrt(2.0 * float(psi)))  # (Python floats overflow to inf silently)
         assert got == ref or (np.isnan(got) and np.isnan(ref))
 
 
