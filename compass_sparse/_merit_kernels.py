@@ -204,6 +204,19 @@ def flat_step_kernel(z, phi, da, db, indptr, indices, data, row_max, col_max, di
 
 
 @njit(cache=True)
+def scale_test_kernel(z, f, lb, ub, phi, indptr, indices, data):
+    """flat_step_kernel with the diagonals of fb_diagonals_kernel and the work areas made
+    inside: the whole scale test of a point in one call (z, f, lb, ub, phi float64
+    vectors of length n, J canonical CSC)."""
+    n = z.shape[0]
+    da = np.empty(n)
+    db = np.empty(n)
+    fb_diagonals_kernel(z, f, lb, ub, da, db)
+    return flat_step_kernel(z, phi, da, db, indptr, indices, data, np.zeros(n),
+                            np.empty(n), np.empty(n))
+
+
+@njit(cache=True)
 def residual_maxima_kernel(z, f, lb, ub, phi, mm):
     """The maxima of merit.residual_report in one pass: mm = |z - pi(z - F)| (as
     merit.min_map, the median form), and (max |Phi|, max mm, max |F_B|), NaN propagating
@@ -243,6 +256,36 @@ def positive_spread(v):
             if x > hi:
                 hi = x
     return hi / lo if hi > 0.0 else 1.0
+
+
+@njit(cache=True)
+def min_map_within(z, f, lb, ub, tol):
+    """Whether |z_i - pi(z_i - F_i)| <= tol for every i, with the min-map formed as
+    merit.min_map forms it, min(max(F, z - u), z - l), and a NaN anywhere in it (z - u
+    or z - l of infinite z, or F) failing the test as it does there."""
+    for i in range(z.shape[0]):
+        a = z[i] - ub[i]
+        b = z[i] - lb[i]
+        fi = f[i]
+        if a != a or b != b or fi != fi:
+            return False
+        m = fi if fi > a else a
+        if b < m:
+            m = b
+        if not abs(m) <= tol:
+            return False
+    return True
+
+
+@njit(cache=True)
+def csc_max_norm_spread(indptr, indices, data, n):
+    """max(positive_spread(rows), positive_spread(cols)) of the row and column max-norms
+    of a canonical square CSC matrix of order n (scaling.spread in one call: the scaling
+    trigger asks for it in every solve)."""
+    rows = np.zeros(n)
+    cols = np.zeros(n)
+    csc_abs_maxima(indptr, indices, data, rows, cols, np.empty(n))
+    return max(positive_spread(rows), positive_spread(cols))
 
 
 @njit(cache=True)

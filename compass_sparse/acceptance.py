@@ -31,8 +31,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ._merit_kernels import flat_step_kernel
+from ._merit_kernels import flat_step_kernel, min_map_within, scale_test_kernel
 from .merit import fb_jacobian_diagonals, fb_phi, min_map
+from .path import _floats
 from .scaling import scale_entries
 
 __all__ = ["FLAT_STEP_RTOL", "Verdict", "judge", "residuals_small", "Acceptance"]
@@ -60,6 +61,8 @@ def residuals_small(z, f, lb, ub, tol, phi=None) -> bool:
         phi = fb_phi(z, f, lb, ub)
     if float(np.sqrt(np.dot(phi, phi))) > tol:
         return False
+    if _floats(np.size(z), z, f, lb, ub):  # the solver's points: one compiled pass
+        return bool(min_map_within(z, f, lb, ub, float(tol)))
     mm = min_map(z, f, lb, ub)
     return bool((np.abs(mm) <= tol).all())
 
@@ -86,15 +89,19 @@ def _scale_test(z, f, lb, ub, phi, J) -> Verdict:
     """Test (2) at a point that passed test (1), with J = J(z): ||H_i||_inf over the row
     is max(|db_i| max_j |J_ij|, |da_i + db_i J_ii|), read off the stored entries of the
     canonical CSC in one compiled pass (no sparse matrix built per solve)."""
-    da, db = fb_jacobian_diagonals(z, f, lb, ub)
     if not (sp.issparse(J) and J.format == "csc"):
         J = sp.csc_matrix(J)
     if not J.has_canonical_format:
         J = J.copy()
         J.sum_duplicates()
-    n = z.size
-    row, d, ratio = flat_step_kernel(z, phi, da, db, J.indptr, J.indices, J.data,
-                                     np.zeros(n), np.empty(n), np.empty(n))
+    if _floats(np.size(z), z, f, lb, ub, phi) and J.data.dtype == np.float64:
+        # the solver's points: diagonals and test in one compiled call
+        row, d, ratio = scale_test_kernel(z, f, lb, ub, phi, J.indptr, J.indices, J.data)
+    else:
+        da, db = fb_jacobian_diagonals(z, f, lb, ub)
+        n = z.size
+        row, d, ratio = flat_step_kernel(z, phi, da, db, J.indptr, J.indices, J.data,
+                                         np.zeros(n), np.empty(n), np.empty(n))
     if row < 0 or ratio <= FLAT_STEP_RTOL:
         return Verdict(True, True)
     return Verdict(False, True, flat_row=int(row), step=float(d))

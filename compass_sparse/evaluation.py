@@ -131,7 +131,7 @@ class _Memo:
     for the short vectors of small problems, where the memo is asked several times per
     evaluation."""
 
-    __slots__ = ("x", "value", "key", "px", "pvalue", "pkey")
+    __slots__ = ("value", "key", "pvalue", "pkey")
 
     def __init__(self):
         self.clear()
@@ -145,32 +145,47 @@ class _Memo:
             return None
         return x.shape, y.tobytes()
 
-    def get(self, x):
+    @staticmethod
+    def probe(x):
+        """The look-up key of a float64 array x: _key(x) without the NaN test (stored
+        keys have no NaN, so bytes with a NaN match none of them)."""
+        return x.shape, (x + 0.0).tobytes()
+
+    @staticmethod
+    def storable(x, k):
+        """The probe key k of x as a key to store: None when x has a NaN."""
+        return None if np.isnan(x).any() else k
+
+    def get(self, x, k=None):
+        """The value at x, or None; ``k``: _key(x) when the caller has it."""
         if self.key is None and self.pkey is None:
             return None
-        # no NaN test: the stored keys have none, so bytes with a NaN match neither
-        k = (x.shape, (x + 0.0).tobytes())
+        if k is None:
+            k = self.probe(x)
         if k == self.key:
             return self.value
         if k == self.pkey:
             return self.pvalue
         return None
 
-    def put(self, x, value):
-        self.x = np.array(x, dtype=float, copy=True)
-        self.key = self._key(self.x)
+    def put(self, x, value, k=None):
+        """Store the value at x; ``k``: _key(x) when the caller has it.  (Only the key
+        is kept: it is a copy of the point's bytes.)"""
+        self.key = self._key(np.asarray(x, dtype=float)) if k is None else k
         self.value = value
         if self.key is not None and self.key == self.pkey:
             self.pvalue = value
 
-    def pin(self, x):
-        """Keep the value at x (the last point) beyond the next evaluations."""
-        k = self._key(np.asarray(x, dtype=float))
+    def pin(self, x, k=None):
+        """Keep the value at x (the last point) beyond the next evaluations; ``k``:
+        _key(x) when the caller has it."""
+        if k is None:
+            k = self._key(np.asarray(x, dtype=float))
         if k is not None and k == self.key:
-            self.px, self.pvalue, self.pkey = self.x, self.value, self.key
+            self.pvalue, self.pkey = self.value, self.key
 
     def clear(self):
-        self.x = self.value = self.px = self.pvalue = self.key = self.pkey = None
+        self.value = self.pvalue = self.key = self.pkey = None
 
 
 class Evaluator:
@@ -209,6 +224,9 @@ class Evaluator:
         self._mj = _Memo()  # J: value (J, counted?)
         self.pattern_declared = pattern is not None
         self.pattern_growths = 0
+        # Objects derived from the pattern alone (see :meth:`for_pattern`); shared with
+        # the fresh() copies, which keep the pattern.
+        self._derived: dict = {}
         if pattern is not None:
             P = canonical_csc(pattern, self.n)
             P.data[:] = 1.0
@@ -227,6 +245,25 @@ class Evaluator:
             return None
         P = self._pattern
         return trusted_csc(np.ones(P.nnz), P.indices.copy(), P.indptr.copy(), P.shape)
+
+    def for_pattern(self, name: str, build: Callable):
+        """``build()``, an object that depends only on the current Jacobian pattern, made
+        once per pattern: a loop of solves of one problem (:meth:`fresh` copies share the
+        store) makes it once.  Kept with the pattern object it was made for, so a pattern
+        that grows (a new object) gets a new one; ``build`` is None-safe: a None result
+        is not kept."""
+        hit = self._derived.get(name)
+        if hit is not None and hit[0] is self._pattern:
+            return hit[1]
+        value = build()
+        if value is not None and self._pattern is not None:
+            self._derived[name] = (self._pattern, value)
+        return value
+
+    @property
+    def pattern_ref(self) -> sp.csc_matrix | None:
+        """The stored pattern itself (not a copy: read only)."""
+        return self._pattern
 
     def _set_pattern(self, C):
         self._pattern = C.copy()
@@ -360,41 +397,47 @@ class Evaluator:
         return sp.csc_matrix((data, P.indices.copy(), P.indptr.copy()), shape=(self.n, self.n))
 
     # ------------------------------------------------------------------ raising calls
-    def F(self, x) -> np.ndarray:
-        """F(x); raises what the user's F raises."""
+    def F(self, x, _k=None) -> np.ndarray:
+        """F(x); raises what the user's F raises.  (``_k``: the memo key of x, when the
+        caller has made it.)"""
         x = np.asarray(x, dtype=float)
-        f = self._mf.get(x)
+        # one key for the look-up and, on a miss, the store (NaN-tested only then)
+        k = _k if _k is not None else _Memo.probe(x)
+        f = self._mf.get(x, k)
         if f is None:
             f, J = self._call_F(x)
-            self._mf.put(x, f)
+            k = _k if _k is not None else _Memo.storable(x, k)
+            self._mf.put(x, f, k)
             if J is not None:
-                self._mj.put(x, (J, False))  # counted when used
+                self._mj.put(x, (J, False), k)  # counted when used
         return f.copy()  # callers may write into their F values; the memo stays intact
 
-    def J(self, x, f=None) -> sp.csc_matrix:
+    def J(self, x, f=None, _k=None) -> sp.csc_matrix:
         """J(x) on the fixed pattern.  ``f`` = F(x) when the caller has it (differences
-        reuse it)."""
+        reuse it).  (``_k``: the memo key of x, when the caller has made it.)"""
         x = np.asarray(x, dtype=float)
-        hit = self._mj.get(x)
+        k = _k if _k is not None else _Memo.probe(x)
+        hit = self._mj.get(x, k)
         if hit is not None:
             J, counted = hit
             if J.nnz != self._pattern.nnz:  # kept from before an undeclared pattern grew
                 J = self._fix_pattern(J)
             if not counted:
                 self.counters.njev += 1
-                self._mj.put(x, (J, True))
+                self._mj.put(x, (J, True), k)  # (k matched a stored key: no NaN)
             return J
+        k = _k if _k is not None else _Memo.storable(x, k)
         if self._user_jac is True:  # one call gives both; F's memo takes the new f too
             f, J = self._call_F(x)
-            self._mf.put(x, f)
+            self._mf.put(x, f, k)
             self.counters.njev += 1
         elif self._user_jac is None:
             if f is None:
-                f = self.F(x)
+                f = self.F(x, k)
             J = self._fd_jacobian(x, np.asarray(f, dtype=float))
         else:
             J = self._call_J(x)
-        self._mj.put(x, (J, True))
+        self._mj.put(x, (J, True), k)
         return J
 
     def FJ(self, x):
@@ -417,10 +460,10 @@ class Evaluator:
         self.last_error = why
         return None
 
-    def f(self, x):
+    def f(self, x, _k=None):
         """F(x), or None when F raised or returned NaN/Inf there (counted)."""
         try:
-            f = self.F(x)
+            f = self.F(x, _k)
         except (CompassError, KeyboardInterrupt):
             raise
         except Exception as exc:  # the user's F failed here: reject the point
@@ -429,10 +472,10 @@ class Evaluator:
             return self._reject("F returned NaN/Inf")
         return f
 
-    def jac(self, x, f=None):
+    def jac(self, x, f=None, _k=None):
         """J(x), or None when J raised or returned NaN/Inf there (counted)."""
         try:
-            J = self.J(x, f)
+            J = self.J(x, f, _k)
         except (CompassError, KeyboardInterrupt):
             raise
         except Exception as exc:
@@ -442,11 +485,14 @@ class Evaluator:
         return J
 
     def fj(self, x):
-        """(f, J), or (None, None) when either is rejected."""
-        f = self.f(x)
+        """(f, J), or (None, None) when either is rejected (the memo key of x is made
+        once for both)."""
+        x = np.asarray(x, dtype=float)
+        k = _Memo._key(x)
+        f = self.f(x, k)
         if f is None:
             return None, None
-        J = self.jac(x, f)
+        J = self.jac(x, f, k)
         if J is None:
             return None, None
         return f, J
@@ -456,8 +502,9 @@ class Evaluator:
         """Keep F(x) and J(x), evaluated last, in the memo until :meth:`forget`: the start
         point's values are asked for by several passes."""
         x = np.asarray(x, dtype=float)
-        self._mf.pin(x)
-        self._mj.pin(x)
+        k = _Memo._key(x)
+        self._mf.pin(x, k)
+        self._mj.pin(x, k)
 
     def check_at(self, x):
         """(F(x), J(x)) at the start point, raising :class:`EvaluationError` that names the
@@ -541,12 +588,12 @@ class _RestrictedEvaluator(Evaluator):
     def _call_F(self, y):
         return self.parent._call_F(self._fill(y))[0][self._rows], None
 
-    def F(self, y) -> np.ndarray:
+    def F(self, y, _k=None) -> np.ndarray:  # (no memo of its own: _k is not used)
         return self.parent.F(self._fill(y))[self._rows]
 
-    def J(self, y, f=None) -> sp.csc_matrix:
+    def J(self, y, f=None, _k=None) -> sp.csc_matrix:
         if self.jac_mode is None:
-            return super().J(y, f)
+            return super().J(y, f, _k)
         return self._restrict_J(self.parent.J(self._fill(y)))
 
     def pin(self, y):

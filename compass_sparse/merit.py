@@ -260,8 +260,12 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5,
         fb_inf, natural, nm_inf = (float(np.max(aphi)), float(np.max(mm)),
                                    float(np.max(np.abs(nm)))) if z.size else (0.0, 0.0, 0.0)
     k = min(k_worst, z.size)
-    idx = np.argpartition(-aphi, k - 1)[:k] if k > 0 else np.array([], dtype=int)
-    idx = idx[np.argsort(-aphi[idx])]
+    if k == z.size:
+        # every row is listed (small problems): one sort, no partition first
+        idx = np.argsort(-aphi, kind="stable")  # ties: the lower row first
+    else:
+        idx = np.argpartition(-aphi, k - 1)[:k] if k > 0 else np.array([], dtype=int)
+        idx = idx[np.argsort(-aphi[idx])]
     if names is None:
         label = lambda i: f"F[{i}]"  # noqa: E731
     elif callable(names):

@@ -41,6 +41,7 @@ with the worst row's name.  Crash lines: ``crash iter changes size residual step
 from __future__ import annotations
 
 import logging
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -95,7 +96,9 @@ class Point:
 
     @property
     def fbn(self) -> float:
-        return float(np.sqrt(2.0 * self.psi))
+        # math.sqrt: the same correctly rounded square root as np.sqrt, without the
+        # array machinery (read several times per major iteration)
+        return math.sqrt(2.0 * self.psi)
 
 
 @dataclass
@@ -167,6 +170,15 @@ class Linearizer:
         if eps:
             data[self.pos_D] += eps
         return trusted_csc(data, self.M.indices, self.M.indptr, self.M.shape)
+
+
+def _linearizer_for(J, P):
+    """A Linearizer of J when J is stored on the pattern P (None otherwise: not kept)."""
+    if P is None or not (J.nnz == P.nnz and J.indptr.shape == P.indptr.shape
+                         and np.array_equal(J.indptr, P.indptr)
+                         and np.array_equal(J.indices, P.indices)):
+        return None
+    return Linearizer(J)
 
 
 @dataclass
@@ -263,6 +275,11 @@ class NMSSolver:
         self._rng = None
         self.verdict = None  # set when a point is judged a solution
         self.flat_rejections = 0
+        #: the caller's acceptance verdict of the start Point handed to solve(), when
+        #: the solver works on the user's problem unscaled: the first run does not judge
+        #: that point again
+        self.start_verdict = None
+        self._start0 = None  # the start Point of solve()
 
     @property
     def rng(self):
@@ -276,15 +293,18 @@ class NMSSolver:
     def _past_deadline(self) -> bool:
         return self.deadline is not None and time.perf_counter() > self.deadline
 
-    def _consider(self, z, f, phi, psi):
+    def _consider(self, z, f, phi, psi, verdict=None):
         """Every evaluated trial point may be the best (and a solution).  Every loop that
         evaluates points passes through here, so the time limit is checked here too: it
-        holds to within one evaluation."""
+        holds to within one evaluation.  ``verdict``: the acceptance verdict of this
+        point, when it is known already."""
         if self.best is None or psi < self.best.psi:
             self.best = Point(z.copy(), f.copy(), phi.copy(), psi)
-        if self.acceptance.small(z, f, phi):
-            v = self.acceptance.judge(z, f, jac=lambda y: self.ev.jac(y, f), phi=phi,
-                                      small=True)
+        small = verdict.small_residual if verdict is not None else \
+            self.acceptance.small(z, f, phi)
+        if small:
+            v = verdict if verdict is not None else self.acceptance.judge(
+                z, f, jac=lambda y: self.ev.jac(y, f), phi=phi, small=True)
             if v.solved:
                 self.best = Point(z.copy(), f.copy(), phi.copy(), psi)
                 self.verdict = v
@@ -428,7 +448,10 @@ class NMSSolver:
         if cur is None:
             # only a restart's drawn point arrives unevaluated (the user's start was evaluated)
             return "F or J undefined at the last restart's point (not at the start point)"
-        self._consider(cur.z, cur.f, cur.phi, cur.psi)
+        # the caller's verdict holds for the start Point itself, in the first run only
+        v0 = self.start_verdict if start is self._start0 else None
+        self.start_verdict = None
+        self._consider(cur.z, cur.f, cur.phi, cur.psi, v0)
         x, _ = normal_map_at(cur.z, cur.f, lb, ub)
         # --- crash
         if (opt.crash_method == "pnewton" and self.n >= opt.crash_minimum_dimension
@@ -608,9 +631,16 @@ class NMSSolver:
         self.progress = ProgressLine(opt.progress)
         self._t_start = time.perf_counter()
         start0, z0 = start, start.z
+        self._start0 = start
         status, message = Status.NO_PROGRESS, ""
         schedule = RestartSchedule(self.opt0)
         self._last_J = None
+        if self.linearizer is None and start.J is not None:
+            # M = J + eps I has the same pattern in every solve of this problem: its index
+            # arrays are made once per Jacobian pattern (a loop of small solves made them
+            # in every solve); a Jacobian off that pattern makes its own (_newton_point).
+            self.linearizer = self.ev.for_pattern("linearizer", lambda: _linearizer_for(
+                start.J, self.ev.pattern_ref))
         try:
             if self.opt0.homotopy == "only":
                 self._consider(start.z, start.f, start.phi, start.psi)

@@ -134,9 +134,12 @@ class PathResult:
 
 
 def _floats(n, *arrays) -> bool:
-    """All float64 vectors of length n (the compiled slot kernels' arguments)."""
-    return all(isinstance(a, np.ndarray) and a.dtype == np.float64 and a.shape == (n,)
-               for a in arrays)
+    """All float64 vectors of length n (the compiled kernels' arguments)."""
+    shape = (n,)
+    for a in arrays:  # (a loop, not all(...): this runs several times per path)
+        if not (isinstance(a, np.ndarray) and a.dtype == np.float64 and a.shape == shape):
+            return False
+    return True
 
 
 def components(x, lb, ub):

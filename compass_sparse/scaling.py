@@ -128,7 +128,12 @@ def _spread(v) -> float:
 
 def spread(J) -> float:
     """max / min of the non-zero row and column max-norms of J (1 for a well-scaled J)."""
-    r, c = _maxnorms(_canonical(J))
+    A = _canonical(J)
+    if A.shape[0] == A.shape[1]:
+        from ._merit_kernels import csc_max_norm_spread
+
+        return float(csc_max_norm_spread(A.indptr, A.indices, A.data, A.shape[0]))
+    r, c = _maxnorms(A)
     return max(_spread(r), _spread(c))
 
 
@@ -174,12 +179,12 @@ class ScaledEvaluator(Evaluator):
     def _call_F(self, y):  # finite differences on G go through the parent's primitive
         return self.scaling.row * self.parent._call_F(self.scaling.col * y)[0], None
 
-    def F(self, y) -> np.ndarray:
+    def F(self, y, _k=None) -> np.ndarray:  # (no memo of its own: _k is not used)
         return self.scaling.row * self.parent.F(self.scaling.col * y)
 
-    def J(self, y, f=None) -> sp.csc_matrix:
+    def J(self, y, f=None, _k=None) -> sp.csc_matrix:
         if self.jac_mode is None:
-            return super().J(y, f)
+            return super().J(y, f, _k)
         J = self.parent.J(self.scaling.col * y)
         return self._fix_pattern(self.scaling.scale_jacobian(J))
 

@@ -152,11 +152,12 @@ _FLAT_OVERRIDES = (Status.SOLVED, Status.NO_PROGRESS, Status.MAJOR_ITERATION_LIM
 
 
 def _result(problem: MCP, status: Status, message: str, z, f, opt: Options, t0, *,
-            start_z=None, verdict=None, **counts) -> Result:
-    """The Result of the point z with F values f on ``problem`` (the user's).  ``verdict``:
-    the acceptance verdict of exactly this (z, f) on this problem, when the solver has
-    just computed it (it is not computed again)."""
-    phi = fb_phi(z, f, problem.lb, problem.ub)
+            start_z=None, verdict=None, phi=None, **counts) -> Result:
+    """The Result of the point z with F values f on ``problem`` (the user's).  ``verdict``
+    and ``phi``: the acceptance verdict and Phi of exactly this (z, f) on this problem,
+    when the solver has just computed them (they are not computed again)."""
+    if phi is None:
+        phi = fb_phi(z, f, problem.lb, problem.ub)
     rep = residual_report(z, f, problem.lb, problem.ub, names=problem.row_label, phi=phi)
     if verdict is None:
         verdict = _judge_on(problem, z, f, opt, phi)
@@ -242,10 +243,16 @@ def _presolve_pass(problem, opt, f0, J0):
     # Every reduction but fixing l = u needs a row whose entries are all declared
     # constant; without one the pass would only cost time (17 s at n = 1e6, measured).
     has_fixed = bool((problem.lb == problem.ub).any())
-    P = J0 if J0 is not None else problem.pattern  # J0 is stored on the pattern
-    mask = problem.constant_mask
-    nonconst_rows = P.indices if mask is None else P.indices[~mask]
-    linear_rows = int(np.count_nonzero(np.bincount(nonconst_rows, minlength=problem.n) == 0))
+
+    def count_linear_rows():
+        P = J0 if J0 is not None else problem.pattern  # J0 is stored on the pattern
+        mask = problem.constant_mask
+        nonconst_rows = P.indices if mask is None else P.indices[~mask]
+        return int(np.count_nonzero(np.bincount(nonconst_rows, minlength=problem.n) == 0))
+
+    # A fact of the pattern and of the constant entries declared on it: counted once per
+    # pattern (a loop of solves of one problem counted it in every solve).
+    linear_rows = problem.evaluator.for_pattern("linear_rows", count_linear_rows)
     if linear_rows == 0 and not has_fixed:
         st.reason = "no linear rows (all entries declared constant) and no fixed variables"
         return None, st
@@ -343,7 +350,8 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
             return _finish(problem, pre, Status.DOMAIN_ERROR, "F or J failed at the start "
                            f"point: {work.evaluator.last_error}", z0, opt, t0, passes)
     phi0 = fb_phi(z0, f0, work.lb, work.ub)
-    at_solution = _judge_on(work, z0, f0, opt, phi0).solved
+    verdict0 = _judge_on(work, z0, f0, opt, phi0)
+    at_solution = verdict0.solved
     if at_solution or opt.major_iteration_limit == 0:
         status = Status.SOLVED if at_solution else Status.MAJOR_ITERATION_LIMIT
         msg = ("the start point is a solution" if status is Status.SOLVED
@@ -365,6 +373,8 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
                        callback=callback, deadline=deadline, log_major=log_major,
                        log_minor=log_minor, acceptance=acceptance)
     solver.basis = basis
+    if sc is None:  # the solver's start Point is (z0, f0) of `work`, judged above
+        solver.start_verdict = verdict0
     if log_major is not None:
         log_major(f"{'major':>5} {'minor':>7} {'func':>6} {'grad':>5} {'residual':>12} "
                   f"type {'prox':>9} {'inorm':>10} (label)")
@@ -382,9 +392,10 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
     # The verdict that stopped the solve was taken on (zb, fb); when neither the
     # preprocessor nor the scaling changed the problem, that is the user's problem and
     # the verdict stands for the Result.
-    verdict = out.verdict if pre is None and sc is None else None
+    same = pre is None and sc is None
+    verdict = out.verdict if same else None
     res = _finish(problem, pre, out.status, out.message, zb, opt, t0, passes,
-                  start_z=problem.x0, verdict=verdict,
+                  start_z=problem.x0, verdict=verdict, phi=out.best.phi if same else None,
                   f_reduced=fb, nit=out.nit, minor_iterations=out.minor,
                   crash_iterations=out.crash_iterations, restarts=out.restarts,
                   gradient_steps=out.gradient_steps, lm_steps=out.lm_steps,
