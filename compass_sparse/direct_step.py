@@ -42,6 +42,7 @@ import scipy.sparse as sp
 
 from ._csc import trusted_csc
 from ._jit import njit
+from ._merit_kernels import csc_is_canonical
 from ._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
 from .basis.types import BasisOptions
 
@@ -207,6 +208,7 @@ class DirectFactors:
         self.klu_allowed = _klu_module() is not None
         self.lu_nnz = 0
         self.method = ("", "")
+        self._held = None  # (indptr, indices, kvxopt matrix, KLU symbolic) of the last block
 
     def solve(self, K, rhs):
         """x with K x = rhs, or None when K is singular (as the factorization finds)."""
@@ -229,11 +231,27 @@ class DirectFactors:
         from kvxopt import matrix, spmatrix
 
         self.method = ("klu", "btf+amd")
-        n = K.shape[0]
-        cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(K.indptr))
-        A = spmatrix(matrix(K.data), matrix(K.indices.astype(np.int64)), matrix(cols), (n, n))
+        h = self._held
+        # (kvxopt keeps each column's entries sorted by row: new values can be copied in
+        # only when K's are in that order too)
+        if (h is not None and np.array_equal(h[0], K.indptr)
+                and np.array_equal(h[1], K.indices)
+                and csc_is_canonical(K.indptr, K.indices, K.shape[0], K.nnz)):
+            # the block of the last step (the active set did not move): KLU's symbolic
+            # analysis (BTF, AMD) depends on the pattern only, so it is kept; only the
+            # values change (~40% of a factorization at n = 362 saved)
+            A, Fs = h[2], h[3]
+            A.V = matrix(K.data)
+        else:
+            n = K.shape[0]
+            cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(K.indptr))
+            A = spmatrix(matrix(K.data), matrix(K.indices.astype(np.int64)), matrix(cols),
+                         (n, n))
+            Fs = None
         try:
-            Fs = klu.symbolic(A)
+            if Fs is None:
+                Fs = klu.symbolic(A)
+                self._held = (K.indptr.copy(), K.indices.copy(), A, Fs)
             Fn = klu.numeric(A, Fs)
         except ArithmeticError:  # singular
             self.lu_nnz = 0

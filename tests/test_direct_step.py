@@ -257,3 +257,42 @@ def test_non_finite_data_give_no_end_point():
     end, _ = ds.direct_step(M, np.array([np.nan, -0.5]), lb, ub, np.full(2, 0.5),
                             np.full(2, VAR_Z, np.int8))
     assert end is None
+
+
+def test_klu_keeps_its_symbolic_analysis_for_a_block_of_the_same_pattern(monkeypatch):
+    """A block with the last block's pattern is factored on the kept symbolic analysis
+    (new values, same answer as a fresh analysis); another pattern gets a new one."""
+    from kvxopt import klu
+
+    calls = []
+    real = klu.symbolic
+    monkeypatch.setattr(klu, "symbolic", lambda A: calls.append(1) or real(A))
+    f = ds.DirectFactors(klu=True)
+    K, b = _random_block(200, 0.01, seed=4)
+    f.solve(K, b)
+    K2 = K.copy()
+    K2.data = K2.data * np.linspace(0.5, 2.0, K2.nnz)
+    x = f.solve(K2, b)
+    assert len(calls) == 1 and f.method[0] == "klu"
+    np.testing.assert_allclose(x, np.linalg.solve(K2.toarray(), b), rtol=1e-9, atol=1e-12)
+    K3, b3 = _random_block(200, 0.01, seed=5)
+    x3 = f.solve(K3, b3)
+    assert len(calls) == 2
+    np.testing.assert_allclose(x3, np.linalg.solve(K3.toarray(), b3), rtol=1e-9, atol=1e-12)
+
+
+def test_klu_reuse_needs_row_sorted_columns():
+    """New values are copied into the kept matrix only in kvxopt's order (rows sorted in
+    each column): a block with the same index arrays but unsorted rows is analysed afresh
+    and still solved right."""
+    f = ds.DirectFactors(klu=True)
+    K = sp.csc_matrix(np.array([[4.0, 1.0, 0.0], [1.0, 3.0, 0.0], [0.0, 1.0, 2.0]]))
+    b = np.array([1.0, 2.0, 3.0])
+    f.solve(K, b)
+    # the same index arrays as the (unsorted) block below would have: rows 1, 0 in column 0
+    U = sp.csc_matrix((np.array([1.0, 5.0, 1.0, 3.0, 1.0, 2.0]),
+                       np.array([1, 0, 0, 1, 2, 2], dtype=np.int32), K.indptr.copy()),
+                      shape=(3, 3))
+    f._held = (U.indptr.copy(), U.indices.copy()) + f._held[2:]
+    x = f.solve(U, b)
+    np.testing.assert_allclose(U.toarray() @ x, b, atol=1e-12)
