@@ -104,6 +104,7 @@ class Workspace:
         self.nnz_total = self.er.size
         self.current_pass = ""
         self.changed = 0
+        self._live = None  # (changed, live mask, its count) -- see live_mask
         self.refresh()
 
     # -- snapshot ----------------------------------------------------------------------
@@ -112,10 +113,17 @@ class Workspace:
         return self.problem.F(x)
 
     def live_mask(self):
-        return self.row_active[self.er] & self.col_active[self.ec]
+        """Entries whose row and column remain (read only: shared until the next
+        reduction, which is the only thing that changes it and counts in ``changed``)."""
+        if self._live is None or self._live[0] != self.changed:
+            mask = self.row_active[self.er] & self.col_active[self.ec]
+            mask.flags.writeable = False
+            self._live = (self.changed, mask, int(np.count_nonzero(mask)))
+        return self._live[1]
 
     def live_nnz(self) -> int:
-        return int(np.count_nonzero(self.live_mask()))
+        self.live_mask()
+        return self._live[2]
 
     def refresh(self):
         """Recompute counts, constants and activity bounds of the remaining problem."""

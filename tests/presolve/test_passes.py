@@ -329,3 +329,25 @@ def test_jac_true_and_finite_difference_problems_are_wrapped():
         sol = solve_with_presolve(p, ref_solve)
         assert sol.natural_residual <= 1e-8
         assert sol.presolve.stats.removed >= 1
+
+
+def test_live_mask_is_shared_until_a_reduction_and_read_only():
+    """The workspace's live-entry mask is computed once per state of the reduction (the
+    passes ask for it before and after every call) and recomputed after one."""
+    from compass_sparse.presolve._work import Workspace
+    from compass_sparse.presolve.linear import declared_constant_mask
+
+    M = np.array([[2.0, 1.0, 0.0], [1.0, 3.0, 1.0], [0.0, 1.0, 4.0]])
+    p = linear_mcp(M, np.array([-1.0, -1.0, -1.0]), 0.0, np.inf)
+    J0 = p.J(p.x0)
+    opts = PresolveOptions()
+    const = declared_constant_mask(p, J0, p.F(p.x0), opts, [], samples=[])
+    ws = Workspace(p, opts, J0, const, [])
+    a = ws.live_mask()
+    assert ws.live_mask() is a and ws.live_nnz() == J0.nnz == 7
+    with pytest.raises(ValueError):
+        a[0] = False
+    ws.fix(np.array([0]), np.array([0.0]), reason="test")
+    b = ws.live_mask()
+    assert b is not a and ws.live_nnz() == 7 - 3   # row 0 and column 0 leave
+    np.testing.assert_array_equal(b, ws.row_active[ws.er] & ws.col_active[ws.ec])
