@@ -80,11 +80,6 @@ def scale_entries(J, row, col) -> sp.csc_matrix:
     return trusted_csc(data, J.indices.copy(), J.indptr.copy(), J.shape)
 
 
-def _columns(A: sp.csc_matrix) -> np.ndarray:
-    """The column index of every stored entry of a CSC matrix."""
-    return np.repeat(np.arange(A.shape[1]), np.diff(A.indptr))
-
-
 def _canonical(A) -> sp.csc_matrix:
     """A as CSC without duplicate entries (a duplicate's |sum| is what a max-norm sees)."""
     A = A if sp.issparse(A) and A.format == "csc" else sp.csc_matrix(A)
@@ -95,28 +90,15 @@ def _canonical(A) -> sp.csc_matrix:
 
 
 def _maxnorms(A: sp.csc_matrix, row=None, col=None):
-    """Row and column max-norms of diag(row) A diag(col) (A canonical CSC), read off the
-    stored entries: no sparse matrix is built (this runs on every solve)."""
+    """Row and column max-norms of diag(row) A diag(col) (A canonical CSC; no factors:
+    A itself), read off the stored entries in one compiled pass (every solve asks)."""
+    from ._merit_kernels import csc_scaled_abs_maxima
+
     rows = np.zeros(A.shape[0])
     cols = np.zeros(A.shape[1])
-    if row is None and A.shape[0] == A.shape[1]:
-        # unscaled (every solve asks for this once): one compiled pass
-        from ._merit_kernels import csc_abs_maxima
-
-        csc_abs_maxima(A.indptr, A.indices, A.data, rows, cols, np.empty(A.shape[1]))
-        return rows, cols
-    if row is not None and A.shape[0] == A.shape[1]:
-        from ._merit_kernels import csc_scaled_abs_maxima
-
-        csc_scaled_abs_maxima(A.indptr, A.indices, A.data, row, col, rows, cols)
-        return rows, cols
-    a = np.abs(A.data)
-    if row is not None:
-        a = a * row[A.indices] * col[_columns(A)]
-    if A.nnz:
-        np.maximum.at(rows, A.indices, a)
-        filled = np.flatnonzero(np.diff(A.indptr))
-        cols[filled] = np.maximum.reduceat(a, A.indptr[filled])
+    if row is None:  # (|a| 1) 1 = |a| exactly
+        row, col = np.ones(A.shape[0]), np.ones(A.shape[1])
+    csc_scaled_abs_maxima(A.indptr, A.indices, A.data, row, col, rows, cols)
     return rows, cols
 
 
