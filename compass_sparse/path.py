@@ -86,6 +86,10 @@ from .exceptions import ShapeError, SingularBasisError
 
 _VAR_NAMES = "zwvatS"
 
+PATH_ATTEMPTS = 3
+"""Runs of one path when the basis manager reports that a singular basis changed its slot
+table (each run starts again from fresh factors); after the last, the path ends SINGULAR."""
+
 
 class LinearCode(enum.Enum):
     """Outcome of one pivotal path: PATH's one-letter linear-solver codes."""
@@ -288,13 +292,17 @@ class PivotalPath:
             r=None) -> PathResult:
         t0 = time.perf_counter()
         st0 = self._stats0()  # (the counts include a first attempt on reused factors)
-        try:
-            return self._run(x_start, warm, ray_start, r, t0, st0)
-        except FactorReuseFailed:
-            # The basis, solved on the factors of an older one, is singular: the manager
-            # has factored it afresh (and will not reuse at the next factor() call); the
-            # path starts again on fresh factors, repairing the basis as usual.
-            return self._run(x_start, warm, ray_start, r, t0, st0)
+        for attempt in range(PATH_ATTEMPTS):
+            try:
+                return self._run(x_start, warm, ray_start, r, t0, st0)
+            except FactorReuseFailed:
+                # The basis (solved on the factors of an older one, or found inaccurate by
+                # a residual check) is singular and its repair changed the manager's slot
+                # table: the path starts again on fresh factors, repairing its own basis
+                # as usual.
+                if attempt == PATH_ATTEMPTS - 1:
+                    return self._finish(LinearCode.SINGULAR, 0.0, t0, st0, ray_start,
+                                        "the basis kept turning singular in its solves")
 
     def _run(self, x_start, warm, ray_start, r, t0, st0) -> PathResult:
         n, lb, ub = self.n, self.lb, self.ub

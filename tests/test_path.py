@@ -540,3 +540,40 @@ def test_compiled_default_basis_matches_array_formulas(seed):
             ref = default_basis(z, lb.astype(np.longdouble), ub.astype(np.longdouble), warm)
         assert got.dtype == ref.dtype == np.int8
         assert np.array_equal(got, ref)
+
+
+def test_path_starts_again_when_a_solve_repairs_the_basis(monkeypatch):
+    """Regression: a residual check inside a solve that repaired a singular basis changed
+    the manager's slot table behind the path's back.  The manager now raises
+    SolveRepairedBasis; the path starts again on fresh factors and still solves, and a
+    path whose solves keep repairing ends SINGULAR instead of raising."""
+    from compass_sparse.basis import SolveRepairedBasis
+    from compass_sparse.path import PATH_ATTEMPTS
+
+    g = gen.p_matrix_lcp(400, "grid", 9, "box")
+    M, q, lb, ub = g.lcp
+    real = BasisManager.ftran_column
+    calls = {"n": 0}
+
+    def once(self, *a, **k):
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise SolveRepairedBasis("injected")
+        return real(self, *a, **k)
+
+    monkeypatch.setattr(BasisManager, "ftran_column", once)
+    res = PivotalPath(M, q, lb, ub, BasisManager(M), Options()).run(start_of(lb, ub))
+    assert calls["n"] > 3
+    assert res.code is LinearCode.SOLVED
+    assert nat_res(M, q, lb, ub, res.z) <= 1e-10
+    assert np.max(np.abs(res.z - g.solution)) <= 1e-9
+
+    def always(self, *a, **k):
+        calls["n"] += 1
+        raise SolveRepairedBasis("injected")
+
+    calls["n"] = 0
+    monkeypatch.setattr(BasisManager, "ftran_column", always)
+    res = PivotalPath(M, q, lb, ub, BasisManager(M), Options()).run(start_of(lb, ub))
+    assert res.code is LinearCode.SINGULAR
+    assert calls["n"] == PATH_ATTEMPTS

@@ -15,10 +15,11 @@ inverse for small problems.
 """
 
 from .dense import DenseBasis
-from .manager import BasisManager, FactorReuseFailed
+from .manager import BasisManager, FactorReuseFailed, SolveRepairedBasis
 from .protocol import Basis
 from .types import (KIND_DENSE, KIND_M, KIND_UNIT, BasisOptions, BasisStats, FactorReport,
                     UpdateStatus)
 
-__all__ = ["Basis", "BasisManager", "FactorReuseFailed", "DenseBasis", "BasisOptions", "BasisStats",
+__all__ = ["Basis", "BasisManager", "FactorReuseFailed", "SolveRepairedBasis", "DenseBasis",
+           "BasisOptions", "BasisStats",
            "UpdateStatus", "FactorReport", "KIND_M", "KIND_UNIT", "KIND_DENSE"]

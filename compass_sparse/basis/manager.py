@@ -53,7 +53,9 @@ LU of an older basis P, and each solve with the new B runs GMRES preconditioned 
 error is at most ``reuse_tolerance``; otherwise, and before any column replacement or
 BTRAN, the basis is factored afresh.  Should that fresh factorization find B singular (a
 rank repair changes the slot table the caller knows), :class:`FactorReuseFailed` is
-raised: the caller starts again with :meth:`factor`, which then factors afresh.
+raised: the caller starts again with :meth:`factor`, which then factors afresh.  The same
+holds when a residual check's fresh factorization finds the basis singular
+(:class:`SolveRepairedBasis`, a subclass).
 """
 
 from __future__ import annotations
@@ -85,6 +87,14 @@ class FactorReuseFailed(CompassError):
     """A basis solved on reused factors turned out singular when factored afresh: its rank
     repair changed the slot table, so the caller must call :meth:`BasisManager.factor`
     again (it factors afresh)."""
+
+
+class SolveRepairedBasis(FactorReuseFailed):
+    """A residual check found a solve inaccurate, the basis was factored afresh, and that
+    factorization found it singular: its rank repair changed the slot table, so the
+    solution asked for is not of the caller's basis.  As for :class:`FactorReuseFailed`,
+    the caller starts again with :meth:`BasisManager.factor` (before, the change went
+    unreported and a caller's slot table no longer matched the factors)."""
 
 
 def _readonly(a):
@@ -770,7 +780,7 @@ class BasisManager:
         y = self._btran_work(c)
         f = self.options.residual_check_frequency
         self.stats.btran_calls += 1
-        if f and self.stats.btran_calls % f == 0 and self._threshold_pivoting:
+        if f and self.stats.btran_calls % f == 0:
             # the transposed counterpart of the FTRAN check: refine once when the
             # backward error is above machine level (threshold pivoting only)
             self.stats.residual_checks += 1
@@ -889,8 +899,12 @@ class BasisManager:
         if self._k > 0 or not self._residual_refactored:
             # (a fresh factorization is retried once: it may have been damaged)
             self.stats.refactor_by_residual += 1
-            self._factorize()
+            rep = self._factorize()
             self._residual_refactored = True
+            if rep.rank_deficiency:
+                raise SolveRepairedBasis("a solve was inaccurate and the basis, factored "
+                                         "afresh, is singular: its repair changed the "
+                                         "slot table")
         if col is not None:
             x = self._ftran_column(*col)
         else:
