@@ -780,7 +780,7 @@ class BasisManager:
         y = self._btran_work(c)
         f = self.options.residual_check_frequency
         self.stats.btran_calls += 1
-        if f and self.stats.btran_calls % f == 0:
+        if f and self.stats.btran_calls % f == 0 and self._threshold_pivoting:
             # the transposed counterpart of the FTRAN check: refine once when the
             # backward error is above machine level (threshold pivoting only)
             self.stats.residual_checks += 1
