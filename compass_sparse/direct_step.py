@@ -170,6 +170,75 @@ def _end_point(indptr, indices, data, q, lb, ub, basic, z, w, v, tol):
     return res, mz
 
 
+@njit(cache=True)
+def _dense_direct(indptr, indices, data, q, lb, ub, basic, z, w, v, tol, rank_tol):
+    """The direct step of a small problem in one compiled pass: M_FF and
+    rhs = -(q + M_FN z_N)_F into a dense block, Gaussian elimination with partial
+    pivoting, z_F, then the end point (:func:`_end_point`).  Returns (largest |residual|
+    over F, max|M z|, |F|); the residual is -1.0 when a solution is not finite, the end
+    point is infeasible, or the block is singular by the compiled engine's own test: a
+    pivot of column j at most ``rank_tol * max(1, ||M[:, j]||_inf)`` (there the engine
+    repairs the basis with artificials and pivots; a Newton step through a nearly
+    singular M_FF would run off along a flat direction instead)."""
+    n = z.shape[0]
+    pos = np.full(n, -1, dtype=np.int64)
+    nf = 0
+    for i in range(n):
+        if basic[i] == VAR_Z:
+            pos[i] = nf
+            nf += 1
+    A = np.zeros((nf, nf))
+    b = np.empty(nf)
+    cmax = np.ones(nf)  # max(1, ||M[:, j]||_inf) of the free columns, all rows
+    for i in range(n):
+        if pos[i] >= 0:
+            b[pos[i]] = -q[i]
+    for j in range(n):
+        pj = pos[j]
+        for e in range(indptr[j], indptr[j + 1]):
+            if pj >= 0:
+                cmax[pj] = max(cmax[pj], abs(data[e]))
+            pi = pos[indices[e]]
+            if pi < 0:
+                continue
+            if pj >= 0:
+                A[pi, pj] += data[e]
+            else:
+                b[pi] -= data[e] * z[j]
+    for k in range(nf):
+        p = k
+        big = abs(A[k, k])
+        for i in range(k + 1, nf):
+            if abs(A[i, k]) > big:
+                big = abs(A[i, k])
+                p = i
+        if big <= rank_tol * cmax[k]:  # singular: the path's rank repair decides
+            return -1.0, 0.0, nf
+        if p != k:
+            for j in range(k, nf):
+                A[k, j], A[p, j] = A[p, j], A[k, j]
+            b[k], b[p] = b[p], b[k]
+        piv = A[k, k]
+        for i in range(k + 1, nf):
+            m = A[i, k] / piv
+            if m != 0.0:
+                for j in range(k + 1, nf):
+                    A[i, j] -= m * A[k, j]
+                b[i] -= m * b[k]
+    for k in range(nf - 1, -1, -1):
+        s = b[k]
+        for j in range(k + 1, nf):
+            s -= A[k, j] * b[j]
+        b[k] = s / A[k, k]
+        if not np.isfinite(b[k]):
+            return -1.0, 0.0, nf
+    for i in range(n):
+        if pos[i] >= 0:
+            z[i] = b[pos[i]]
+    res, mz = _end_point(indptr, indices, data, q, lb, ub, basic, z, w, v, tol)
+    return res, mz, nf
+
+
 def reduced_system(M, free, z, q):
     """(M_FF as CSC, -(q + M_FN z_N)_F) for the indices F where ``free`` is True (M: CSC,
     sorted indices give sorted indices), in one compiled pass without scipy's slicing."""
@@ -203,9 +272,14 @@ class DirectFactors:
     solve to SuperLU.  ``lu_nnz`` is the size of the last LU (L + U, and KLU's
     off-diagonal blocks); ``method`` its (backend, ordering)."""
 
-    def __init__(self, klu: bool = False):
-        self.klu = klu and _klu_module() is not None
-        self.klu_allowed = _klu_module() is not None
+    def __init__(self, klu: bool = False, dense: bool = False, rank_tolerance: float = 1e-9):
+        #: small problems (order below ``DIRECT_MIN_N``): M_FF is solved densely in one
+        #: compiled pass with the end point (:func:`_dense_direct`), no sparse LU; a block
+        #: singular to the compiled engine's ``rank_tolerance`` is left to the path
+        self.dense = dense
+        self.rank_tolerance = float(rank_tolerance)
+        self.klu = klu and not dense and _klu_module() is not None
+        self.klu_allowed = not dense and _klu_module() is not None
         self.lu_nnz = 0
         self.method = ("", "")
         self._held = None  # (indptr, indices, kvxopt matrix, KLU symbolic) of the last block
@@ -289,8 +363,17 @@ def direct_step(M, q, lb, ub, z, basic, factors: DirectFactors | None = None):
     its bounds off F; ``factors``: the solve's :class:`DirectFactors` (default: SuperLU)."""
     factors = DirectFactors() if factors is None else factors
     n = z.shape[0]
-    free = basic == VAR_Z
     zt = np.array(z, dtype=float)
+    w = np.empty(n)
+    v = np.empty(n)
+    if factors.dense:
+        res, mz, nf = _dense_direct(M.indptr, M.indices, M.data, q, lb, ub,
+                                    basic.astype(np.int64), zt, w, v, FEASIBILITY_TOLERANCE,
+                                    factors.rank_tolerance)
+        factors.method = ("dense", "partial pivoting")
+        factors.lu_nnz = nnz_lu = nf * nf
+        return _accepted(res, mz, q, zt, w, v, nnz_lu)
+    free = basic == VAR_Z
     nnz_lu = 0
     if free.any():
         K, rhs = reduced_system(M, free, zt, q)
@@ -301,13 +384,17 @@ def direct_step(M, q, lb, ub, z, basic, factors: DirectFactors | None = None):
         if not np.all(np.isfinite(zf)):
             return None, nnz_lu
         zt[free] = zf
-    w = np.empty(n)
-    v = np.empty(n)
     res, mz = _end_point(M.indptr, M.indices, M.data, q, lb, ub, basic.astype(np.int64), zt,
                          w, v, FEASIBILITY_TOLERANCE)
+    return _accepted(res, mz, q, zt, w, v, nnz_lu)
+
+
+def _accepted(res, mz, q, z, w, v, nnz_lu):
+    """The direct step's answer from its end point's (residual, max|M z|): the point when
+    it is feasible and solves the linear equations to ``RESIDUAL_TOLERANCE``."""
     if res < 0.0:
         return None, nnz_lu
-    qmax = float(np.max(np.abs(q))) if n else 0.0
+    qmax = float(np.max(np.abs(q))) if q.size else 0.0
     if not res <= RESIDUAL_TOLERANCE * (1.0 + mz + qmax):  # (NaN fails too)
         return None, nnz_lu
-    return (zt, w, v), nnz_lu
+    return (z, w, v), nnz_lu

@@ -52,7 +52,8 @@ from ._csc import trusted_csc
 from ._merit_kernels import csc_matvec
 from .acceptance import Acceptance
 from .crash import crash
-from .direct_step import REUSE_BEATS_REFACTOR_NNZ, DirectFactors, direct_step_applies
+from .direct_step import (DIRECT_MIN_N, REUSE_BEATS_REFACTOR_NNZ, DirectFactors,
+                          direct_step_applies)
 from .exceptions import FactorBudgetError
 from .fallback import gradient_steps, lm_step
 from .merit import fb_gradient, fb_phi, fb_psi, normal_map_at, project
@@ -378,7 +379,15 @@ class NMSSolver:
         q = cur.f - Mz
         if self.bm is None:
             self.bm = self.manager_factory(M)
-            self._direct = DirectFactors() if direct_step_applies(M, opt) else None
+            if direct_step_applies(M, opt):
+                self._direct = DirectFactors()
+            elif self.n < DIRECT_MIN_N and getattr(self.bm, "runs_paths", False):
+                # small problems on the compiled engine: the direct step's block is
+                # solved densely in one compiled call (a path's set-up costs more)
+                self._direct = DirectFactors(dense=True,
+                                             rank_tolerance=self.bm.rank_tolerance)
+            else:
+                self._direct = None
         else:
             self.bm.set_matrix(M)
         if self._crash_factors is not None and hasattr(self.bm, "offer_factors"):

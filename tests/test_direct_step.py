@@ -296,3 +296,98 @@ def test_klu_reuse_needs_row_sorted_columns():
     f._held = (U.indptr.copy(), U.indices.copy()) + f._held[2:]
     x = f.solve(U, b)
     np.testing.assert_allclose(U.toarray() @ x, b, atol=1e-12)
+
+
+# ----------------------------------------------------------------- the dense direct step
+@pytest.mark.parametrize("seed", range(6))
+def test_dense_direct_step_agrees_with_the_path_on_small_problems(seed):
+    """Small problems (n < DIRECT_MIN_N) on the compiled engine: the dense direct step
+    (one compiled pass) returns the path's end point where the path makes no pivot, and
+    declines where it pivots."""
+    kinds = set()
+    for n, structure, bounds in ((2, "banded", "box"), (7, "grid", "mixed"),
+                                 (30, "banded", "mixed")):
+        g = gen.p_matrix_lcp(n, structure, seed, bounds)
+        M, q, lb, ub = g.lcp
+        M = sp.csc_matrix(M)
+        rng = np.random.default_rng(seed)
+        xs = g.solution - (M @ g.solution + q)
+        for scale in (1e-6, 1e-2, 1.0):
+            x = xs + scale * rng.standard_normal(n)
+            plain = PivotalPath(M, q, lb, ub, DensePathEngine(M), Options()).run(x)
+            direct = PivotalPath(M, q, lb, ub, DensePathEngine(M), Options(),
+                                 direct=ds.DirectFactors(dense=True)).run(x)
+            assert plain.code is LinearCode.SOLVED and direct.code is LinearCode.SOLVED
+            if plain.pivots == 0:
+                kinds.add("direct")
+                assert direct.factorizations == 1 and direct.pivots == 0
+                np.testing.assert_allclose(direct.z, plain.z, rtol=0, atol=1e-10)
+                np.testing.assert_array_equal(direct.basis.basic, plain.basis.basic)
+            else:
+                kinds.add("path")
+                assert direct.pivots == plain.pivots
+                np.testing.assert_array_equal(direct.z, plain.z)
+            f = M @ direct.z + q
+            assert np.max(np.abs(direct.z - np.clip(direct.z - f, lb, ub))) <= 1e-9
+    assert kinds == {"direct", "path"}
+
+
+def test_dense_direct_step_tolerances_and_singular_block():
+    """The dense kernel applies the same feasibility tolerance as the sparse step and the
+    compiled engine's rank tolerance (each from both sides); an exactly singular M_FF is
+    left to the path."""
+    tol = ds.FEASIBILITY_TOLERANCE
+    dense = ds.DirectFactors(dense=True)
+    end, nnz = ds.direct_step(*_one_dim(-0.5 * tol), factors=dense)
+    assert end is not None and end[0][0] == 0.0 and nnz == 4
+    end, _ = ds.direct_step(*_one_dim(-2.0 * tol), factors=dense)
+    assert end is None
+    M = sp.csc_matrix(np.array([[1.0, 1.0], [1.0, 1.0]]))
+    end, _ = ds.direct_step(M, np.array([-1.0, -1.0]), np.full(2, -np.inf),
+                            np.full(2, np.inf), np.zeros(2), np.full(2, VAR_Z, np.int8),
+                            factors=dense)
+    assert end is None
+    # the compiled engine's rank test, from both sides: a pivot at most
+    # rank_tolerance * max(1, ||M[:, j]||_inf) makes the block singular (left to the path)
+    rank_tol = dense.rank_tolerance
+    for d, accepted in ((2.0 * rank_tol, True), (0.5 * rank_tol, False)):
+        M = sp.csc_matrix(np.array([[1.0, 0.0], [0.0, d]]))
+        end, _ = ds.direct_step(M, np.array([-1.0, -d]), np.full(2, -np.inf),
+                                np.full(2, np.inf), np.zeros(2),
+                                np.full(2, VAR_Z, np.int8), factors=dense)
+        assert (end is not None) is accepted
+        if accepted:
+            np.testing.assert_allclose(end[0], [1.0, 1.0], rtol=1e-12)
+
+
+def test_small_solves_take_the_dense_direct_step():
+    """A 2-variable LCP solved as an MCP: its Newton step makes no pivot and ends by the
+    dense direct step (no dense factorization of the engine), at the known solution."""
+    a, b, c = 10.0, 1.0, np.array([1.0, 2.0])
+    M = np.array([[2 * b, b], [b, 2 * b]])
+
+    def F(x):
+        return M @ x - (a - c)
+
+    r = solve_mcp(F, lambda x: sp.csc_matrix(M), 0.0, np.inf, np.zeros(2))
+    assert r.success and r.minor_iterations == 0
+    assert r.passes["path"].factorizations == r.passes["path"].iterations
+    np.testing.assert_allclose(r.x, np.linalg.solve(M, a - c), atol=1e-9)
+
+
+def test_dense_direct_step_does_not_run_off_a_flat_tail_of_mathiesen():
+    """Regression: the first dense direct step solved nearly singular blocks that the
+    compiled engine repairs (pivot test of exact zeros only); on Mathiesen's problem from
+    (2, 1, 0.5, 0.5) its Newton steps ran off to |x| ~ 6e6 along a flat direction and the
+    solve reported success there, far from the solution set {(s, 0, 0, 0): 0 <= s <= 3}.
+    With the engine's rank test the solve reaches the solution set."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    import known_problems as kp
+
+    p = kp.ALL_SOLVABLE["mathiesen"](np.array([2.0, 1.0, 0.5, 0.5]))
+    r = solve_mcp(p.F, p.J, p.lb, p.ub, p.x0, options={"convergence_tolerance": 1e-6})
+    assert r.success
+    assert p.distance_to_solutions(r.x) <= 1e-4
