@@ -283,3 +283,26 @@ def test_memo_never_stores_or_matches_a_point_with_a_nan():
     ev.F(good)
     ev.F(good.copy())
     assert len(calls) == 3
+
+
+def test_start_point_at_a_solution_runs_no_pass():
+    """A solve started at a solution (a re-solve, a scenario that changed nothing) is
+    judged on the user's problem before any pass: the preprocessor, which would reduce
+    this CGE model (a fixed price and a column singleton), does not run, F and J are
+    evaluated once, and the Result is the start point with its verdict."""
+    from compass_sparse.generators.cge import size_for, static_cge
+
+    p = static_cge(**size_for(90)).with_shock(output_tax=0.25).problem
+    first = solve_mcp(p)
+    assert first.success and first.passes["presolve"].ran  # it reduces this model
+    again = solve_mcp(p.with_start(first.x))
+    assert again.success and again.message == "the start point is a solution"
+    assert again.nit == 0 and again.nfev == 1 and again.njev == 1
+    assert not again.passes["presolve"].ran
+    assert again.passes["presolve"].reason == "start point already solved"
+    np.testing.assert_array_equal(again.x, first.x)
+    f = p.F(again.x)
+    assert np.max(np.abs(again.x - np.clip(again.x - f, p.lb, p.ub))) <= 1e-6
+    # a start point that is not a solution still gets the preprocessor
+    moved = solve_mcp(p.with_start(first.x * 1.01))
+    assert moved.success and moved.passes["presolve"].ran

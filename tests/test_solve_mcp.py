@@ -292,7 +292,7 @@ def test_fixed_variables_alone_are_left_to_the_solver():
     from compass_sparse.presolve import presolve
 
     g, F, lb, ub, zstar, fix = fixed_variables_case()
-    pre = presolve(g.problem, keep_fixed_only=True)
+    pre = presolve(g.problem, leave_simple_to_solver=True)
     assert pre.reduced is g.problem and pre.stats.kept_fixed == fix.size
     assert pre.stats.removed == 0 and len(pre.stack) == 0
     full = presolve(g.problem)
@@ -305,12 +305,12 @@ def test_fixed_variables_alone_are_left_to_the_solver():
 
 
 def test_large_problems_still_solve_a_reduced_problem_without_fixed_variables():
-    """Above KEEP_FIXED_MAX_N the preprocessor's reduced problem is kept even when it only
+    """Above LEAVE_SIMPLE_MAX_N the preprocessor's reduced problem is kept even when it only
     fixes l = u variables (a different trajectory had cost the dynamic CGE model at
     n = 1e4 its crash-only solve)."""
-    from compass_sparse.solve import KEEP_FIXED_MAX_N
+    from compass_sparse.solve import LEAVE_SIMPLE_MAX_N
 
-    n = KEEP_FIXED_MAX_N + 1
+    n = LEAVE_SIMPLE_MAX_N + 1
     d = np.linspace(1.0, 2.0, n)
     lb, ub = np.zeros(n), np.full(n, np.inf)
     lb[::7] = ub[::7] = 0.5
@@ -636,3 +636,45 @@ def test_warm_basis_survives_presolve():
     assert again.residual.fb_norm <= r.residual.fb_norm
     with pytest.raises(ShapeError, match="warm-start basis"):
         solve_mcp(problem, basis=type(r.basis)(r.basis.basic[:-1]))
+
+
+def test_diagonal_column_singletons_are_left_to_the_solver():
+    """A small static CGE model whose preprocessor finds one fixed price and one diagonal
+    column singleton: no reduced problem is built (the solver settles both itself; the
+    reduced problem's set-up and restricted evaluations cost more than they save), the
+    summary says so, and the solution is the one the reduced problem gives."""
+    from compass_sparse.generators.cge import size_for, static_cge
+    from compass_sparse.presolve import presolve
+
+    p = static_cge(**size_for(90)).with_shock(output_tax=0.25).problem
+    full = presolve(p)
+    assert full.stack.counts_by_kind() == {"fix": 1, "diagonal_column_singleton": 1}
+    kept = presolve(p, leave_simple_to_solver=True)
+    assert kept.reduced is p and len(kept.stack) == 0
+    assert (kept.stats.kept_fixed, kept.stats.kept_singletons) == (1, 1)
+    assert kept.stats.f_evals <= full.stats.f_evals  # no linearity check at sample points
+    r = solve_mcp(p)
+    assert "1 diagonal column singletons left to the solver" in r.passes["presolve"].reason
+    check_success(r, p.F, p.lb, p.ub)
+    reduced = presolve(p).reduced
+    assert reduced is not p
+    ref = solve_mcp(p, options={"presolve": False})
+    np.testing.assert_allclose(r.x, ref.x, rtol=1e-7, atol=1e-9)
+
+
+def test_other_reductions_are_still_made_for_small_problems():
+    """Reductions other than those two are still made: on a linear diagonal NCP every
+    row is a singleton row that fixes its variable (records of kind "fix" from another
+    pass than the l = u one), so the preprocessor solves the whole problem."""
+    from compass_sparse.presolve import presolve
+
+    n = 6
+    A = sp.csc_matrix(np.diag(np.arange(1.0, n + 1)))
+    q = -np.ones(n)
+    p = MCP(lambda z: A @ z + q, lambda z: A, np.zeros(n), np.full(n, np.inf), np.zeros(n),
+            constant_jac=A)
+    pre = presolve(p, leave_simple_to_solver=True)
+    assert pre.reduced is None and pre.stats.kept_fixed == pre.stats.kept_singletons == 0
+    r = solve_mcp(p)
+    assert r.message == "solved by the preprocessor"
+    check_success(r, lambda z: A @ z + q, 0.0, np.inf)

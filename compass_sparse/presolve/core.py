@@ -64,7 +64,8 @@ class PresolveStats:
     time: float = 0.0
     f_evals: int = 0
     passes: dict = field(default_factory=dict)
-    kept_fixed: int = 0  #: l = u variables left in the problem (``keep_fixed_only``)
+    kept_fixed: int = 0  #: l = u variables left in the problem (``leave_simple_to_solver``)
+    kept_singletons: int = 0  #: diagonal column singletons left in it (the same)
 
     @property
     def removed(self) -> int:
@@ -122,6 +123,9 @@ class PresolveResult:
                 f"(nnz {s.nnz_original}) in {s.rounds} rounds, {s.time:.3f} s")
         if s.kept_fixed:
             line += f"; {s.kept_fixed} fixed variables (l = u) left to the solver"
+        if s.kept_singletons:
+            line += (f"; {s.kept_singletons} diagonal column singletons left to the "
+                     "solver")
         if self.infeasible is not None:
             line += f"; INFEASIBLE: {self.infeasible.message}"
         return line
@@ -142,14 +146,19 @@ def _has_structure(problem, J0) -> bool:
 
 
 def presolve(problem, options: PresolveOptions | dict | None = None, *, f0=None,
-             J0=None, keep_fixed_only: bool = False) -> PresolveResult:
+             J0=None, leave_simple_to_solver: bool = False) -> PresolveResult:
     """Reduce ``problem`` (an :class:`~compass_sparse.problem.MCP`); see the module docs.
     ``f0``, ``J0``: F and J at ``problem.x0`` when the caller has them.
 
-    ``keep_fixed_only``: when fixing l = u variables is the only reduction found, return
-    the problem itself (an identity stack; ``stats.kept_fixed`` counts them): a solver
-    that keeps such variables at their value needs no reduced problem, whose set-up and
-    restricted evaluations cost more than they save."""
+    ``leave_simple_to_solver``: when every reduction found is one the solver does as well
+    on the whole problem -- fixing l = u variables (it keeps them at their value) and
+    diagonal column singletons (a variable that appears in its own row only, linearly:
+    one Newton step settles it) -- return the problem itself (an identity stack;
+    ``stats.kept_fixed`` and ``stats.kept_singletons`` count them): a reduced problem's
+    set-up and restricted evaluations cost a small model more than they save (a static
+    CGE model at n = 91 with one of each: 7.9 ms per solve against 3.5 ms without the
+    preprocessor, measured).  The declared linearity is then not checked at sample points:
+    the check only ever withdraws reductions, and none is made."""
     opts = PresolveOptions.coerce(options)
     t0 = time.perf_counter()
     warnings: list = []
@@ -177,7 +186,10 @@ def presolve(problem, options: PresolveOptions | dict | None = None, *, f0=None,
     declared = problem.constant_mask is not None and problem.constant_mask.any()
     const = declared_constant_mask(problem, J0, f0, opts, warnings, samples=[])
     ws, infeasible = _reduce(problem, opts, J0, const, warnings, stats)
-    if declared and opts.verify_linear and _rests_on_linearity(stats, infeasible):
+    kept = _left_to_solver(ws.stack) if leave_simple_to_solver and infeasible is None \
+        else None
+    if kept is None and declared and opts.verify_linear and \
+            _rests_on_linearity(stats, infeasible):
         samples = sample_evaluations(problem, opts)
         J0v = J0
         if J0.nnz != problem.pattern.nnz:  # an undeclared pattern grew at the sample points
@@ -189,13 +201,15 @@ def presolve(problem, options: PresolveOptions | dict | None = None, *, f0=None,
             warnings[:] = checked
             stats.rounds = 0
             ws, infeasible = _reduce(problem, opts, J0v, const_v, warnings, stats)
+            if leave_simple_to_solver and infeasible is None:
+                kept = _left_to_solver(ws.stack)
         else:
             warnings.extend(checked)
-    stats.kept_fixed = 0
-    if keep_fixed_only and infeasible is None and _fixed_only(stats):
-        stats.kept_fixed = stats.passes[fixed.NAME].removed
+    stats.kept_fixed = stats.kept_singletons = 0
+    if kept is not None and len(ws.stack):
+        stats.kept_fixed, stats.kept_singletons = kept
         _reset_passes(stats, opts)
-    if len(ws.stack) == 0 or stats.kept_fixed:
+    if len(ws.stack) == 0 or kept is not None:
         reduced = problem
         ws.stack = _identity_stack(problem)
         stats.n_reduced, stats.nnz_reduced = problem.n, nnz
@@ -253,6 +267,20 @@ def _reduce(problem, opts, J0, const, warnings, stats):
         infeasible = exc.diagnostic
         logger.warning("presolve: %s", infeasible.message)
     return ws, infeasible
+
+
+def _left_to_solver(stack):
+    """(fixed variables, diagonal column singletons) when these are all the records on
+    the stack (the reductions the solver does as well itself), else None."""
+    counts = [0, 0]
+    for rec in stack.records:
+        if rec.kind == "fix" and rec.pass_name == fixed.NAME:
+            counts[0] += int(np.size(rec.cols))
+        elif rec.kind == "diagonal_column_singleton":
+            counts[1] += int(np.size(rec.cols))
+        else:
+            return None
+    return tuple(counts)
 
 
 def _fixed_only(stats) -> bool:
