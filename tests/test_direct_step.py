@@ -19,41 +19,31 @@ from compass_sparse.dense_path import DensePathEngine
 from compass_sparse.path import LinearCode, PivotalPath, components, default_basis
 
 
-def _paths(lcp, x, manager):
-    M, q, lb, ub = lcp
-    M = sp.csc_matrix(M)
-    out = []
-    for direct in (False, True):
-        bm = manager(M)
-        out.append(PivotalPath(M, q, lb, ub, bm, Options(),
-                                   direct=ds.DirectFactors() if direct else None).run(x))
-    return out
-
-
-@pytest.mark.parametrize("manager", [BasisManager, DensePathEngine])
-@pytest.mark.parametrize("seed", range(4))
-def test_direct_step_agrees_with_the_path(manager, seed):
-    """From points near (the normal-map point of) the solution of P-matrix LCPs: where the
-    path makes no pivot the direct step returns its end point (same z, one
-    factorization); where it pivots the direct step declines and the path's result is
-    unchanged."""
+def _agreement(cases, scales, seed, manager, factors, atol):
+    """Paths from points near the normal-map point of the solution of P-matrix LCPs, with
+    and without the direct step: where the path makes no pivot the direct step returns its
+    end point (one factorization, the same basis); where it pivots the direct step
+    declines and the path's result is unchanged.  Returns the branches exercised."""
     kinds = set()
-    for structure, bounds in (("banded", "box"), ("grid", "mixed")):
-        g = gen.p_matrix_lcp(120, structure, seed, bounds)
+    for n, structure, bounds in cases:
+        g = gen.p_matrix_lcp(n, structure, seed, bounds)
         M, q, lb, ub = g.lcp
+        M = sp.csc_matrix(M)
         rng = np.random.default_rng(seed)
         xs = g.solution - (M @ g.solution + q)  # the normal-map point of the solution
-        for scale in (1e-4, 1e-2, 1.0):
-            x = xs + scale * rng.standard_normal(M.shape[0])
-            plain, direct = _paths(g.lcp, x, manager)
-            assert plain.code is LinearCode.SOLVED
-            assert direct.code is LinearCode.SOLVED
+        for scale in scales:
+            x = xs + scale * rng.standard_normal(n)
+            plain = PivotalPath(M, q, lb, ub, manager(M), Options()).run(x)
+            direct = PivotalPath(M, q, lb, ub, manager(M), Options(),
+                                 direct=factors()).run(x)
+            assert plain.code is LinearCode.SOLVED and direct.code is LinearCode.SOLVED
             if plain.pivots == 0:
                 kinds.add("direct")
-                assert direct.direct_lu_nnz > 0 and direct.factorizations == 1
-                np.testing.assert_allclose(direct.z, plain.z, rtol=0, atol=1e-9)
+                assert direct.factorizations == 1 and direct.pivots == 0
+                assert direct.direct_lu_nnz > 0 or not (direct.basis.basic == VAR_Z).any()
+                np.testing.assert_allclose(direct.z, plain.z, rtol=0, atol=atol)
                 np.testing.assert_allclose(direct.w - direct.v, plain.w - plain.v,
-                                           rtol=0, atol=1e-9)
+                                           rtol=0, atol=atol)
                 np.testing.assert_array_equal(direct.basis.basic, plain.basis.basic)
             else:
                 kinds.add("path")
@@ -61,6 +51,15 @@ def test_direct_step_agrees_with_the_path(manager, seed):
                 np.testing.assert_array_equal(direct.z, plain.z)
             f = M @ direct.z + q
             assert np.max(np.abs(direct.z - np.clip(direct.z - f, lb, ub))) <= 1e-9
+    return kinds
+
+
+@pytest.mark.parametrize("manager", [BasisManager, DensePathEngine])
+@pytest.mark.parametrize("seed", range(4))
+def test_direct_step_agrees_with_the_path(manager, seed):
+    """Sparse direct step (n = 120): both branches, on both bases."""
+    kinds = _agreement([(120, "banded", "box"), (120, "grid", "mixed")], (1e-4, 1e-2, 1.0),
+                       seed, manager, ds.DirectFactors, 1e-9)
     assert kinds == {"direct", "path"}  # both branches were exercised
 
 
@@ -302,33 +301,10 @@ def test_klu_reuse_needs_row_sorted_columns():
 @pytest.mark.parametrize("seed", range(6))
 def test_dense_direct_step_agrees_with_the_path_on_small_problems(seed):
     """Small problems (n < DIRECT_MIN_N) on the compiled engine: the dense direct step
-    (one compiled pass) returns the path's end point where the path makes no pivot, and
-    declines where it pivots."""
-    kinds = set()
-    for n, structure, bounds in ((2, "banded", "box"), (7, "grid", "mixed"),
-                                 (30, "banded", "mixed")):
-        g = gen.p_matrix_lcp(n, structure, seed, bounds)
-        M, q, lb, ub = g.lcp
-        M = sp.csc_matrix(M)
-        rng = np.random.default_rng(seed)
-        xs = g.solution - (M @ g.solution + q)
-        for scale in (1e-6, 1e-2, 1.0):
-            x = xs + scale * rng.standard_normal(n)
-            plain = PivotalPath(M, q, lb, ub, DensePathEngine(M), Options()).run(x)
-            direct = PivotalPath(M, q, lb, ub, DensePathEngine(M), Options(),
-                                 direct=ds.DirectFactors(dense=True)).run(x)
-            assert plain.code is LinearCode.SOLVED and direct.code is LinearCode.SOLVED
-            if plain.pivots == 0:
-                kinds.add("direct")
-                assert direct.factorizations == 1 and direct.pivots == 0
-                np.testing.assert_allclose(direct.z, plain.z, rtol=0, atol=1e-10)
-                np.testing.assert_array_equal(direct.basis.basic, plain.basis.basic)
-            else:
-                kinds.add("path")
-                assert direct.pivots == plain.pivots
-                np.testing.assert_array_equal(direct.z, plain.z)
-            f = M @ direct.z + q
-            assert np.max(np.abs(direct.z - np.clip(direct.z - f, lb, ub))) <= 1e-9
+    (one compiled pass) agrees with the path in both branches."""
+    kinds = _agreement([(2, "banded", "box"), (7, "grid", "mixed"), (30, "banded", "mixed")],
+                       (1e-6, 1e-2, 1.0), seed, DensePathEngine,
+                       lambda: ds.DirectFactors(dense=True), 1e-10)
     assert kinds == {"direct", "path"}
 
 

@@ -173,11 +173,15 @@ def test_repair_larger_sparse_path_exactly_singular():
     M = dominant_matrix(n, 0.01, rng).tolil()
     for j, (a, b) in {10: (3, 4), 50: (51, 52), 200: (7, 199)}.items():
         M[:, j] = M[:, a] + 2.0 * M[:, b]
-    M = sp.csc_matrix(M)
+    _check_sparse_repair_of_three(sp.csc_matrix(M), rng)
+
+
+def _check_sparse_repair_of_three(M, rng):
+    """M (n > the dense limit of 50) has three dependent columns: the sparse repair
+    replaces exactly three, and the repaired basis is regular and well conditioned."""
+    n = M.shape[0]
     bm = BasisManager(M, BasisOptions(dense_rank_limit=50))
-    kinds = np.full(n, KIND_M)
-    idx = np.arange(n)
-    sg = np.ones(n)
+    kinds, idx, sg = np.full(n, KIND_M), np.arange(n), np.ones(n)
     rep = bm.factor(kinds, idx, sg)
     assert rep.rank_deficiency == 3
     B1 = assert_repaired(bm, M, None, kinds, idx, sg, rep)
@@ -251,14 +255,7 @@ def test_rank_repair_frees_rows_that_leave_a_well_conditioned_block(seed):
     The rows are now chosen on the left null space of the block."""
     rng = np.random.default_rng(100 + seed)
     n = 300
-    M = _singular_by_three_dependent_columns(rng, n)
-    bm = BasisManager(M, BasisOptions(dense_rank_limit=50))
-    kinds, idx, sg = np.full(n, KIND_M), np.arange(n), np.ones(n)
-    rep = bm.factor(kinds, idx, sg)
-    assert rep.rank_deficiency == 3
-    B1 = assert_repaired(bm, M, None, kinds, idx, sg, rep)
-    assert np.linalg.cond(B1) < 1e8
-    check_solves(bm, M, None, rng, TOL)
+    _check_sparse_repair_of_three(_singular_by_three_dependent_columns(rng, n), rng)
 
 
 def test_rows_to_free_past_the_null_space_limit_are_the_pivot_rows():
