@@ -46,6 +46,24 @@ def fb_phi_kernel(z, f, lb, ub, phi):
 
 
 @njit(cache=True)
+def has_nan_kernel(x):
+    """Whether the float vector x holds a NaN (evaluation.has_nan)."""
+    for i in range(x.shape[0]):
+        if np.isnan(x[i]):
+            return True
+    return False
+
+
+@njit(cache=True)
+def all_finite_kernel(x):
+    """Whether every entry of the float vector x is finite (evaluation.all_finite)."""
+    for i in range(x.shape[0]):
+        if not np.isfinite(x[i]):
+            return False
+    return True
+
+
+@njit(cache=True)
 def csc_rmatvec(indptr, indices, data, u, out):
     """out = A^T u for A in CSC form (column j of A is row j of A^T)."""
     for j in range(out.shape[0]):
