@@ -26,6 +26,7 @@ Two tests, both at the user's ``convergence_tolerance`` tol:
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -142,9 +143,13 @@ class Acceptance:
             return z, f
         return self.col * z, f / self.row
 
-    def small(self, z, f, phi=None) -> bool:
-        """Test (1) only (cheap: no Jacobian).  ``phi``: Phi(z) of the problem being
-        solved, when known (used only when that problem is the user's, unscaled)."""
+    def small(self, z, f, phi=None, psi=None) -> bool:
+        """Test (1) only (cheap: no Jacobian).  ``phi``, ``psi``: Phi(z) and Psi(z) of the
+        problem being solved, when known (used only when that problem is the user's,
+        unscaled: then ||Phi||_2 = sqrt(2 Psi) exactly, and the common answer "not small"
+        costs one square root)."""
+        if self.row is None and psi is not None and math.sqrt(2.0 * psi) > self.tol:
+            return False
         zu, fu = self.user_point(z, f)
         return residuals_small(zu, fu, self.lb, self.ub, self.tol,
                                phi if self.row is None else None)

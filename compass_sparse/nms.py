@@ -302,7 +302,7 @@ class NMSSolver:
         if self.best is None or psi < self.best.psi:
             self.best = Point(z.copy(), f.copy(), phi.copy(), psi)
         small = verdict.small_residual if verdict is not None else \
-            self.acceptance.small(z, f, phi)
+            self.acceptance.small(z, f, phi, psi)
         if small:
             v = verdict if verdict is not None else self.acceptance.judge(
                 z, f, jac=lambda y: self.ev.jac(y, f), phi=phi, small=True)

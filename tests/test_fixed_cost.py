@@ -327,3 +327,31 @@ def test_nan_and_finite_tests_by_one_dot_product_equal_numpy(seed):
             for X in (np.vstack([x, x]) if n else np.zeros((2, 0)), x[::2]):
                 assert has_nan(X) == bool(np.isnan(X).any())
                 assert all_finite(X) == bool(np.isfinite(X).all())
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_acceptance_small_with_psi_gives_the_verdict_without_it(seed):
+    """Acceptance.small decides "not small" from Psi alone on the user's unscaled problem
+    (||Phi||_2 = sqrt(2 Psi) exactly); its answer is the full test's at points on both
+    sides of the tolerance, and a scaled acceptance ignores Psi (it is of the scaled
+    problem)."""
+    from compass_sparse.acceptance import Acceptance
+    from compass_sparse.merit import fb_psi
+
+    rng = np.random.default_rng(seed)
+    n = 12
+    lb, ub = np.zeros(n), np.full(n, np.inf)
+    tol = 1e-6
+    plain = Acceptance(lb, ub, tol)
+    scaled = Acceptance(lb, ub, tol, np.full(n, 2.0), np.full(n, 0.5))
+    seen = set()
+    for size in (1e-9, 3e-7, 1e-6, 3e-6, 1e-2):
+        z = np.abs(rng.standard_normal(n))
+        f = size * rng.standard_normal(n) / np.sqrt(n)
+        z[f > 0] = 0.0  # complementary up to the size of f
+        phi = fb_phi(z, f, lb, ub)
+        psi = fb_psi(phi)
+        assert plain.small(z, f, phi, psi) == plain.small(z, f, phi)
+        assert scaled.small(z, f, phi, psi) == scaled.small(z, f)
+        seen.add(plain.small(z, f, phi))
+    assert seen == {True, False}  # both sides of the tolerance were tried
