@@ -1,0 +1,92 @@
+"""Two revisions of the solver timed on the same problems, alternating process by process.
+
+On a shared machine the time of the same code moves by 30-50% between minutes, more than
+most changes to a small solve's fixed cost; timing the two revisions in alternating fresh
+processes, several times, and comparing the medians separates the change from the drift.
+
+    git worktree add /tmp/old <revision>
+    python3 benchmarks/alternate_revisions.py /tmp/old . kojshin cournot2 ramsey40 --rounds 4
+
+Each round runs one process per revision (old first); each process solves every problem
+``--solves`` times per repeat after a warm-up (numba kernels loaded), ``--repeats`` times,
+and reports the median CPU time per solve, F and J included.  Problems: the names of
+``bench_fixed_cost.py`` (known problems) and ``ramseyT`` (one-sector Ramsey CGE model with
+T periods, 25% capital tax) or ``staticN`` (static CGE model of about N variables).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+
+CHILD = r"""
+import json, statistics, sys, time
+root, names, solves, repeats = sys.argv[1], sys.argv[2].split(","), int(sys.argv[3]), int(sys.argv[4])
+sys.path[:0] = [root, root + "/tests", root + "/benchmarks"]
+from compass_sparse import solve_mcp
+
+def problem(name):
+    if name.startswith("ramsey"):
+        from compass_sparse.generators.cge import ramsey_cge
+        p = ramsey_cge(periods=int(name[6:]), sectors=1).with_shock(capital_tax=0.25).problem
+        return p, p.x0
+    if name.startswith("static"):
+        from compass_sparse.generators.cge import size_for, static_cge
+        m = static_cge(**size_for(int(name[6:])))
+        m = m.with_shock(output_tax=0.25) if m.info["regions"] == 1 else m.with_shock(tariff=0.25)
+        return m.problem, m.problem.x0
+    from bench_fixed_cost import _problem
+    return _problem(name)
+
+out = {}
+for name in names:
+    prob, x0 = problem(name)
+    for _ in range(max(10, solves // 10)):
+        r = solve_mcp(prob.with_start(x0))
+    times = []
+    for _ in range(repeats):
+        copies = [prob.with_start(x0) for _ in range(solves)]
+        t = time.process_time()
+        for q in copies:
+            solve_mcp(q)
+        times.append((time.process_time() - t) / solves)
+    out[name] = dict(time=statistics.median(times), nit=r.nit, status=r.status.name)
+print(json.dumps(out))
+"""
+
+
+def run(root, names, solves, repeats):
+    out = subprocess.run([sys.executable, "-c", CHILD, os.path.abspath(root), ",".join(names),
+                          str(solves), str(repeats)], capture_output=True, text=True, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("old")
+    ap.add_argument("new")
+    ap.add_argument("problems", nargs="+")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--solves", type=int, default=100)
+    ap.add_argument("--repeats", type=int, default=5)
+    a = ap.parse_args(argv)
+    got = {"old": [], "new": []}
+    for k in range(a.rounds):
+        for side in ("old", "new"):
+            got[side].append(run(getattr(a, side), a.problems, a.solves, a.repeats))
+            print(f"round {k + 1} {side}: " + ", ".join(
+                f"{n} {v['time'] * 1e3:.3f} ms" for n, v in got[side][-1].items()), flush=True)
+    print("\n| problem | old (median over rounds) | new | new / old | majors old / new |")
+    print("|---|---|---|---|---|")
+    for n in a.problems:
+        o = statistics.median(r[n]["time"] for r in got["old"])
+        w = statistics.median(r[n]["time"] for r in got["new"])
+        print(f"| {n} | {o * 1e3:.3f} ms | {w * 1e3:.3f} ms | {w / o:.2f} | "
+              f"{got['old'][0][n]['nit']} / {got['new'][0][n]['nit']} |")
+
+
+if __name__ == "__main__":
+    main()
