@@ -14,7 +14,11 @@ Steps, repeated until the LU of the kept block has no tiny pivot:
 
 1. structural: a maximum bipartite matching of K's pattern
    (:mod:`compass_sparse._matching`); unmatched columns are dropped,
-   unmatched rows freed;
+   unmatched rows freed -- except for a square block larger than the dense limit, where
+   tiny entries on the matching completed by pairing the unmatched rows and columns make
+   the block factorable and its tiny pivots choose the columns (and the null space the
+   rows), as in step 3: the matching's unmatched column may be a numerically
+   independent one;
 2. numerical, small blocks (order <= ``dense_rank_limit``): QR with column pivoting of
    the column-equilibrated dense block picks ``rank`` independent columns
    (``|R_ii| > rank_tolerance * |R_00|``); a second pivoted QR of the kept columns'
@@ -114,6 +118,34 @@ def _rows_to_free(fac, bad):
     return np.sort(piv[:d])
 
 
+def _perturbed_choice(K, r_m, c_m, backend, rank_tol):
+    """(columns to drop, rows to free) of a square, structurally singular K, chosen on
+    the numbers: tiny entries (0.01 rank_tol relative to each column) on a perfect matching
+    -- the maximum matching (r_m, c_m) completed by pairing its unmatched rows with its
+    unmatched columns -- make K factorable; the tiny pivots of that factorization mark the
+    dependent columns and :func:`_rows_to_free` the rows.  (None, None) when the
+    perturbed block does not factor or shows no tiny pivot."""
+    n = K.shape[0]
+    r0 = np.setdiff1d(np.arange(n), r_m)
+    c0 = np.setdiff1d(np.arange(n), c_m)
+    pr = np.concatenate((r_m, r0))
+    pc = np.concatenate((c_m, c0))
+    cn = _col_inf_norms(K)
+    cn[cn == 0.0] = 1.0
+    vals = np.asarray(K[pr, pc]).ravel()
+    sg = np.where(vals < 0.0, -1.0, 1.0)
+    eps = 0.01 * max(rank_tol, 1e-14)
+    Kp = sp.csc_matrix(K + sp.csc_matrix((sg * cn[pc] * eps, (pr, pc)), shape=K.shape))
+    try:
+        fac = backend.factor(Kp, strict=True)
+    except SingularFactorError:
+        return None, None
+    bad = _tiny_pivots(fac, K, rank_tol)
+    if bad.size < c0.size:
+        return None, None
+    return fac.col_order[bad], _rows_to_free(fac, bad)
+
+
 def _dense_select(K, rank_tol):
     """Indices (rows, cols) of a maximal regular square sub-block of the dense K."""
     A = K.toarray() if sp.issparse(K) else np.asarray(K, float)
@@ -171,6 +203,19 @@ def select_regular_block(K, backend, rank_tol, dense_limit, max_rounds=30):
     for _ in range(max_rounds):
         sub = K[rows, :][:, cols]
         r_m, c_m = _structural(sub)
+        if (sub.shape[0] == sub.shape[1] and 0 < r_m.size < sub.shape[0]
+                and sub.shape[0] > dense_limit):
+            # Structurally singular and square: which columns and rows go is decided
+            # numerically, not by the matching (whose unmatched column may be an
+            # independent one: one column more than the rank deficiency was lost).
+            bad_c, freed = _perturbed_choice(sp.csc_matrix(sub), r_m, c_m, backend, rank_tol)
+            if bad_c is not None:
+                keep = np.ones(cols.size, bool)
+                keep[bad_c] = False
+                keep_r = np.ones(rows.size, bool)
+                keep_r[freed] = False
+                rows, cols = rows[keep_r], cols[keep]
+                continue
         rows, cols = rows[r_m], cols[c_m]
         if cols.size == 0:
             return rows, cols, None

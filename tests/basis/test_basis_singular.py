@@ -233,9 +233,10 @@ def rel_err_ok(x, xt, cond):
     return np.abs(x - xt).max() / np.abs(xt).max() <= max(1e-12, 1e3 * cond * 2.2e-16)
 
 
-def _singular_by_three_dependent_columns(rng, n):
-    """A dominant sparse M whose columns j = a + c b for three disjoint triples; drawn
-    again until the pattern keeps structural rank n (the numerical rank is n - 3)."""
+def _singular_by_three_dependent_columns(rng, n, structural_rank_n=True):
+    """A dominant sparse M whose columns j = a + c b for three disjoint triples (numerical
+    rank n - 3); with ``structural_rank_n``, drawn again until the pattern keeps
+    structural rank n."""
     from scipy.sparse.csgraph import structural_rank
 
     while True:
@@ -243,7 +244,7 @@ def _singular_by_three_dependent_columns(rng, n):
         for j, a, b in rng.choice(n, size=9, replace=False).reshape(3, 3):
             M[:, j] = M[:, a] + rng.uniform(0.5, 2.0) * M[:, b]
         M = sp.csc_matrix(M)
-        if structural_rank(M) == n:
+        if not structural_rank_n or structural_rank(M) == n:
             return M
 
 
@@ -295,3 +296,19 @@ def test_residual_check_that_repairs_the_basis_reports_it():
     rep = bm.factor(kinds, idx, sg)
     assert rep.rank_deficiency == 1
     check_solves(bm, Mc, None, rng, TOL)
+
+
+def test_structurally_singular_block_loses_no_more_columns_than_its_rank_deficiency():
+    """Regression: on a structurally singular block (structural rank n - 1, numerical rank
+    n - 3) the repair dropped the column the maximum matching left unmatched -- here a
+    numerically independent one -- and then the three dependent ones: four replaced for a
+    deficiency of three.  Columns and rows are now chosen on the numbers (a perturbed
+    factorization on a completed matching)."""
+    from scipy.sparse.csgraph import structural_rank
+
+    rng = np.random.default_rng(102)
+    n = 300
+    M = _singular_by_three_dependent_columns(rng, n, structural_rank_n=False)
+    assert structural_rank(M) == n - 1 and np.linalg.matrix_rank(M.toarray()) == n - 3
+    _check_sparse_repair_of_three(M, rng)
+
