@@ -309,6 +309,15 @@ def _postsolve_basis(pre, basis: WarmBasis | None, z, lb, ub) -> WarmBasis | Non
     return WarmBasis(full)
 
 
+_SOLVE_PASSES = ("crash", "path", "fallback", "homotopy")
+
+
+def _not_run(passes, names, reason):
+    """Record the passes ``names`` as not run, for ``reason``."""
+    for k in names:
+        passes[k] = PassStats(reason=reason)
+
+
 def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -> Result:
     basis = _check_basis(basis, problem.n)
     t0 = time.perf_counter()
@@ -330,8 +339,7 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
     phi_user = fb_phi(problem.x0, f0, problem.lb, problem.ub)
     verdict_user = _judge_on(problem, problem.x0, f0, opt, phi_user)
     if verdict_user.solved:
-        for k in ("presolve", "crash", "path", "fallback", "homotopy"):
-            passes[k] = PassStats(reason="start point already solved")
+        _not_run(passes, ("presolve",) + _SOLVE_PASSES, "start point already solved")
         return _result(problem, Status.SOLVED, "the start point is a solution", problem.x0,
                        f0, opt, t0, start_z=problem.x0, verdict=verdict_user, phi=phi_user,
                        passes=passes, basis=basis)
@@ -371,9 +379,8 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
         status = Status.SOLVED if at_solution else Status.MAJOR_ITERATION_LIMIT
         msg = ("the start point is a solution" if status is Status.SOLVED
                else "major_iteration_limit = 0: start point evaluated")
-        for k in ("crash", "path", "fallback", "homotopy"):
-            passes[k] = PassStats(reason="start point already solved"
-                                  if status is Status.SOLVED else "major_iteration_limit = 0")
+        _not_run(passes, _SOLVE_PASSES, "start point already solved"
+                 if status is Status.SOLVED else "major_iteration_limit = 0")
         return _finish(problem, pre, status, msg, z0, opt, t0, passes,
                        f_reduced=f0, start_z=problem.x0, basis=basis)
     sc, passes["scaling"] = _scaling_pass(J0, opt)

@@ -118,6 +118,26 @@ def _rows_to_free(fac, bad):
     return np.sort(piv[:d])
 
 
+def _perturbed(K, pr, pc, rank_tol):
+    """K plus tiny entries (0.01 rank_tol relative to each column, with the sign of the
+    entry they add to) on the perfect matching pairing rows pr[i] with columns pc[i]: a
+    factorable block whose tiny pivots locate K's dependent columns."""
+    cn = _col_inf_norms(K)
+    cn[cn == 0.0] = 1.0
+    sg = np.where(np.asarray(K[pr, pc]).ravel() < 0.0, -1.0, 1.0)
+    eps = 0.01 * max(rank_tol, 1e-14)
+    return sp.csc_matrix(K + sp.csc_matrix((sg * cn[pc] * eps, (pr, pc)), shape=K.shape))
+
+
+def _without(rows, cols, col_pos, row_pos):
+    """rows and cols less the positions row_pos and col_pos."""
+    keep_c = np.ones(cols.size, bool)
+    keep_c[col_pos] = False
+    keep_r = np.ones(rows.size, bool)
+    keep_r[row_pos] = False
+    return rows[keep_r], cols[keep_c]
+
+
 def _perturbed_choice(K, r_m, c_m, backend, rank_tol):
     """(columns to drop, rows to free) of a square, structurally singular K, chosen on
     the numbers: tiny entries (0.01 rank_tol relative to each column) on a perfect matching
@@ -128,14 +148,7 @@ def _perturbed_choice(K, r_m, c_m, backend, rank_tol):
     n = K.shape[0]
     r0 = np.setdiff1d(np.arange(n), r_m)
     c0 = np.setdiff1d(np.arange(n), c_m)
-    pr = np.concatenate((r_m, r0))
-    pc = np.concatenate((c_m, c0))
-    cn = _col_inf_norms(K)
-    cn[cn == 0.0] = 1.0
-    vals = np.asarray(K[pr, pc]).ravel()
-    sg = np.where(vals < 0.0, -1.0, 1.0)
-    eps = 0.01 * max(rank_tol, 1e-14)
-    Kp = sp.csc_matrix(K + sp.csc_matrix((sg * cn[pc] * eps, (pr, pc)), shape=K.shape))
+    Kp = _perturbed(K, np.concatenate((r_m, r0)), np.concatenate((c_m, c0)), rank_tol)
     try:
         fac = backend.factor(Kp, strict=True)
     except SingularFactorError:
@@ -210,11 +223,7 @@ def select_regular_block(K, backend, rank_tol, dense_limit, max_rounds=30):
             # independent one: one column more than the rank deficiency was lost).
             bad_c, freed = _perturbed_choice(sp.csc_matrix(sub), r_m, c_m, backend, rank_tol)
             if bad_c is not None:
-                keep = np.ones(cols.size, bool)
-                keep[bad_c] = False
-                keep_r = np.ones(rows.size, bool)
-                keep_r[freed] = False
-                rows, cols = rows[keep_r], cols[keep]
+                rows, cols = _without(rows, cols, bad_c, freed)
                 continue
         rows, cols = rows[r_m], cols[c_m]
         if cols.size == 0:
@@ -237,11 +246,8 @@ def select_regular_block(K, backend, rank_tol, dense_limit, max_rounds=30):
             continue
         if fac is None:
             # exactly singular: perturb the matched diagonal slightly to find the culprits
-            cn = _col_inf_norms(Kk)
-            cn[cn == 0.0] = 1.0
-            dg = Kk.diagonal()
-            sg = np.where(dg < 0.0, -1.0, 1.0)
-            Kp = sp.csc_matrix(Kk + sp.diags(sg * cn * (0.01 * max(rank_tol, 1e-14))))
+            diag = np.arange(cols.size)  # rows[i] is matched to cols[i]
+            Kp = _perturbed(Kk, diag, diag, rank_tol)
             try:
                 fac_p = backend.factor(Kp, strict=True)
             except SingularFactorError as exc:
@@ -253,9 +259,5 @@ def select_regular_block(K, backend, rank_tol, dense_limit, max_rounds=30):
             if bad.size == 0:
                 raise SingularBasisError("rank repair failed: no dependent column found")
             fac = fac_p
-        keep = np.ones(cols.size, bool)
-        keep[fac.col_order[bad]] = False
-        keep_r = np.ones(rows.size, bool)
-        keep_r[_rows_to_free(fac, bad)] = False
-        rows, cols = rows[keep_r], cols[keep]
+        rows, cols = _without(rows, cols, fac.col_order[bad], _rows_to_free(fac, bad))
     raise SingularBasisError("rank repair did not converge")
