@@ -11,8 +11,10 @@ Kernels call each other inside compiled code, where numba resolves a callee thro
 caller's module globals at compile time and must find a dispatcher there, not a stand-in.
 So the first call of any kernel replaces EVERY stand-in found in its module's globals
 (its own and those imported from other kernel modules) by its dispatcher before numba
-compiles anything.  Callers that imported a stand-in by name keep it; it forwards each call
-to the dispatcher (one extra Python call, ~0.1 us).
+compiles anything.  Python callers that imported a stand-in by name get the dispatcher too: the first build
+also rebinds the built stand-ins in the package's loaded modules, since a forwarded call
+costs an extra Python frame (~0.4 us) and a small solve makes hundreds of kernel calls.
+A module loaded later keeps its stand-in, which forwards each call to the dispatcher.
 """
 from __future__ import annotations
 
@@ -61,14 +63,27 @@ class LazyKernel:
 
 def materialize(namespace: dict):
     """Replace every :class:`LazyKernel` in ``namespace`` (a module's globals) by its
-    dispatcher, so that compiled callers find dispatchers when numba types them."""
+    dispatcher, so that compiled callers find dispatchers when numba types them; then
+    rebind built stand-ins in the package's other loaded modules (Python callers)."""
+    _materialize(namespace)
+    package = __name__.rpartition(".")[0]
+    for mod_name, mod in list(sys.modules.items()):
+        if mod is None or not (mod_name == package or mod_name.startswith(package + ".")):
+            continue
+        ns = mod.__dict__
+        for name, obj in list(ns.items()):
+            if isinstance(obj, LazyKernel) and obj._dispatcher is not None:
+                ns[name] = obj._dispatcher
+
+
+def _materialize(namespace: dict):
     for name, obj in list(namespace.items()):
         if isinstance(obj, LazyKernel):
             namespace[name] = obj._build()
             # A kernel defined elsewhere has callees in its own module too.
             home = sys.modules.get(obj.__module__)
             if home is not None and home.__dict__ is not namespace:
-                materialize(home.__dict__)
+                _materialize(home.__dict__)
 
 
 def njit(*args, **options):

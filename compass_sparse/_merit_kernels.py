@@ -55,6 +55,21 @@ def has_nan_kernel(x):
 
 
 @njit(cache=True)
+def memo_key_kernel(x, out):
+    """out = x with -0.0 made 0.0 (the bytes of equal points are then equal); returns
+    whether x holds a NaN (evaluation._Memo.probe)."""
+    nan = False
+    for i in range(x.shape[0]):
+        v = x[i]
+        if v == 0.0:
+            v = 0.0
+        elif v != v:
+            nan = True
+        out[i] = v
+    return nan
+
+
+@njit(cache=True)
 def all_finite_kernel(x):
     """Whether every entry of the float vector x is finite (evaluation.all_finite)."""
     for i in range(x.shape[0]):

@@ -129,6 +129,20 @@ def test_lazy_kernels_calling_each_other_compile_on_first_use(tmp_path, monkeypa
     assert lazy_b.outer(0.5) == 2.0
 
 
+def test_python_callers_of_a_built_kernel_call_its_dispatcher():
+    """Once a kernel is built, the package's modules that imported its stand-in by name
+    call the dispatcher itself (a forwarded call costs an extra Python frame at every
+    evaluated point)."""
+    from compass_sparse import merit
+    from compass_sparse._jit import LazyKernel
+
+    z = np.array([1.0, -2.0])
+    phi = merit.fb_phi(z, np.array([0.5, 3.0]), np.zeros(2), np.full(2, np.inf))
+    assert np.allclose(phi, merit.fb_phi_arrays(z, np.array([0.5, 3.0]), np.zeros(2),
+                                                np.full(2, np.inf)))
+    assert not isinstance(merit.fb_phi_kernel, LazyKernel)
+
+
 def test_blas_limit_reuses_one_controller():
     from compass_sparse import _blas
     from compass_sparse import solve as S
