@@ -45,6 +45,7 @@ from ._jit import njit
 from ._merit_kernels import csc_is_canonical
 from ._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
 from .basis.types import BasisOptions
+from .merit import max_abs
 
 __all__ = ["DIRECT_MAX_DENSITY", "DIRECT_MAX_N", "DIRECT_MIN_N", "KLU_FILL_LIMIT", "KLU_FROM_FILL",
            "REUSE_BEATS_REFACTOR_NNZ", "DirectFactors", "direct_step", "direct_step_applies",
@@ -394,7 +395,7 @@ def _accepted(res, mz, q, z, w, v, nnz_lu):
     it is feasible and solves the linear equations to ``RESIDUAL_TOLERANCE``."""
     if res < 0.0:
         return None, nnz_lu
-    qmax = float(np.max(np.abs(q))) if q.size else 0.0
+    qmax = max_abs(q)
     if not res <= RESIDUAL_TOLERANCE * (1.0 + mz + qmax):  # (NaN fails too)
         return None, nnz_lu
     return (z, w, v), nnz_lu

@@ -56,7 +56,7 @@ from .direct_step import (DIRECT_MIN_N, REUSE_BEATS_REFACTOR_NNZ, DirectFactors,
                           direct_step_applies)
 from .exceptions import FactorBudgetError
 from .fallback import gradient_steps, lm_step
-from .merit import fb_gradient, fb_phi, fb_psi, normal_map_at, project
+from .merit import fb_gradient, fb_phi, fb_psi, max_abs_diff, normal_map_at, project
 from .path import LinearCode, WarmBasis, solve_linear_mcp
 from .progress import ProgressLine
 from .restarts import FROM_RANDOM, FROM_START, RestartSchedule, near_point, random_point
@@ -523,7 +523,7 @@ class NMSSolver:
             if cand is not None:
                 self._consider(cand.z, cand.f, cand.phi, cand.psi)
                 R, large = reference_value(st.memory, cur.psi, cur.fbn, st.fbn_start)
-                dist = float(np.max(np.abs(cand.z - cur.z))) if cand.z.size else 0.0
+                dist = max_abs_diff(cand.z, cur.z)
                 step = classify_step(
                     cand.psi, R, large, dist, st.delta,
                     not monotone and st.n_d < opt.nms_mstep_frequency, opt.nms_sigma,

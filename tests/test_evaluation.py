@@ -181,6 +181,9 @@ def test_memo_compares_points_as_equal_values_signed_zeros_alike_nan_never():
     assert m.get(np.zeros(2)) is None
     m.put(np.array([0.0, 1.0]), "a")
     assert m.get(np.array([-0.0, 1.0])) == "a"
+    # a strided view (a non-contiguous vector for the kernel) answers alike
+    assert m.get(np.array([-0.0, 7.0, 1.0])[::2]) == "a"
+    assert m.get(np.array([np.nan, 7.0, 1.0])[::2]) is None
     assert m.get(np.array([0.0, 1.0 + 2e-16])) is None
     assert m.get(np.array([0.0, 1.0, 0.0])) is None
     m.pin(np.array([0.0, 1.0]))

@@ -14,6 +14,8 @@ from compass_sparse.merit import (
     fb_phi,
     fb_psi,
     fischer,
+    max_abs,
+    max_abs_diff,
     min_map,
     natural_residual,
     normal_map,
@@ -237,3 +239,18 @@ def test_residual_report_names_worst_row():
     assert rep2.worst[0][0] == "row<6>"
     rep3 = residual_report(z, f, lb, ub)
     assert rep3.worst[0][0] == "F[6]"
+
+
+@pytest.mark.parametrize("x", [np.array([1.0, -3.0, 2.0]), np.array([-0.0]), np.zeros(0),
+                               np.array([1.0, np.nan, -5.0]), np.array([np.inf, -1.0]),
+                               np.arange(6.0)[::2] - 5.0, [1, -7, 2]])
+def test_max_abs_agrees_with_numpy_nan_and_empty_included(x):
+    """The compiled infinity norms answer as np.max(np.abs(.)) does: NaN when a NaN is
+    there, 0 for an empty vector, any input through the general path."""
+    ref = float(np.max(np.abs(np.asarray(x, dtype=float)))) if np.size(x) else 0.0
+    got = max_abs(x)
+    assert (np.isnan(ref) and np.isnan(got)) or got == ref
+    y = np.asarray(x, dtype=float)[::-1].copy()
+    ref2 = float(np.max(np.abs(np.asarray(x, dtype=float) - y))) if np.size(x) else 0.0
+    got2 = max_abs_diff(np.asarray(x, dtype=float), y)
+    assert (np.isnan(ref2) and np.isnan(got2)) or got2 == ref2
