@@ -38,7 +38,7 @@ from ._matching import column_matching
 from .basis.backends import SingularFactorError, solve_sparse
 from .direct_step import reduced_system
 from .exceptions import FactorBudgetError
-from .merit import fb_phi, normal_map_at, project
+from .merit import fb_phi, max_abs, normal_map_at, project
 
 __all__ = ["CrashResult", "crash"]
 
@@ -74,12 +74,27 @@ def _numerical(A):
     return A
 
 
-def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None, labels=None, lu=("auto", "auto")):
+CRASH_STEP_LIMIT = 10.0
+"""Largest ||d||_inf / (1 + ||z||_inf) of a crash step solved on a PERTURBED J_II + eps I.
+On a singular J_II a tiny eps leaves the matrix nearly singular, and the step has length
+~1/eps along the null space: at the start x0 = 0 of kojshin (J_II has a zero column)
+eps = 1e-7 gave ||d|| ~ 1e7, and the search spent 13 F evaluations to reject it.  A longer
+step is refused as a singular matrix would be, and eps grows tenfold (eps ~ 1 gave a crash
+step to a third of the start residual there)."""
+
+PERTURB_ATTEMPTS = 8
+"""Factorizations of J_II (+ eps I) per crash step: eps = 0 (when J_II is structurally
+regular), then eps0 = 1e-8 max(1, ||F_B||) growing tenfold, so up to eps0 * 1e6 or 1e7."""
+
+
+def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None, labels=None, lu=("auto", "auto"),
+                   step_limit=np.inf):
     """Solve (J_II + eps I) d = rhs with eps = 0 first (eps0 at once when J_II is
     structurally singular), then growing when singular.
 
     Returns (d or None, eps, factorizations, why, held): ``why`` is None on success, else
-    the crash's stop reason; ``held`` the kept factors of the last matrix (or None).  Each
+    the crash's stop reason; ``held`` the kept factors of the last matrix (or None).  A step
+    on a perturbed matrix longer than ``step_limit`` (max norm) is refused.  Each
     factorization is atomic, so the deadline is checked before every attempt and handed to
     the factorization's budget (one whose estimate does not fit in the time left is not
     started)."""
@@ -91,7 +106,7 @@ def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None, labels=None, lu=("aut
         # unperturbed factorization can only fail -- and without a zero-free diagonal it
         # runs in the slow fallback ordering (40 s at n = 3e4 on the dynamic CGE model).
         eps = eps0
-    for attempt in range(6):
+    for attempt in range(PERTURB_ATTEMPTS):
         if deadline is not None and time.perf_counter() > deadline:
             return None, eps, nf, "time limit", None
         A = Jii if eps == 0.0 else (Jii + eps * sp.identity(Jii.shape[0], format="csc"))
@@ -99,7 +114,7 @@ def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None, labels=None, lu=("aut
             nf += 1
             d, held = solve_sparse(A, rhs, deadline=deadline, labels=labels, keep=True,
                                    backend=lu[0], ordering=lu[1])
-            if np.all(np.isfinite(d)):
+            if np.all(np.isfinite(d)) and not (eps > 0.0 and max_abs(d) > step_limit):
                 return d, eps, nf, None, held
         except SingularFactorError:  # exactly singular
             pass
@@ -253,7 +268,8 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
             if di is None:
                 di, eps, nf, why, held = _solve_reduced(
                     Jii, rhs, opt.crash_perturb, eps_scale * max(1.0, nm_norm),
-                    deadline, labels=inact, lu=(opt.lu_backend, opt.lu_ordering))
+                    deadline, labels=inact, lu=(opt.lu_backend, opt.lu_ordering),
+                    step_limit=CRASH_STEP_LIMIT * (1.0 + max_abs(z)))
                 nfact += nf
                 if stats is not None:
                     stats.factorizations += nf

@@ -100,7 +100,8 @@ class Options(OptionsMixin):
                              choices=("pnewton", "none"))
     crash_iteration_limit: int = _opt(50, "maximum crash iterations", lo=0)
     crash_minimum_dimension: int = _opt(
-        10, "skip the crash below this dimension (thesis n_min = 10)", lo=0)
+        1, "skip the crash below this dimension (PATH's default 1; the thesis' n_min is 10)",
+        lo=0)
     crash_nbchange_limit: int = _opt(
         1, "stop the crash when at most this many active-set changes occur", lo=0)
     crash_perturb: bool = _opt(True, "perturb a singular reduced Jacobian by eps*I")

@@ -113,3 +113,35 @@ def test_crash_factors_afresh_when_gmres_on_the_old_factors_does_not_converge(mo
     cr = _dynamic_cge_crash(monkeypatch, REUSE_ITERATIONS=1)
     assert cr.reused == 0 and cr.factorizations == fresh.factorizations
     assert [r[3] for r in cr.log] == [r[3] for r in fresh.log]
+
+
+def test_crash_step_on_a_singular_reduced_jacobian_does_not_run_away():
+    """At kojshin's start x0 = 0, J has a zero column.  The perturbed J_II + eps I with
+    the first eps (~1e-7) gave a step of length ~1e7 that the search rejected through 13 F
+    evaluations; such a step is now refused and eps grows until the step is at most
+    CRASH_STEP_LIMIT (1 + max|z|) long."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    import known_problems as kp
+
+    from compass_sparse.crash import CRASH_STEP_LIMIT, _solve_reduced
+
+    p = kp.kojima_shindo()
+    z = p.x0.astype(float)
+    f = p.F(z)
+    J = sp.csc_matrix(p.J(z))
+    eps0 = 1e-8 * max(1.0, float(np.linalg.norm(f)))
+    limit = CRASH_STEP_LIMIT * (1.0 + float(np.max(np.abs(z))))
+    d, eps, nf, why, _ = _solve_reduced(J, f, True, eps0, step_limit=limit)
+    assert why is None and np.max(np.abs(d)) <= limit and eps > eps0 and nf > 1
+    # the step solves the perturbed system it was taken on
+    np.testing.assert_allclose((J + eps * sp.identity(4)) @ d, f, rtol=1e-10, atol=1e-10)
+    # without the limit, the first perturbation's step is the runaway one
+    d0, eps_0, _, _, _ = _solve_reduced(J, f, True, eps0)
+    assert eps_0 == eps0 and np.max(np.abs(d0)) > 1e5
+    # in a solve: the crash takes steps, and the whole solve a handful of F evaluations
+    r = cs.solve_mcp(p.F, p.J, p.lb, p.ub, p.x0)
+    assert r.success and r.passes["crash"].iterations >= 1
+    assert r.nfev <= 15 and r.restarts == 0

@@ -127,7 +127,7 @@ def test_solve_lcp_tight_tolerance():
 def test_crash_skipped_below_minimum_dimension(n):
     g = gen.p_matrix_lcp(n, "banded", n, "box")
     M, q, lb, ub = g.lcp
-    r = solve_lcp(M, q, lb, ub)
+    r = solve_lcp(M, q, lb, ub, options={"crash_minimum_dimension": 10})
     check_solved(r, M, q, lb, ub, solution=g.solution)
     assert not r.passes["crash"].ran
     assert "crash_minimum_dimension" in r.passes["crash"].reason
