@@ -35,7 +35,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._matching import column_matching
-from .basis.backends import SingularFactorError, solve_sparse
+from .basis.backends import DENSE_SOLVE_MAX_N, SingularFactorError, solve_sparse
 from .direct_step import reduced_system
 from .exceptions import FactorBudgetError
 from .merit import fb_phi, max_abs, normal_map_at, project
@@ -84,7 +84,10 @@ step to a third of the start residual there)."""
 
 PERTURB_ATTEMPTS = 8
 """Factorizations of J_II (+ eps I) per crash step: eps = 0 (when J_II is structurally
-regular), then eps0 = 1e-8 max(1, ||F_B||) growing tenfold, so up to eps0 * 1e6 or 1e7."""
+regular), then eps0 = 1e-8 max(1, ||F_B||) growing tenfold, so up to eps0 * 1e6 or 1e7.
+(Jumping straight to the eps that brings a runaway step to the limit, ~eps ||d|| / limit,
+was tried: at kojshin's start it stopped at eps ~ 0.1, whose step the search rejects, where
+tenfold growth passes on to eps ~ 1.)"""
 
 
 def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None, labels=None, lu=("auto", "auto"),
@@ -106,10 +109,20 @@ def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None, labels=None, lu=("aut
         # unperturbed factorization can only fail -- and without a zero-free diagonal it
         # runs in the slow fallback ordering (40 s at n = 3e4 on the dynamic CGE model).
         eps = eps0
+    # A block that solve_sparse factors densely is perturbed densely too: the same sums
+    # a_ii + eps, without a sparse identity and a sparse sum per attempt (~0.1 ms each,
+    # more than the 4 x 4 solve).
+    dense = Jii.toarray() if Jii.shape[0] <= DENSE_SOLVE_MAX_N else None
     for attempt in range(PERTURB_ATTEMPTS):
         if deadline is not None and time.perf_counter() > deadline:
             return None, eps, nf, "time limit", None
-        A = Jii if eps == 0.0 else (Jii + eps * sp.identity(Jii.shape[0], format="csc"))
+        if eps == 0.0:
+            A = Jii if dense is None else dense
+        elif dense is None:
+            A = Jii + eps * sp.identity(Jii.shape[0], format="csc")
+        else:
+            A = dense.copy()
+            A.flat[::A.shape[0] + 1] += eps
         try:
             nf += 1
             d, held = solve_sparse(A, rhs, deadline=deadline, labels=labels, keep=True,
