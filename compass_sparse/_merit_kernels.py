@@ -147,6 +147,18 @@ def fb_diagonals_kernel(z, f, lb, ub, da, db):
 
 
 @njit(cache=True)
+def csc_diagonal(indptr, indices, data, diag):
+    """diag[j] = A_jj of a CSC matrix A (duplicates summed, 0 where not stored), as
+    scipy's A.diagonal() without its dispatch (~15 us on a small matrix)."""
+    for j in range(diag.shape[0]):
+        d = 0.0
+        for k in range(indptr[j], indptr[j + 1]):
+            if indices[k] == j:
+                d += data[k]
+        diag[j] = d
+
+
+@njit(cache=True)
 def csc_abs_maxima(indptr, indices, data, rows, cols, diag):
     """Of a canonical CSC matrix A: rows[i] = max_j |A_ij|, cols[j] = max_i |A_ij| and
     diag[j] = A_jj (0 where not stored), in one pass over the stored entries (a NaN entry

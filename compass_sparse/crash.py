@@ -35,6 +35,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._matching import column_matching
+from ._merit_kernels import csc_diagonal
 from .basis.backends import DENSE_SOLVE_MAX_N, SingularFactorError, solve_sparse
 from .direct_step import reduced_system
 from .exceptions import FactorBudgetError
@@ -104,7 +105,9 @@ def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None, labels=None, lu=("aut
     eps = 0.0
     nf = 0
     held = None
-    if perturb and Jii.shape[0] and np.any(column_matching(_numerical(Jii)) < 0):
+    n = Jii.shape[0]
+    full = Jii.nnz == n * n and bool(np.all(Jii.data != 0.0))  # (a dense block: regular)
+    if perturb and n and not full and np.any(column_matching(_numerical(Jii)) < 0):
         # Structurally singular: no value of its entries makes it regular, so the
         # unperturbed factorization can only fail -- and without a zero-free diagonal it
         # runs in the slow fallback ordering (40 s at n = 3e4 on the dynamic CGE model).
@@ -248,7 +251,12 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
         # whole front at once.)
         # Rows are scaled by |J_ii| so that F and z are compared in the same units (the
         # minimum map of the row-scaled problem has the same solutions).
-        dg = np.abs(J.diagonal())
+        if sp.issparse(J) and J.format == "csc" and J.shape[0] == z.size:
+            dg = np.empty(z.size)
+            csc_diagonal(J.indptr, J.indices, J.data, dg)
+            dg = np.abs(dg)
+        else:
+            dg = np.abs(J.diagonal())
         dg = np.where(dg > 0, dg, 1.0)
         xm = z - f / dg
         act_l = xm <= lb
