@@ -254,3 +254,19 @@ def test_max_abs_agrees_with_numpy_nan_and_empty_included(x):
     ref2 = float(np.max(np.abs(np.asarray(x, dtype=float) - y))) if np.size(x) else 0.0
     got2 = max_abs_diff(np.asarray(x, dtype=float), y)
     assert (np.isnan(ref2) and np.isnan(got2)) or got2 == ref2
+
+
+def test_csc_diagonal_kernel_agrees_with_scipy_duplicates_and_missing_entries():
+    """The crash's compiled diagonal: scipy's A.diagonal() on canonical matrices, on
+    duplicated entries (summed) and on missing diagonal entries (0)."""
+    from compass_sparse._merit_kernels import csc_diagonal
+
+    rng = np.random.default_rng(3)
+    A = sp.random(30, 30, density=0.2, random_state=4, format="csc")
+    indptr = np.array([0, 3, 3, 5], dtype=np.int32)  # column 0: row 0 twice, column 1 empty
+    B = sp.csc_matrix((np.array([1.5, 2.0, -4.0, 7.0, 3.0]),
+                       np.array([0, 0, 2, 1, 2], dtype=np.int32), indptr), shape=(3, 3))
+    for M in (A, B, sp.csc_matrix(rng.normal(size=(5, 5)))):
+        out = np.empty(M.shape[0])
+        csc_diagonal(M.indptr, M.indices, M.data, out)
+        np.testing.assert_array_equal(out, M.diagonal())
