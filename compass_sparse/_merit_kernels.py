@@ -159,6 +159,29 @@ def csc_diagonal(indptr, indices, data, diag):
 
 
 @njit(cache=True)
+def crash_active_set(z, f, lb, ub, diag, free, d):
+    """The crash's active set and Newton target (crash.py): with g_i = |J_ii| (1 where it
+    is 0 or NaN), index i is active at its lower bound when z_i - f_i / g_i <= l_i, else at
+    its upper bound when that point is >= u_i (a NaN point is neither); ``free`` is the
+    complement, and d_i = z_i - (its bound) on the active indices, 0 elsewhere.  The array
+    formulas' values element by element, in one pass."""
+    for i in range(z.shape[0]):
+        g = abs(diag[i])
+        if not g > 0.0:
+            g = 1.0
+        xm = z[i] - f[i] / g
+        if xm <= lb[i]:
+            free[i] = False
+            d[i] = z[i] - lb[i]
+        elif xm >= ub[i]:
+            free[i] = False
+            d[i] = z[i] - ub[i]
+        else:
+            free[i] = True
+            d[i] = 0.0
+
+
+@njit(cache=True)
 def csc_abs_maxima(indptr, indices, data, rows, cols, diag):
     """Of a canonical CSC matrix A: rows[i] = max_j |A_ij|, cols[j] = max_i |A_ij| and
     diag[j] = A_jj (0 where not stored), in one pass over the stored entries (a NaN entry

@@ -35,7 +35,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._matching import column_matching
-from ._merit_kernels import csc_diagonal
+from ._merit_kernels import crash_active_set, csc_diagonal
 from .basis.backends import DENSE_SOLVE_MAX_N, SingularFactorError, solve_sparse
 from .direct_step import reduced_system
 from .exceptions import FactorBudgetError
@@ -214,7 +214,7 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
     nm_norm = float(np.linalg.norm(nm))
     rows = []
     nfact = 0
-    prev_active = None
+    prev_free = None
     reason = "iteration limit"
     J = J0
     it = 0
@@ -254,29 +254,24 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
         if sp.issparse(J) and J.format == "csc" and J.shape[0] == z.size:
             dg = np.empty(z.size)
             csc_diagonal(J.indptr, J.indices, J.data, dg)
-            dg = np.abs(dg)
         else:
-            dg = np.abs(J.diagonal())
-        dg = np.where(dg > 0, dg, 1.0)
-        xm = z - f / dg
-        act_l = xm <= lb
-        act_u = (xm >= ub) & ~act_l
-        active = act_l | act_u
-        changes = z.size if prev_active is None else int(np.count_nonzero(active != prev_active))
-        if prev_active is not None and changes < opt.crash_nbchange_limit:
+            dg = np.asarray(J.diagonal(), dtype=float)
+        # Newton target: active indices go to their bound (d = z - bound); the inactive
+        # ones solve F_I(z) + J_II d_I + J_IA d_A = 0 for the step d = z - z_new.
+        free = np.empty(z.size, dtype=np.bool_)
+        d = np.empty(z.size)
+        crash_active_set(*(np.ascontiguousarray(a, dtype=float) for a in (z, f, lb, ub)),
+                         dg, free, d)
+        changes = z.size if prev_free is None else int(np.count_nonzero(free != prev_free))
+        if prev_free is not None and changes < opt.crash_nbchange_limit:
             reason = "no basis change"
             it -= 1
             break
-        prev_active = active
-        inact = np.flatnonzero(~active)
-        # Newton target: active indices go to their bound; the inactive ones solve
-        # F_I(z) + J_II d_I + J_IA d_A = 0 for the step d = z - z_new.
-        d = np.zeros_like(z)
-        d[act_l] = z[act_l] - lb[act_l]
-        d[act_u] = z[act_u] - ub[act_u]
+        prev_free = free
+        inact = np.flatnonzero(free)
         if inact.size:
             # J_II and f_I - J_IA d_A (d is 0 on I), in one compiled pass
-            Jii, rhs = reduced_system(J, ~active, d, -f)
+            Jii, rhs = reduced_system(J, free, d, -f)
             di = None
             if (factors is not None and not aged
                     and np.setxor1d(factors[0], inact).size <= REUSE_MAX_CHANGES):
