@@ -72,7 +72,12 @@ def ranges(ptr: np.ndarray, ids: np.ndarray) -> np.ndarray:
 
 class Workspace:
     def __init__(self, problem, options, J0, const_mask, warnings, certain_rows=None,
-                 nonlinear_rows=None):
+                 nonlinear_rows=None, refresh=True):
+        """``refresh``: compute the counts and constants now (one F evaluation).  The
+        driver passes False: the first pass it runs (fixed variables) reads only the
+        bounds and the activity and touched masks, and it refreshes after that pass in
+        any case (a refresh here was recomputed, with a second F evaluation, as soon as a
+        model had one fixed price)."""
         P = problem
         none = np.zeros(P.n, dtype=bool)
         # rows without entries: constant by declaration (an infeasibility verdict may rest
@@ -105,7 +110,12 @@ class Workspace:
         self.current_pass = ""
         self.changed = 0
         self._live = None  # (changed, live mask, its count) -- see live_mask
-        self.refresh()
+        self._refreshed = False
+        if refresh:
+            self.refresh()
+        else:
+            self.touched_row = np.zeros(n, dtype=bool)
+            self.touched_col = np.zeros(n, dtype=bool)
 
     # -- snapshot ----------------------------------------------------------------------
     def evaluate(self, x):
@@ -139,8 +149,12 @@ class Workspace:
         self.col_nnz = np.bincount(ec[nz], minlength=n)
         self.col_nl = np.bincount(ec[nl], minlength=n)
         f = self.evaluate(self.base)
-        if not np.all(np.isfinite(f[self.row_active])):
-            bad = np.flatnonzero(~np.isfinite(f) & self.row_active)
+        # the first refresh checks every row, as when it ran before any pass (the fixed
+        # variables' rows included), the later ones the remaining rows
+        checked = self.row_active if self._refreshed else np.ones(n, dtype=bool)
+        self._refreshed = True
+        if not np.all(np.isfinite(f[checked])):
+            bad = np.flatnonzero(~np.isfinite(f) & checked)
             raise FloatingPointError(
                 f"F is not finite in row {self.problem.row_label(int(bad[0]))} at the "
                 "presolve base point")
