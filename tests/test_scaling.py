@@ -122,3 +122,30 @@ def test_scale_entries_is_the_diagonal_products_and_undoes_itself():
     assert np.array_equal(S.toarray(), ref.toarray())
     back = scale_entries(S, 1.0 / r, 1.0 / c)
     assert np.array_equal(back.data, J.data) and back.data is not S.data
+
+
+def test_a_loop_of_scaled_solves_builds_the_newton_linearizer_once(monkeypatch):
+    """The scaled evaluator shares the user evaluator's pattern object and its store of
+    pattern-derived objects: R J C has J's pattern, so a loop of solves of one badly
+    scaled model builds the linearizer's index arrays once (every solve did), with the
+    same results."""
+    import compass_sparse.nms as nms
+
+    n = 20
+    M, q = _monotone(n, 3)
+    S = 10.0 ** np.random.default_rng(5).uniform(-8, 2, n)
+    p = MCP(lambda z: S * (M @ z + q), lambda z: sp.csc_matrix(S[:, None] * M), 0.0, np.inf,
+            np.zeros(n))
+    built = []
+    real = nms._linearizer_for
+    monkeypatch.setattr(nms, "_linearizer_for", lambda J, P: built.append(1) or real(J, P))
+    first = solve_mcp(p)
+    assert first.passes["scaling"].ran and first.status is Status.SOLVED
+    for _ in range(3):
+        again = solve_mcp(p.with_start(np.zeros(n)))
+        np.testing.assert_array_equal(again.x, first.x)
+        assert (again.nit, again.minor_iterations) == (first.nit, first.minor_iterations)
+    assert len(built) == 1
+    sc = equilibrate(p.J(p.x0))
+    g = scale_problem(p, sc)
+    assert g.evaluator.pattern_ref is p.evaluator.pattern_ref
