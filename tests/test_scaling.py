@@ -149,3 +149,40 @@ def test_a_loop_of_scaled_solves_builds_the_newton_linearizer_once(monkeypatch):
     sc = equilibrate(p.J(p.x0))
     g = scale_problem(p, sc)
     assert g.evaluator.pattern_ref is p.evaluator.pattern_ref
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_compiled_ruiz_sweeps_match_the_array_formulas(seed):
+    """The Ruiz sweeps of equilibrate run in one compiled call; they give bit for bit the
+    factors of the array formulas they replace (max-norms of R A C, then
+    row /= sqrt(where(r > 0, r, 1)), the same for the columns), zero and NaN entries
+    included."""
+    from compass_sparse.scaling import SWEEPS, _canonical, _maxnorms, _ruiz_sweeps
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 80))
+    A = sp.random(n, n, density=rng.uniform(0.02, 0.5), random_state=seed, format="csc")
+    A.data *= 10.0 ** rng.uniform(-12, 12, A.nnz)
+    if A.nnz > 2:
+        A.data[0], A.data[-1] = np.nan, 0.0
+    A = _canonical(A)
+    row, col = np.ones(n), np.ones(n)
+    for _ in range(SWEEPS):
+        r, c = _maxnorms(A, row, col)
+        row /= np.sqrt(np.where(r > 0, r, 1.0))
+        col /= np.sqrt(np.where(c > 0, c, 1.0))
+    got_r, got_c = np.ones(n), np.ones(n)
+    _ruiz_sweeps(A.indptr, A.indices, A.data, got_r, got_c, SWEEPS)
+    assert np.array_equal(got_r, row, equal_nan=True)
+    assert np.array_equal(got_c, col, equal_nan=True)
+
+
+def test_the_scaled_problem_keeps_the_problems_name_lists():
+    """The scaled MCP names rows and variables with the user problem's own (checked)
+    lists, not converted copies."""
+    M, q = _monotone(5, 1)
+    p = MCP(lambda z: M @ z + q, lambda z: sp.csc_matrix(M), 0.0, np.inf, np.ones(5),
+            var_names=[f"v{i}" for i in range(5)], eqn_names=[f"e{i}" for i in range(5)])
+    g = scale_problem(p, equilibrate(sp.diags(10.0 ** np.arange(5)) @ sp.csc_matrix(M)))
+    assert g.var_names is p.var_names and g.eqn_names is p.eqn_names
+    assert g.var_label(3) == "v3" and g.row_label(4) == "e4"
