@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .._jit import njit
 from .postsolve import FixVariables, PostsolveStack, Record
 
 logger = logging.getLogger("compass_sparse.presolve")
@@ -61,6 +62,9 @@ def ranges(ptr: np.ndarray, ids: np.ndarray) -> np.ndarray:
     ids = np.asarray(ids, dtype=np.intp)
     if ids.size == 0:
         return np.zeros(0, dtype=np.intp)
+    if ids.size == 1:  # (one column or row, e.g. one fixed price: no cumsum and repeat)
+        k = int(ids.ravel()[0])
+        return np.arange(ptr[k], ptr[k + 1], dtype=np.intp)
     starts = ptr[ids]
     lens = ptr[ids + 1] - starts
     total = int(lens.sum())
@@ -68,6 +72,53 @@ def ranges(ptr: np.ndarray, ids: np.ndarray) -> np.ndarray:
         return np.zeros(0, dtype=np.intp)
     offs = np.repeat(starts - (np.cumsum(lens) - lens), lens)
     return offs + np.arange(total)
+
+
+@njit(cache=True)
+def _recount(er, ec, ev, nz, nl, base, lb, ub, f, counts, vals):
+    """The recount of :meth:`Workspace.refresh` in one pass over the entries, replacing
+    seven bincounts and a dozen array operations (a small model's recount was their
+    overhead: ~130 us at n = 102).  Entries are visited in storage order and summed into
+    their row as ``np.bincount(rows, weights=w)`` sums them, and every term is formed as
+    the array formulas formed it, so the results are the same bits:
+
+    counts = (row_nnz, row_nl, col_nnz, col_nl): entries in ``nz`` (live, declared
+    constant, above the zero tolerance) and in ``nl`` (live, not constant);
+    vals = (c, fmin, fmax, scale): c = f - sum a_ij base_j, fmin/fmax = c + sum of
+    min/max of a_ij z_j over [l_j, u_j], scale = 1 + |c| + sum of the finite |bounds|."""
+    n = f.shape[0]
+    acc = np.zeros(n)
+    amin = np.zeros(n)
+    amax = np.zeros(n)
+    amag = np.zeros(n)
+    for k in range(er.shape[0]):
+        i = er[k]
+        j = ec[k]
+        if nl[k]:
+            counts[1, i] += 1
+            counts[3, j] += 1
+        elif nz[k]:
+            counts[0, i] += 1
+            counts[2, j] += 1
+            a = ev[k]
+            acc[i] += a * base[j]
+            if a > 0:
+                tmin = a * lb[j]
+                tmax = a * ub[j]
+            else:
+                tmin = a * ub[j]
+                tmax = a * lb[j]
+            amin[i] += tmin
+            amax[i] += tmax
+            m1 = abs(tmin) if np.isfinite(tmin) else 0.0
+            m2 = abs(tmax) if np.isfinite(tmax) else 0.0
+            amag[i] += m1 + m2
+    for i in range(n):
+        c = f[i] - acc[i]
+        vals[0, i] = c
+        vals[1, i] = c + amin[i]
+        vals[2, i] = c + amax[i]
+        vals[3, i] = 1.0 + abs(c) + amag[i]
 
 
 class Workspace:
@@ -144,10 +195,6 @@ class Workspace:
         nl = live & ~self.const
         self.nz = nz
         self.nl = nl
-        self.row_nnz = np.bincount(er[nz], minlength=n)
-        self.row_nl = np.bincount(er[nl], minlength=n)
-        self.col_nnz = np.bincount(ec[nz], minlength=n)
-        self.col_nl = np.bincount(ec[nl], minlength=n)
         f = self.evaluate(self.base)
         # the first refresh checks every row, as when it ran before any pass (the fixed
         # variables' rows included), the later ones the remaining rows
@@ -159,18 +206,14 @@ class Workspace:
                 f"F is not finite in row {self.problem.row_label(int(bad[0]))} at the "
                 "presolve base point")
         self.f_base = f
-        self.c = f - np.bincount(er[nz], weights=ev[nz] * self.base[ec[nz]], minlength=n)
-        # activity bounds of linear rows over the remaining box
-        a = ev[nz]
-        lo_b, hi_b = self.lb[ec[nz]], self.ub[ec[nz]]
-        tmin = np.where(a > 0, a * lo_b, a * hi_b)
-        tmax = np.where(a > 0, a * hi_b, a * lo_b)
-        rows = er[nz]
-        self.fmin = self.c + np.bincount(rows, weights=tmin, minlength=n)
-        self.fmax = self.c + np.bincount(rows, weights=tmax, minlength=n)
-        mag = np.where(np.isfinite(tmin), np.abs(tmin), 0.0) + \
-            np.where(np.isfinite(tmax), np.abs(tmax), 0.0)
-        self.scale = 1.0 + np.abs(self.c) + np.bincount(rows, weights=mag, minlength=n)
+        # counts, constants c = F(base) - A base and the activity bounds of the linear
+        # rows over the remaining box, in one compiled pass (see _recount)
+        counts = np.zeros((4, n), dtype=np.intp)
+        vals = np.empty((4, n))
+        _recount(er, ec, ev, nz, nl, self.base, self.lb, self.ub,
+                 np.asarray(f, dtype=np.float64), counts, vals)
+        self.row_nnz, self.row_nl, self.col_nnz, self.col_nl = counts
+        self.c, self.fmin, self.fmax, self.scale = vals
         self.linear = self.row_active & (self.row_nl == 0) & ~self.nonlinear_rows
         self.touched_row = np.zeros(n, dtype=bool)
         self.touched_col = np.zeros(n, dtype=bool)
@@ -189,7 +232,8 @@ class Workspace:
         return self.er[pos], self.ev[pos]
 
     def free(self, j) -> bool:
-        return bool(np.isneginf(self.lb[j]) and np.isposinf(self.ub[j]))
+        # (comparisons with inf: np.isneginf / np.isposinf on a scalar cost ~5 us each)
+        return bool(self.lb[j] == -np.inf and self.ub[j] == np.inf)
 
     def tol(self, i) -> float:
         return self.opts.feasibility_tolerance * self.scale[i]
@@ -231,7 +275,7 @@ class Workspace:
         if cols.size == 0:
             return
         values = np.asarray(values, dtype=float)
-        assert np.unique(cols).size == cols.size
+        assert cols.size < 2 or np.unique(cols).size == cols.size
         rows = self.partner_row[cols]
         self.remove(cols, rows)
         self.base[cols] = values

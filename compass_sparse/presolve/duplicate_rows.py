@@ -36,8 +36,8 @@ _RTOL = 1e-12
 
 
 def _sign_set(lb, ub):
-    lo = 0.0 if np.isposinf(ub) else -np.inf
-    hi = 0.0 if np.isneginf(lb) else np.inf
+    lo = 0.0 if ub == np.inf else -np.inf
+    hi = 0.0 if lb == -np.inf else np.inf
     return lo, hi
 
 
