@@ -215,6 +215,10 @@ class ScaledEvaluator(Evaluator):
         if self.jac_mode is None:
             return super().J(y, f, _k)
         J = self.parent.J(self.scaling.col * y)
+        if self._pattern is not None and self._pattern is self.parent.pattern_ref:
+            # the parent's J is on the parent's pattern, which is this one (shared, see
+            # __init__), and R J C keeps J's index arrays: nothing to check
+            return self.scaling.scale_jacobian(J)
         return self._fix_pattern(self.scaling.scale_jacobian(J))
 
     def pin(self, y):

@@ -186,3 +186,28 @@ def test_the_scaled_problem_keeps_the_problems_name_lists():
     g = scale_problem(p, equilibrate(sp.diags(10.0 ** np.arange(5)) @ sp.csc_matrix(M)))
     assert g.var_names is p.var_names and g.eqn_names is p.eqn_names
     assert g.var_label(3) == "v3" and g.row_label(4) == "e4"
+
+
+def test_scaled_jacobian_follows_a_pattern_that_grows_after_the_scaling():
+    """The scaled evaluator shares the user evaluator's pattern; when an undeclared
+    pattern grows (an entry that was zero at the start point and dropped), the scaled J
+    still carries the new entry, with its value R J C."""
+    S = np.array([1e4, 1.0, 1e-4])
+
+    def J(z):
+        D = S[:, None] * np.array([[3.0 * z[0] ** 2, 1.0, 0.0],
+                                   [1.0, 2.0, 0.0],
+                                   [0.0, 1.0, 1.0]])
+        return sp.csc_matrix(D)  # drops the zero entry (0, 0) at z0 = 0
+
+    p = MCP(lambda z: S * np.array([z[0] ** 3 + z[1], z[0] + 2 * z[1], z[1] + z[2]]), J,
+            -np.inf, np.inf, np.zeros(3))
+    J0 = p.J(p.x0)
+    assert J0.nnz == 5
+    sc = equilibrate(J0)
+    g = scale_problem(p, sc)
+    y = np.array([0.5, 0.2, -0.1]) / sc.col
+    got = g.J(y).toarray()
+    want = sc.row[:, None] * J(sc.col * y).toarray() * sc.col[None, :]
+    np.testing.assert_array_equal(got, want)
+    assert got[0, 0] != 0.0 and g.evaluator.pattern_ref.nnz == 6
