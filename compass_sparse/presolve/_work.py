@@ -121,6 +121,36 @@ def _recount(er, ec, ev, nz, nl, base, lb, ub, f, counts, vals):
         vals[3, i] = 1.0 + abs(c) + amag[i]
 
 
+def _index_arrays(J0):
+    """(ec, er, col_ptr, row_order, row_ptr): column and row of every entry (CSC
+    order), the column pointers, the entries in row-major order and the row pointers."""
+    n = J0.shape[0]
+    ec = np.repeat(np.arange(n), np.diff(J0.indptr)).astype(np.intp)
+    er = J0.indices.astype(np.intp)
+    col_ptr = J0.indptr.astype(np.intp)
+    row_order = np.argsort(er, kind="stable")
+    row_ptr = np.zeros(n + 1, dtype=np.intp)
+    np.cumsum(np.bincount(er, minlength=n), out=row_ptr[1:])
+    out = (ec, er, col_ptr, row_order, row_ptr)
+    for a in out:  # read only: shared by the workspaces of one pattern
+        a.flags.writeable = False
+    return out
+
+
+def _index(problem, J0):
+    """The index arrays of J0's structure (:func:`_index_arrays`), made once per Jacobian
+    pattern when J0 is stored on the problem's pattern (a loop of solves of one model
+    made them in every solve: an argsort and five array passes over the entries)."""
+    ev = getattr(problem, "evaluator", None)
+    P = ev.pattern_ref if ev is not None else None
+    if P is None or not (J0.indptr.shape == P.indptr.shape
+                         and J0.indices.shape == P.indices.shape
+                         and np.array_equal(J0.indptr, P.indptr)
+                         and np.array_equal(J0.indices, P.indices)):
+        return _index_arrays(J0)
+    return ev.for_pattern("presolve_index", lambda: _index_arrays(P))
+
+
 class Workspace:
     def __init__(self, problem, options, J0, const_mask, warnings, certain_rows=None,
                  nonlinear_rows=None, refresh=True):
@@ -140,14 +170,9 @@ class Workspace:
         self.opts = options
         self.n = n
         self.warnings = warnings
-        self.ec = np.repeat(np.arange(n), np.diff(J0.indptr)).astype(np.intp)
-        self.er = J0.indices.astype(np.intp)
+        self.ec, self.er, self.col_ptr, self.row_order, self.row_ptr = _index(P, J0)
         self.ev = J0.data.astype(float).copy()
         self.const = const_mask.copy()
-        self.col_ptr = J0.indptr.astype(np.intp)
-        self.row_order = np.argsort(self.er, kind="stable")
-        self.row_ptr = np.zeros(n + 1, dtype=np.intp)
-        np.cumsum(np.bincount(self.er, minlength=n), out=self.row_ptr[1:])
         self.lb = P.lb.copy()
         self.ub = P.ub.copy()
         self.col_active = np.ones(n, dtype=bool)

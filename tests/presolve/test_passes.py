@@ -406,3 +406,27 @@ def test_compiled_recount_matches_the_array_formulas(seed):
         gone = rng.choice(np.flatnonzero(ws.col_active), 6, replace=False)
         ws.fix(gone, np.clip(np.zeros(6), lb[gone], ub[gone]), reason="test")
         ws.refresh()
+
+
+def test_workspace_index_arrays_are_made_once_per_pattern_and_read_only():
+    """The entry/row/column index arrays of the workspace depend on the pattern alone:
+    two presolve runs of one model share them (read only); a J0 stored off the pattern
+    gets its own."""
+    from compass_sparse.presolve._work import Workspace
+
+    M = np.array([[2.0, 1.0, 0.0], [1.0, 3.0, 1.0], [0.0, 1.0, 4.0]])
+    p = linear_mcp(M, np.array([-1.0, -1.0, -1.0]), 0.0, np.inf)
+    J0 = p.J(p.x0)
+    opts = PresolveOptions()
+    const = np.ones(J0.nnz, dtype=bool)
+    a = Workspace(p, opts, J0, const, [])
+    b = Workspace(p.with_start(np.ones(3)), opts, p.J(np.ones(3)), const, [])
+    assert a.row_order is b.row_order and a.er is b.er and a.ec is b.ec
+    with pytest.raises(ValueError):
+        a.er[0] = 1
+    np.testing.assert_array_equal(a.ec, [0, 0, 1, 1, 1, 2, 2])
+    np.testing.assert_array_equal(a.row_ptr, [0, 2, 5, 7])
+    # a J0 with a stored entry outside the pattern (a different structure): its own arrays
+    J1 = sp.csc_matrix(M + np.diag([0.0, 0.0, 0.0]) + np.eye(3, k=2))
+    c = Workspace(p, opts, J1, np.ones(J1.nnz, dtype=bool), [])
+    assert c.er is not a.er and c.er.size == 8
