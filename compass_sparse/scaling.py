@@ -151,13 +151,16 @@ def _ruiz_sweeps(indptr, indices, data, row, col, sweeps):
             row[i] = row[i] / np.sqrt(r if r > 0 else 1.0)
 
 
-def equilibrate(J) -> Scaling:
-    """Power-of-two factors with R J C equilibrated (see the module docstring)."""
+def equilibrate(J, before: float | None = None) -> Scaling:
+    """Power-of-two factors with R J C equilibrated (see the module docstring).
+    ``before``: ``spread(J)`` when the caller has it (the scaling pass computes it to
+    decide whether to scale), not computed again."""
     A = _canonical(J)
     n = A.shape[0]
     row = np.ones(n)
     col = np.ones(n)
-    before = spread(A)
+    if before is None:
+        before = spread(A)
     _ruiz_sweeps(A.indptr, A.indices, A.data, row, col, SWEEPS)
     row = np.clip(2.0 ** np.round(np.log2(row)), 1.0 / FACTOR_LIMIT, FACTOR_LIMIT)
     col = np.clip(2.0 ** np.round(np.log2(col)), 1.0 / FACTOR_LIMIT, FACTOR_LIMIT)

@@ -211,3 +211,14 @@ def test_scaled_jacobian_follows_a_pattern_that_grows_after_the_scaling():
     want = sc.row[:, None] * J(sc.col * y).toarray() * sc.col[None, :]
     np.testing.assert_array_equal(got, want)
     assert got[0, 0] != 0.0 and g.evaluator.pattern_ref.nnz == 6
+
+
+def test_equilibrate_takes_the_spread_the_caller_has():
+    """``before`` is spread(J), reported as is (the pass computed it already); the factors
+    do not depend on it."""
+    M, _ = _monotone(10, 2)
+    J = sp.diags(10.0 ** np.arange(10)) @ sp.csc_matrix(M)
+    a, b = equilibrate(J), equilibrate(J, before=spread(J))
+    assert a.spread_before == b.spread_before == spread(J)
+    np.testing.assert_array_equal(a.row, b.row)
+    np.testing.assert_array_equal(a.col, b.col)
