@@ -143,3 +143,51 @@ def test_dense_solve_of_the_crash_gives_the_bits_of_scipy_lu_factor_and_lu_solve
     else:
         raise AssertionError("a singular matrix was solved")
     assert solve_sparse(sp.csc_matrix((0, 0)), np.zeros(0)).shape == (0,)
+
+
+def test_crash_active_set_kernel_matches_the_array_formulas():
+    """The crash's minimum-map active set and its step on the active indices come from one
+    compiled pass; bit for bit the array formulas (scipy's diagonal, |J_ii| or 1, xm =
+    z - f / dg, the bound tests), with a missing, a zero, a NaN and a duplicated diagonal
+    entry, a NaN in F and infinite bounds."""
+    from compass_sparse.crash import _min_map_active
+
+    rng = np.random.default_rng(3)
+    n = 60
+    for trial in range(5):
+        # column j: a few random rows and the diagonal, built by hand so that the
+        # special entries stay as stored (scipy's constructors would sum duplicates)
+        indptr, indices, data = [0], [], []
+        for j in range(n):
+            rows = sorted(set(rng.choice(n, 4, replace=False)) | {j})
+            if j == 7:
+                rows.remove(7)                        # no diagonal entry
+            for i in rows:
+                indices.append(i)
+                data.append(0.0 if (i, j) == (3, 3) else np.nan if (i, j) == (9, 9)
+                            else rng.standard_normal())
+                if (i, j) == (4, 4):                  # stored twice
+                    indices.append(4)
+                    data.append(0.25)
+            indptr.append(len(indices))
+        J = sp.csc_matrix((np.array(data), np.array(indices, dtype=np.int32),
+                           np.array(indptr, dtype=np.int32)), shape=(n, n))
+        lb = np.where(rng.random(n) < 0.3, -np.inf, rng.uniform(-1, 0, n))
+        ub = np.where(rng.random(n) < 0.3, np.inf, rng.uniform(0.5, 2, n))
+        z = np.clip(rng.standard_normal(n), lb, ub)
+        f = rng.standard_normal(n) * 3
+        f[11] = np.nan
+        dg = np.abs(J.diagonal())
+        dg = np.where(dg > 0, dg, 1.0)
+        xm = z - f / dg
+        want_l = xm <= lb
+        want_u = (xm >= ub) & ~want_l
+        want_d = np.zeros_like(z)
+        want_d[want_l] = z[want_l] - lb[want_l]
+        want_d[want_u] = z[want_u] - ub[want_u]
+        act_l, act_u, d = np.empty(n, bool), np.empty(n, bool), np.empty(n)
+        k = _min_map_active(J.indptr, J.indices, J.data, z, f, lb, ub, act_l, act_u, d)
+        np.testing.assert_array_equal(act_l, want_l)
+        np.testing.assert_array_equal(act_u, want_u)
+        np.testing.assert_array_equal(d, want_d)
+        assert k == int(np.count_nonzero(want_l | want_u))
