@@ -227,12 +227,14 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
     # many indices at once instead of creeping one front per halved step.
     recent = [CRASH_START_FACTOR * nm_norm]
     best = (nm_norm, z, f, x)
+    fb_at = None  # (z, f, ||Phi(z)||) of the last step's start
     for it in range(1, opt.crash_iteration_limit + 1):
         if deadline is not None and time.perf_counter() > deadline:
             reason = "time limit"
             it -= 1
             break
         fb = float(np.linalg.norm(fb_phi(z, f, lb, ub)))
+        fb_at = (z, f, fb)
         if fb <= tol:
             reason = "converged"
             it -= 1
@@ -338,5 +340,9 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
         # first step, 5.8 after the fourth, on the dynamic CGE model at n = 2.4e4): hand
         # the best one on.
         nm_norm, z, f, x = best
-    return CrashResult(z, f, x, max(it, 0), float(np.linalg.norm(fb_phi(z, f, lb, ub))),
-                       reason, time.perf_counter() - t0, nfact, rows, factors, reused)
+    if fb_at is not None and fb_at[0] is z and fb_at[1] is f:
+        fb = fb_at[2]  # the loop stopped at the start of a step: ||Phi|| of this point
+    else:
+        fb = float(np.linalg.norm(fb_phi(z, f, lb, ub)))
+    return CrashResult(z, f, x, max(it, 0), fb, reason, time.perf_counter() - t0, nfact, rows,
+                       factors, reused)

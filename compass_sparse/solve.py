@@ -451,7 +451,7 @@ def _scaling_pass(J0, opt):
         st.reason = f"row/column max-norm spread {s:.1e} <= {SPREAD_TRIGGER:.0e}"
         st.time = time.perf_counter() - t
         return None, st
-    sc = equilibrate(J0)
+    sc = equilibrate(J0, before=s)  # (the spread just computed)
     st.ran, st.reason, st.time = True, sc.summary(), time.perf_counter() - t
     return sc, st
 

@@ -177,3 +177,33 @@ def test_compiled_crash_active_set_matches_the_array_formulas():
     crash_active_set(z, f, lb, ub, dg, free, d)
     np.testing.assert_array_equal(free, ~(act_l | act_u))
     np.testing.assert_array_equal(d, d_ref)
+
+
+def test_dense_solve_of_the_crash_gives_the_bits_of_scipy_lu_factor_and_lu_solve():
+    """The crash's reduced systems up to DENSE_SOLVE_MAX_N are solved by LAPACK getrf and
+    getrs called directly; the result must be bitwise that of scipy.linalg.lu_factor +
+    lu_solve (the same two calls), and an exactly singular matrix must still raise."""
+    import scipy.linalg as sla
+
+    from compass_sparse.basis.backends import SingularFactorError, solve_sparse
+
+    rng = np.random.default_rng(4)
+    for n in (1, 7, 60, 150):
+        A = sp.random(n, n, 0.1, format="csc", random_state=n) + 2.0 * sp.identity(
+            n, format="csc")
+        for b in (rng.standard_normal(n), rng.standard_normal((n, 2))):
+            want = sla.lu_solve(sla.lu_factor(A.toarray()), b)
+            got, held = solve_sparse(A, b, keep=True)
+            assert held is None
+            np.testing.assert_array_equal(got, want)
+        D = A.toarray()
+        np.testing.assert_array_equal(solve_sparse(D, b), want)  # a dense A: not modified
+        np.testing.assert_array_equal(D, A.toarray())
+    S = sp.csc_matrix(np.array([[1.0, 2.0, 0.0], [2.0, 4.0, 0.0], [0.0, 0.0, 1.0]]))
+    try:
+        solve_sparse(S, np.ones(3))
+    except SingularFactorError:
+        pass
+    else:
+        raise AssertionError("a singular matrix was solved")
+    assert solve_sparse(sp.csc_matrix((0, 0)), np.zeros(0)).shape == (0,)

@@ -122,3 +122,103 @@ def test_scale_entries_is_the_diagonal_products_and_undoes_itself():
     assert np.array_equal(S.toarray(), ref.toarray())
     back = scale_entries(S, 1.0 / r, 1.0 / c)
     assert np.array_equal(back.data, J.data) and back.data is not S.data
+
+
+def test_a_loop_of_scaled_solves_builds_the_newton_linearizer_once(monkeypatch):
+    """The scaled evaluator shares the user evaluator's pattern object and its store of
+    pattern-derived objects: R J C has J's pattern, so a loop of solves of one badly
+    scaled model builds the linearizer's index arrays once (every solve did), with the
+    same results."""
+    import compass_sparse.nms as nms
+
+    n = 20
+    M, q = _monotone(n, 3)
+    S = 10.0 ** np.random.default_rng(5).uniform(-8, 2, n)
+    p = MCP(lambda z: S * (M @ z + q), lambda z: sp.csc_matrix(S[:, None] * M), 0.0, np.inf,
+            np.zeros(n))
+    built = []
+    real = nms._linearizer_for
+    monkeypatch.setattr(nms, "_linearizer_for", lambda J, P: built.append(1) or real(J, P))
+    first = solve_mcp(p)
+    assert first.passes["scaling"].ran and first.status is Status.SOLVED
+    for _ in range(3):
+        again = solve_mcp(p.with_start(np.zeros(n)))
+        np.testing.assert_array_equal(again.x, first.x)
+        assert (again.nit, again.minor_iterations) == (first.nit, first.minor_iterations)
+    assert len(built) == 1
+    sc = equilibrate(p.J(p.x0))
+    g = scale_problem(p, sc)
+    assert g.evaluator.pattern_ref is p.evaluator.pattern_ref
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_compiled_ruiz_sweeps_match_the_array_formulas(seed):
+    """The Ruiz sweeps of equilibrate run in one compiled call; they give bit for bit the
+    factors of the array formulas they replace (max-norms of R A C, then
+    row /= sqrt(where(r > 0, r, 1)), the same for the columns), zero and NaN entries
+    included."""
+    from compass_sparse.scaling import SWEEPS, _canonical, _maxnorms, _ruiz_sweeps
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(1, 80))
+    A = sp.random(n, n, density=rng.uniform(0.02, 0.5), random_state=seed, format="csc")
+    A.data *= 10.0 ** rng.uniform(-12, 12, A.nnz)
+    if A.nnz > 2:
+        A.data[0], A.data[-1] = np.nan, 0.0
+    A = _canonical(A)
+    row, col = np.ones(n), np.ones(n)
+    for _ in range(SWEEPS):
+        r, c = _maxnorms(A, row, col)
+        row /= np.sqrt(np.where(r > 0, r, 1.0))
+        col /= np.sqrt(np.where(c > 0, c, 1.0))
+    got_r, got_c = np.ones(n), np.ones(n)
+    _ruiz_sweeps(A.indptr, A.indices, A.data, got_r, got_c, SWEEPS)
+    assert np.array_equal(got_r, row, equal_nan=True)
+    assert np.array_equal(got_c, col, equal_nan=True)
+
+
+def test_the_scaled_problem_keeps_the_problems_name_lists():
+    """The scaled MCP names rows and variables with the user problem's own (checked)
+    lists, not converted copies."""
+    M, q = _monotone(5, 1)
+    p = MCP(lambda z: M @ z + q, lambda z: sp.csc_matrix(M), 0.0, np.inf, np.ones(5),
+            var_names=[f"v{i}" for i in range(5)], eqn_names=[f"e{i}" for i in range(5)])
+    g = scale_problem(p, equilibrate(sp.diags(10.0 ** np.arange(5)) @ sp.csc_matrix(M)))
+    assert g.var_names is p.var_names and g.eqn_names is p.eqn_names
+    assert g.var_label(3) == "v3" and g.row_label(4) == "e4"
+
+
+def test_scaled_jacobian_follows_a_pattern_that_grows_after_the_scaling():
+    """The scaled evaluator shares the user evaluator's pattern; when an undeclared
+    pattern grows (an entry that was zero at the start point and dropped), the scaled J
+    still carries the new entry, with its value R J C."""
+    S = np.array([1e4, 1.0, 1e-4])
+
+    def J(z):
+        D = S[:, None] * np.array([[3.0 * z[0] ** 2, 1.0, 0.0],
+                                   [1.0, 2.0, 0.0],
+                                   [0.0, 1.0, 1.0]])
+        return sp.csc_matrix(D)  # drops the zero entry (0, 0) at z0 = 0
+
+    p = MCP(lambda z: S * np.array([z[0] ** 3 + z[1], z[0] + 2 * z[1], z[1] + z[2]]), J,
+            -np.inf, np.inf, np.zeros(3))
+    J0 = p.J(p.x0)
+    assert J0.nnz == 5
+    sc = equilibrate(J0)
+    g = scale_problem(p, sc)
+    y = np.array([0.5, 0.2, -0.1]) / sc.col
+    got = g.J(y).toarray()
+    want = sc.row[:, None] * J(sc.col * y).toarray() * sc.col[None, :]
+    np.testing.assert_array_equal(got, want)
+    assert got[0, 0] != 0.0 and g.evaluator.pattern_ref.nnz == 6
+
+
+def test_equilibrate_takes_the_spread_the_caller_has():
+    """``before`` is spread(J), reported as is (the pass computed it already); the factors
+    do not depend on it."""
+    M, _ = _monotone(10, 2)
+    J = sp.diags(10.0 ** np.arange(10)) @ sp.csc_matrix(M)
+    a, b = equilibrate(J), equilibrate(J, before=spread(J))
+    assert a.spread_before == b.spread_before == spread(J)
+    np.testing.assert_array_equal(a.row, b.row)
+    np.testing.assert_array_equal(a.col, b.col)

@@ -27,7 +27,7 @@ def run(ws) -> None:
     c = ws.c[rows]
     t = ws.opts.feasibility_tolerance * ws.scale[rows]
     pos, neg = c > t, c < -t
-    bad = (pos & np.isneginf(ws.lb[p])) | (neg & np.isposinf(ws.ub[p]))
+    bad = (pos & (ws.lb[p] == -np.inf)) | (neg & (ws.ub[p] == np.inf))
     if bad.any():
         k = int(np.flatnonzero(bad)[0])
         i, j = rows[k], p[k]

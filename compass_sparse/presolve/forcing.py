@@ -35,8 +35,8 @@ def run(ws) -> None:
     cand = ws.linear & (ws.row_nnz >= 1) & ~ws.touched_row
     t = ws.opts.feasibility_tolerance * ws.scale
     p_all = ws.partner_var
-    up = cand & np.isposinf(ws.ub[p_all]) & np.isfinite(ws.fmax) & (np.abs(ws.fmax) <= t)
-    dn = cand & np.isneginf(ws.lb[p_all]) & np.isfinite(ws.fmin) & (np.abs(ws.fmin) <= t)
+    up = cand & (ws.ub[p_all] == np.inf) & np.isfinite(ws.fmax) & (np.abs(ws.fmax) <= t)
+    dn = cand & (ws.lb[p_all] == -np.inf) & np.isfinite(ws.fmin) & (np.abs(ws.fmin) <= t)
     rows = np.flatnonzero(up | dn)
     if rows.size == 0:
         return

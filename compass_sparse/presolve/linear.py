@@ -69,6 +69,8 @@ def declared_constant_mask(problem, J0, f0, options, warnings, samples=None):
         return mask
     if samples is None:
         samples = sample_evaluations(problem, options)
+    if isinstance(samples, list) and not samples:
+        return mask  # no sample point: nothing to check (the driver's first call)
     if not isinstance(samples, list):
         # evaluation failed inside the box: keep the declaration
         warnings.append(f"could not verify the declared linear entries ({samples!r})")

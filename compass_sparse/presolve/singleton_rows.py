@@ -37,7 +37,9 @@ def run(ws) -> None:
     # Those fixings are implied by every solution and satisfy their own row whatever the
     # rest does, so a whole batch is valid at once.
     ent = np.flatnonzero(ws.nz & (ws.row_nnz[ws.er] == 1))
-    ent = ent[np.isin(ws.er[ent], rows)]
+    is_cand = np.zeros(ws.n, dtype=bool)  # a mask, not np.isin: rows are row numbers
+    is_cand[rows] = True
+    ent = ent[is_cand[ws.er[ent]]]
     er, ec, ev = ws.er[ent], ws.ec[ent], ws.ev[ent]
     diag = (ec == ws.partner_var[er]) & (ev > 0) & ~ws.touched_col[ec]
     if diag.any():

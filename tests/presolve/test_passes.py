@@ -351,3 +351,82 @@ def test_live_mask_is_shared_until_a_reduction_and_read_only():
     b = ws.live_mask()
     assert b is not a and ws.live_nnz() == 7 - 3   # row 0 and column 0 leave
     np.testing.assert_array_equal(b, ws.row_active[ws.er] & ws.col_active[ws.ec])
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_compiled_recount_matches_the_array_formulas(seed):
+    """The workspace's recount (counts, constants, activity bounds) runs in one compiled
+    pass; it gives bit for bit what the bincounts and array formulas it replaces gave,
+    with infinite bounds, entries below the zero tolerance, nonlinear entries and removed
+    rows and columns."""
+    from compass_sparse.presolve._work import Workspace
+
+    rng = np.random.default_rng(seed)
+    n = 40
+    A = sp.random(n, n, density=0.15, random_state=seed, format="csc") + sp.identity(n)
+    A = sp.csc_matrix(A)
+    A.data *= rng.choice([-1.0, 1.0], A.nnz) * 10.0 ** rng.uniform(-3, 3, A.nnz)
+    A.data[rng.random(A.nnz) < 0.05] = 1e-14  # below the zero tolerance
+    q = rng.standard_normal(n)
+    lb = np.where(rng.random(n) < 0.4, -INF, rng.uniform(-2, 0, n))
+    ub = np.where(rng.random(n) < 0.4, INF, rng.uniform(0.5, 3, n))
+    p = MCP(lambda z: A @ z + q + 0.1 * np.sin(z), lambda z: A, lb, ub,
+            np.clip(rng.standard_normal(n), lb, ub))
+    J0 = p.J(p.x0)
+    const = rng.random(J0.nnz) < 0.7
+    opts = PresolveOptions()
+    ws = Workspace(p, opts, J0, const, [])
+    for step in range(2):
+        er, ec, ev = ws.er, ws.ec, ws.ev
+        live = ws.live_mask()
+        nz = live & ws.const & (np.abs(ev) > opts.zero_tolerance)
+        nl = live & ~ws.const
+        for got, want in ((ws.row_nnz, np.bincount(er[nz], minlength=n)),
+                          (ws.row_nl, np.bincount(er[nl], minlength=n)),
+                          (ws.col_nnz, np.bincount(ec[nz], minlength=n)),
+                          (ws.col_nl, np.bincount(ec[nl], minlength=n))):
+            np.testing.assert_array_equal(got, want)
+            assert got.dtype == want.dtype
+        f = p.F(ws.base)
+        c = f - np.bincount(er[nz], weights=ev[nz] * ws.base[ec[nz]], minlength=n)
+        a = ev[nz]
+        lo_b, hi_b = ws.lb[ec[nz]], ws.ub[ec[nz]]
+        tmin = np.where(a > 0, a * lo_b, a * hi_b)
+        tmax = np.where(a > 0, a * hi_b, a * lo_b)
+        rows = er[nz]
+        mag = np.where(np.isfinite(tmin), np.abs(tmin), 0.0) + \
+            np.where(np.isfinite(tmax), np.abs(tmax), 0.0)
+        for got, want in ((ws.c, c),
+                          (ws.fmin, c + np.bincount(rows, weights=tmin, minlength=n)),
+                          (ws.fmax, c + np.bincount(rows, weights=tmax, minlength=n)),
+                          (ws.scale, 1.0 + np.abs(c) + np.bincount(rows, weights=mag,
+                                                                   minlength=n))):
+            np.testing.assert_array_equal(got, want)
+        # remove a few rows and columns, move the base point, and recount
+        gone = rng.choice(np.flatnonzero(ws.col_active), 6, replace=False)
+        ws.fix(gone, np.clip(np.zeros(6), lb[gone], ub[gone]), reason="test")
+        ws.refresh()
+
+
+def test_workspace_index_arrays_are_made_once_per_pattern_and_read_only():
+    """The entry/row/column index arrays of the workspace depend on the pattern alone:
+    two presolve runs of one model share them (read only); a J0 stored off the pattern
+    gets its own."""
+    from compass_sparse.presolve._work import Workspace
+
+    M = np.array([[2.0, 1.0, 0.0], [1.0, 3.0, 1.0], [0.0, 1.0, 4.0]])
+    p = linear_mcp(M, np.array([-1.0, -1.0, -1.0]), 0.0, np.inf)
+    J0 = p.J(p.x0)
+    opts = PresolveOptions()
+    const = np.ones(J0.nnz, dtype=bool)
+    a = Workspace(p, opts, J0, const, [])
+    b = Workspace(p.with_start(np.ones(3)), opts, p.J(np.ones(3)), const, [])
+    assert a.row_order is b.row_order and a.er is b.er and a.ec is b.ec
+    with pytest.raises(ValueError):
+        a.er[0] = 1
+    np.testing.assert_array_equal(a.ec, [0, 0, 1, 1, 1, 2, 2])
+    np.testing.assert_array_equal(a.row_ptr, [0, 2, 5, 7])
+    # a J0 with a stored entry outside the pattern (a different structure): its own arrays
+    J1 = sp.csc_matrix(M + np.diag([0.0, 0.0, 0.0]) + np.eye(3, k=2))
+    c = Workspace(p, opts, J1, np.ones(J1.nnz, dtype=bool), [])
+    assert c.er is not a.er and c.er.size == 8

@@ -59,3 +59,29 @@ def test_presolve_reports_structure_of_the_reduced_problem():
     assert res.reduced is None and res.infeasible is None
     x = res.postsolve(np.zeros(0))
     assert np.allclose(P @ x + 1.0, 0.0)
+
+
+def test_presolve_makes_the_structural_report_once_per_pattern_and_set_of_fixed_variables(
+        monkeypatch):
+    """The matching reads only the pattern and which variables are fixed: a loop of solves
+    of one model makes it once, a new set of fixed variables (with_bounds) anew."""
+    import compass_sparse.presolve.core as core
+
+    calls = []
+    real = core.structural_rank_check
+    monkeypatch.setattr(core, "structural_rank_check",
+                        lambda p, **kw: calls.append(1) or real(p, **kw))
+    pat = [[1, 0, 0], [1, 0, 1], [1, 0, 1]]  # column 1 empty: singular until it is fixed
+    p = model(pat)
+    first = presolve(p).structural
+    assert not first.ok and len(calls) == 1
+    again = presolve(p.with_start(np.ones(3))).structural
+    assert again is first and len(calls) == 1
+    # the same evaluator (the same pattern) with variable 1 fixed
+    fixed = MCP.from_evaluator(p.evaluator, [-INF, 0.0, -INF], [INF, 0.0, INF], np.zeros(3))
+    assert presolve(fixed).structural.ok and len(calls) == 2
+    assert presolve(p).structural is first and len(calls) == 2
+    # other names on the same evaluator: a report of its own (it names them)
+    named = MCP.from_evaluator(p.evaluator, -INF, INF, np.zeros(3), var_names=["a", "b", "c"])
+    assert "b" in presolve(named).structural.var_names and len(calls) == 3
+
