@@ -37,6 +37,12 @@ _BLAS_LIBS = []
 """[the BLAS library controllers of _CONTROLLER, or None to use its ``limit``]."""
 
 
+_DEPTH = [0]
+"""How many single-threaded blocks are open: a block inside another one (a dense solve
+inside the crash's loop) has nothing to set or restore (the crash of a 4 x 4 problem opened
+eleven, each setting and restoring two libraries, ~15 us apiece)."""
+
+
 class _OneThread:
     """One BLAS thread inside the block, each library's own count restored after."""
 
@@ -47,14 +53,17 @@ class _OneThread:
         self.saved = []
 
     def __enter__(self):
-        for c in self.libs:
-            k = c.get_num_threads()
-            if k != 1:
-                c.set_num_threads(1)
-                self.saved.append((c, k))
+        if _DEPTH[0] == 0:
+            for c in self.libs:
+                k = c.get_num_threads()
+                if k != 1:
+                    c.set_num_threads(1)
+                    self.saved.append((c, k))
+        _DEPTH[0] += 1
         return self
 
     def __exit__(self, *exc):
+        _DEPTH[0] -= 1
         for c, k in self.saved:
             c.set_num_threads(k)
         self.saved.clear()

@@ -36,6 +36,7 @@ import scipy.sparse as sp
 
 from ._matching import column_matching
 from ._merit_kernels import crash_active_set, csc_diagonal, csc_to_dense
+from ._blas import single_threaded_blas
 from .basis.backends import DENSE_SOLVE_MAX_N, SingularFactorError, solve_sparse
 from .direct_step import reduced_system
 from .evaluation import all_finite
@@ -187,8 +188,6 @@ def _reuse_solve(J, inact, rhs, prev, nm_norm):
     b[in_new] = rhs
     bn = float(np.linalg.norm(b))
     eta = max(1e-10, min(1e-4, nm_norm))
-    from ._blas import single_threaded_blas
-
     with single_threaded_blas():   # level-1 vector work: threads only slow it
         x, steps, _ = preconditioned_gmres(lambda v: B @ v, psolve, b, 0.5 * eta * bn,
                                            REUSE_ITERATIONS)
@@ -206,6 +205,18 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
     :class:`~compass_sparse.result.PassStats`) counts the accepted steps and the
     factorizations as they happen, so that they are reported when ``on_point`` stops the
     crash at a solution."""
+    kw = dict(f0=f0, J0=J0, tol=tol, deadline=deadline, log=log, on_point=on_point,
+              stats=stats)
+    if np.size(z0) <= DENSE_SOLVE_MAX_N:
+        # Its reduced systems are factored densely, each in a single-threaded BLAS block;
+        # one block around the whole crash makes those free (see compass_sparse._blas).
+        with single_threaded_blas():
+            return _crash(evalr, z0, lb, ub, options, **kw)
+    return _crash(evalr, z0, lb, ub, options, **kw)
+
+
+def _crash(evalr, z0, lb, ub, options, *, f0, J0, tol, deadline, log, on_point,
+           stats) -> CrashResult:
     t0 = time.perf_counter()
     opt = options
     tol = opt.convergence_tolerance if tol is None else tol

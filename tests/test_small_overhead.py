@@ -143,6 +143,47 @@ def test_python_callers_of_a_built_kernel_call_its_dispatcher():
     assert not isinstance(merit.fb_phi_kernel, LazyKernel)
 
 
+def test_nested_single_threaded_blas_blocks_set_threads_once_and_restore_after():
+    """A single-threaded BLAS block inside another sets nothing and restores nothing; the
+    outer block restores each library's own count when it closes."""
+    from compass_sparse import _blas
+
+    with _blas.single_threaded_blas():
+        pass
+    libs = _blas._BLAS_LIBS[0]
+    if not libs:
+        pytest.skip("no BLAS library under threadpoolctl's control")
+    calls = []
+
+    class Spy:
+        def __init__(self, c):
+            self.c = c
+
+        def get_num_threads(self):
+            return self.c.get_num_threads()
+
+        def set_num_threads(self, k):
+            calls.append(k)
+            self.c.set_num_threads(k)
+
+    before = [c.get_num_threads() for c in libs]
+    for c in libs:
+        c.set_num_threads(2)
+    spies = [Spy(c) for c in libs]
+    try:
+        with _blas._OneThread(spies):
+            assert all(c.get_num_threads() == 1 for c in libs)
+            for _ in range(3):
+                with _blas._OneThread(spies):
+                    assert all(c.get_num_threads() == 1 for c in libs)
+            assert all(c.get_num_threads() == 1 for c in libs)
+        assert [c.get_num_threads() for c in libs] == [2] * len(libs)
+        assert calls == [1] * len(libs) + [2] * len(libs)  # the outer block only
+    finally:
+        for c, k in zip(libs, before):
+            c.set_num_threads(k)
+
+
 def test_blas_limit_reuses_one_controller():
     from compass_sparse import _blas
     from compass_sparse import solve as S
