@@ -54,6 +54,7 @@ from .acceptance import Acceptance
 from .crash import crash
 from .direct_step import (DIRECT_MIN_N, REUSE_BEATS_REFACTOR_NNZ, DirectFactors,
                           direct_step_applies)
+from .evaluation import all_finite
 from .exceptions import FactorBudgetError
 from .fallback import gradient_steps, lm_step
 from .merit import fb_gradient, fb_phi, fb_psi, max_abs_diff, normal_map_at, project
@@ -472,14 +473,15 @@ class NMSSolver:
             it0 = st.iterations
             try:  # (a solution found by the crash stops the solve from inside it)
                 cr = crash(self.ev, cur.z, lb, ub, opt, f0=cur.f, J0=cur.J, tol=self.tol,
-                           deadline=self.deadline, log=self._crash_log,
+                           deadline=self.deadline,
+                           log=self._crash_log if self.log_major is not None else None,
                            on_point=self._consider_trial, stats=st)
             finally:
                 st.time += time.perf_counter() - t0
                 st.nfev += self.p.counters.nfev - nf0
                 st.njev += self.p.counters.njev - nj0
                 self.crash_its += st.iterations - it0
-            if cr.iterations > 0 and np.all(np.isfinite(cr.f)):
+            if cr.iterations > 0 and all_finite(cr.f):
                 pt = self._point(cr.z, cr.f)
                 self._consider(pt.z, pt.f, pt.phi, pt.psi)
                 if pt.psi <= opt.nms_initial_reference_factor * cur.psi:

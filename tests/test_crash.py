@@ -207,3 +207,15 @@ def test_dense_solve_of_the_crash_gives_the_bits_of_scipy_lu_factor_and_lu_solve
     else:
         raise AssertionError("a singular matrix was solved")
     assert solve_sparse(sp.csc_matrix((0, 0)), np.zeros(0)).shape == (0,)
+
+
+def test_crash_norm_is_numpys_two_norm_bit_for_bit():
+    """The crash's ||v||_2 (the square root of v.v) gives np.linalg.norm's bits, from
+    underflowing to overflowing magnitudes."""
+    from compass_sparse.crash import _norm
+
+    rng = np.random.default_rng(0)
+    for n in (0, 1, 2, 5, 17, 1000):
+        for e in (-200, -100, 0, 100, 200):
+            v = rng.normal(size=n) * 10.0 ** e
+            assert _norm(v) == float(np.linalg.norm(v))
