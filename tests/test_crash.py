@@ -218,4 +218,5 @@ def test_crash_norm_is_numpys_two_norm_bit_for_bit():
     for n in (0, 1, 2, 5, 17, 1000):
         for e in (-200, -100, 0, 100, 200):
             v = rng.normal(size=n) * 10.0 ** e
-            assert _norm(v) == float(np.linalg.norm(v))
+            with np.errstate(over="ignore"):  # (1e200 squared: both give inf)
+                assert _norm(v) == float(np.linalg.norm(v))
