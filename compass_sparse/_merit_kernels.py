@@ -70,24 +70,12 @@ def memo_key_kernel(x, out):
 
 
 @njit(cache=True)
-def max_abs_kernel(x):
-    """max |x_i| (NaN when x holds one, as np.max; 0 for an empty x)."""
+def max_abs_kernel(x, y, diff):
+    """max |x_i - y_i| when ``diff``, else max |x_i| (y unread): NaN when a term is one, as
+    np.max; 0 for empty vectors."""
     m = 0.0
     for i in range(x.shape[0]):
-        a = abs(x[i])
-        if a != a:
-            return a
-        if a > m:
-            m = a
-    return m
-
-
-@njit(cache=True)
-def max_abs_diff_kernel(x, y):
-    """max |x_i - y_i| (NaN when a difference is one; 0 for empty vectors)."""
-    m = 0.0
-    for i in range(x.shape[0]):
-        a = abs(x[i] - y[i])
+        a = abs(x[i] - y[i]) if diff else abs(x[i])
         if a != a:
             return a
         if a > m:

@@ -33,7 +33,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._merit_kernels import (csc_rmatvec, fb_diagonals_kernel, fb_phi_kernel,
-                             max_abs_diff_kernel, max_abs_kernel, normal_map_kernel,
+                             max_abs_kernel, normal_map_kernel,
                              residual_maxima_kernel)
 
 __all__ = [
@@ -198,7 +198,7 @@ def max_abs(x) -> float:
     for a float vector: np.max(np.abs(x)) costs ~5 us of dispatch on a short one, and the
     solver asks it several times per major iteration."""
     if x.__class__ is np.ndarray and x.ndim == 1 and x.dtype is _F64:
-        return float(max_abs_kernel(x))
+        return float(max_abs_kernel(x, x, False))
     x = np.asarray(x, dtype=float)
     return float(np.max(np.abs(x))) if x.size else 0.0
 
@@ -207,7 +207,7 @@ def max_abs_diff(x, y) -> float:
     """||x - y||_inf of two vectors of one length (as :func:`max_abs`)."""
     if (x.__class__ is np.ndarray and y.__class__ is np.ndarray and x.ndim == 1
             and x.dtype is _F64 and y.dtype is _F64 and x.shape == y.shape):
-        return float(max_abs_diff_kernel(x, y))
+        return float(max_abs_kernel(x, y, True))
     return max_abs(np.asarray(x, dtype=float) - np.asarray(y, dtype=float))
 
 

@@ -35,6 +35,7 @@ import scipy.sparse as sp
 
 from ._csc import trusted_csc
 from ._jit import njit
+from ._merit_kernels import csc_scaled_abs_maxima
 from .evaluation import Evaluator
 from .problem import MCP
 
@@ -93,8 +94,6 @@ def _canonical(A) -> sp.csc_matrix:
 def _maxnorms(A: sp.csc_matrix, row=None, col=None):
     """Row and column max-norms of diag(row) A diag(col) (A canonical CSC; no factors:
     A itself), read off the stored entries in one compiled pass (every solve asks)."""
-    from ._merit_kernels import csc_scaled_abs_maxima
-
     rows = np.zeros(A.shape[0])
     cols = np.zeros(A.shape[1])
     if row is None:  # (|a| 1) 1 = |a| exactly
@@ -129,24 +128,16 @@ def _ruiz_sweeps(indptr, indices, data, row, col, sweeps):
     formulas ``row /= np.sqrt(np.where(r > 0, r, 1.0))`` entry by entry: the same bits.
     One compiled call instead of six array operations per sweep (a small model's
     equilibration was that overhead)."""
-    nr = row.shape[0]
-    nc = col.shape[0]
-    rows = np.zeros(nr)
+    rows = np.empty(row.shape[0])
+    cols = np.empty(col.shape[0])
     for _ in range(sweeps):
         rows[:] = 0.0
-        for j in range(nc):
-            c = 0.0
-            for k in range(indptr[j], indptr[j + 1]):
-                i = indices[k]
-                a = abs(data[k]) * row[i] * col[j]
-                if a > c or a != a:
-                    c = a
-                if a > rows[i] or a != a:
-                    rows[i] = a
-            # column j's norm is complete: its factor may change now (row factors are
-            # read before any of them changes: they change after the loop)
+        cols[:] = 0.0
+        csc_scaled_abs_maxima(indptr, indices, data, row, col, rows, cols)
+        for j in range(cols.shape[0]):
+            c = cols[j]
             col[j] = col[j] / np.sqrt(c if c > 0 else 1.0)
-        for i in range(nr):
+        for i in range(rows.shape[0]):
             r = rows[i]
             row[i] = row[i] / np.sqrt(r if r > 0 else 1.0)
 
