@@ -1,0 +1,90 @@
+"""Compiled helpers of the evaluation layer and of the direct Newton step: the checks and
+copies that every Jacobian evaluation and every sparse direct step of a small problem
+makes, each in one pass instead of several array operations (a few microseconds each,
+asked several times per major iteration)."""
+import numpy as np
+
+from ._jit import njit
+
+
+@njit(cache=True)
+def csc_copy_on_pattern(indptr, indices, data, pindptr, pindices, out):
+    """Whether the CSC index arrays (indptr, indices) are exactly the pattern (pindptr,
+    pindices) -- the same column pointers and, in the nnz = pindptr[-1] first places, the
+    same row indices -- and if so, data[:nnz] copied into ``out`` (length nnz).  A pattern
+    that is canonical (sorted, duplicate-free) makes an equal matrix canonical too."""
+    m = pindptr.shape[0]
+    if indptr.shape[0] != m:
+        return False
+    for j in range(m):
+        if indptr[j] != pindptr[j]:
+            return False
+    nnz = pindices.shape[0]
+    if indptr[m - 1] != nnz or indices.shape[0] < nnz or data.shape[0] < nnz:
+        return False
+    for k in range(nnz):
+        if indices[k] != pindices[k]:
+            return False
+    for k in range(nnz):
+        out[k] = data[k]
+    return True
+
+
+@njit(cache=True)
+def csc_same_pattern(indptr, indices, pindptr, pindices):
+    """Whether two CSC index arrays hold the same pattern (pointers equal, the nnz first
+    row indices equal; nnz = pindptr[-1] = len(pindices))."""
+    m = pindptr.shape[0]
+    if indptr.shape[0] != m:
+        return False
+    for j in range(m):
+        if indptr[j] != pindptr[j]:
+            return False
+    nnz = pindices.shape[0]
+    if indptr[m - 1] != nnz or indices.shape[0] < nnz:
+        return False
+    for k in range(nnz):
+        if indices[k] != pindices[k]:
+            return False
+    return True
+
+
+@njit(cache=True)
+def free_block(indptr, indices, data, free, z, q):
+    """(Kp, Ki, Kx, rhs, nnz) of M_FF (CSC, int32 index arrays with room for nnz(M)) and
+    rhs = -(q + M_FN z_N)_F for the indices F where ``free`` is True: the positions in F,
+    the arrays and the pass of :func:`compass_sparse.direct_step._free_block` in one
+    call (same operations in the same order, so the same bits)."""
+    n = free.shape[0]
+    pos = np.empty(n, dtype=np.int64)
+    nf = 0
+    for i in range(n):
+        if free[i]:
+            pos[i] = nf
+            nf += 1
+        else:
+            pos[i] = -1
+    nnz = indptr[n]
+    Kp = np.zeros(nf + 1, dtype=np.int32)
+    Ki = np.empty(nnz, dtype=np.int32)
+    Kx = np.empty(nnz)
+    rhs = np.empty(nf)
+    for i in range(n):
+        if pos[i] >= 0:
+            rhs[pos[i]] = -q[i]
+    k = 0
+    for j in range(n):
+        pj = pos[j]
+        for e in range(indptr[j], indptr[j + 1]):
+            pi = pos[indices[e]]
+            if pi < 0:
+                continue
+            if pj >= 0:
+                Ki[k] = pi
+                Kx[k] = data[e]
+                k += 1
+            else:
+                rhs[pi] -= data[e] * z[j]
+        if pj >= 0:
+            Kp[pj + 1] = k
+    return Kp, Ki, Kx, rhs, k
