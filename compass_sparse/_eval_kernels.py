@@ -88,3 +88,14 @@ def free_block(indptr, indices, data, free, z, q):
         if pj >= 0:
             Kp[pj + 1] = k
     return Kp, Ki, Kx, rhs, k
+
+
+@njit(cache=True)
+def csc_scaled_all_finite(indptr, indices, data, row, col):
+    """Whether every stored entry of diag(row) J diag(col), computed as the scaling's
+    kernel computes it ((a_ij row_i) col_j), is finite -- without building it."""
+    for j in range(indptr.shape[0] - 1):
+        for k in range(indptr[j], indptr[j + 1]):
+            if not np.isfinite(data[k] * row[indices[k]] * col[j]):
+                return False
+    return True
