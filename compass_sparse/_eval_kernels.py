@@ -99,3 +99,43 @@ def csc_scaled_all_finite(indptr, indices, data, row, col):
             if not np.isfinite(data[k] * row[indices[k]] * col[j]):
                 return False
     return True
+
+
+@njit(cache=True)
+def top_abs_distinct(v, idx):
+    """The indices of the k = len(idx) largest |v_i|, largest first, into idx, when that
+    answer is unique: the k largest values distinct and the k-th larger than the next
+    (ties are ordered by the caller's own sort instead, which this pass need not
+    imitate).  Returns False (idx undefined) on a tie, a NaN, or k > len(v)."""
+    k = idx.shape[0]
+    n = v.shape[0]
+    if k == 0 or k > n:
+        return False
+    vals = np.empty(k + 1)
+    ids = np.empty(k + 1, dtype=np.int64)
+    cnt = 0
+    for i in range(n):
+        a = abs(v[i])
+        if a != a:  # NaN
+            return False
+        if cnt == k + 1 and not a > vals[k]:
+            continue
+        # insertion into the descending list (the last entry drops when it is full)
+        p = cnt if cnt < k + 1 else k
+        while p > 0 and vals[p - 1] < a:
+            if p < k + 1:
+                vals[p] = vals[p - 1]
+                ids[p] = ids[p - 1]
+            p -= 1
+        vals[p] = a
+        ids[p] = i
+        if cnt < k + 1:
+            cnt += 1
+    for j in range(1, k):
+        if not vals[j - 1] > vals[j]:
+            return False
+    if cnt > k and not vals[k - 1] > vals[k]:
+        return False
+    for j in range(k):
+        idx[j] = ids[j]
+    return True

@@ -348,3 +348,29 @@ def test_scaled_solve_takes_the_solvers_verdict_for_its_result(monkeypatch):
     assert np.array_equal(r.x, r2.x) and r.residual == r2.residual
     assert (r.status, r.nit, r.nfev, r.njev, r.domain_errors, r.point_status) == \
         (r2.status, r2.nit, r2.nfev, r2.njev, r2.domain_errors, r2.point_status)
+
+
+def test_scale_test_of_a_non_canonical_jacobian_is_that_of_its_canonical_form():
+    """The compiled canonical test lets a canonical J straight through; an unsorted one,
+    one with duplicates (summed) or with int64 indices gets the verdict of its canonical
+    form, unchanged."""
+    from compass_sparse.acceptance import _scale_test
+    from compass_sparse.merit import fb_phi
+
+    n = 3
+    z, f = np.array([1.0, 2.0, 0.0]), np.array([1e-8, -1e-8, 2e-8])
+    lb, ub = np.zeros(n), np.full(n, np.inf)
+    phi = fb_phi(z, f, lb, ub)
+    ref = sp.csc_matrix(np.array([[1e-9, 1.0, 0.0], [0.0, 2e-9, 0.0], [1.0, 0.0, 3.0]]))
+    dup = sp.csc_matrix((np.array([1e-9, 0.5, 0.5, 1.0, 2e-9, 3.0]),
+                         np.array([0, 2, 2, 0, 1, 2], np.int32),
+                         np.array([0, 3, 5, 6], np.int32)), shape=(n, n))
+    uns = sp.csc_matrix((np.array([1.0, 1e-9, 2e-9, 1.0, 3.0]), np.array([2, 0, 1, 0, 2], np.int32),
+                         np.array([0, 2, 4, 5], np.int32)), shape=(n, n))
+    i64 = ref.copy()
+    i64.indices, i64.indptr = i64.indices.astype(np.int64), i64.indptr.astype(np.int64)
+    want = _scale_test(z, f, lb, ub, phi, ref)
+    for J in (dup, uns, i64):
+        assert _scale_test(z, f, lb, ub, phi, J) == want
+    assert not want.solved  # the flat row 1 decides: the forms must agree on it
+    assert dup.nnz == 6  # the caller's matrix is not summed in place
