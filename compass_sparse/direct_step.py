@@ -319,12 +319,12 @@ class DirectFactors:
             # the block of the last step (the active set did not move): KLU's symbolic
             # analysis (BTF, AMD) depends on the pattern only, so it is kept; only the
             # values change (~40% of a factorization at n = 362 saved)
-            A, Fs = h[2], h[3]
+            A, Fs, info = h[2], h[3], h[4]
             A.V = matrix(K.data[:K.indptr[-1]])
         else:
-            A, Fs = _klu_analysis(K)
+            A, Fs, info = _klu_analysis(K)
             if Fs is not None:
-                self._held = (K.indptr.copy(), K.indices[:K.indptr[-1]].copy(), A, Fs)
+                self._held = (K.indptr.copy(), K.indices[:K.indptr[-1]].copy(), A, Fs, info)
                 A.V = matrix(K.data[:K.indptr[-1]])
         try:
             if Fs is None:  # a block that is not canonical: analysed for itself
@@ -333,8 +333,7 @@ class DirectFactors:
         except ArithmeticError:  # singular
             self.lu_nnz = 0
             return None
-        parts = klu.get_numeric(A, Fs, Fn)  # L, U, P, Q, R, F (copies: ~10 us at n = 1e3)
-        self.lu_nnz = len(parts[0]) + len(parts[1]) + len(parts[5])
+        self.lu_nnz = _klu_lu_nnz(A, Fs, Fn, info)
         if self.lu_nnz > KLU_FILL_LIMIT * max(K.nnz, 1):
             self.klu_allowed = self.klu = False
         b = matrix(np.ascontiguousarray(rhs, dtype=np.float64))
@@ -408,10 +407,11 @@ KLU_CACHE_SIZE = 8
 
 
 def _klu_analysis(K):
-    """(kvxopt matrix with K's pattern, KLU symbolic analysis of it) from the cache or
-    made and cached; (matrix, None) for a K that is not canonical (kvxopt sorts the
-    entries it is given: the values of such a K could not be copied in later), whose
-    analysis the caller makes and does not keep."""
+    """(kvxopt matrix with K's pattern, KLU symbolic analysis of it, [entries of the
+    off-diagonal blocks, once known]) from the cache or made and cached; (matrix, None,
+    [None]) for a K that is not canonical (kvxopt sorts the entries it is given: the
+    values of such a K could not be copied in later), whose analysis the caller makes
+    and does not keep."""
     from kvxopt import matrix, spmatrix
 
     for i in range(len(_KLU_CACHE) - 1, -1, -1):
@@ -419,19 +419,72 @@ def _klu_analysis(K):
         if csc_same_pattern(K.indptr, K.indices, e[0], e[1]):
             if i != len(_KLU_CACHE) - 1:
                 _KLU_CACHE.append(_KLU_CACHE.pop(i))
-            return +e[2], e[3]  # unary plus: a copy of the template
+            return +e[2], e[3], e[4]  # unary plus: a copy of the template
     n = K.shape[0]
     nnz = int(K.indptr[-1])
     cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(K.indptr))
     A = spmatrix(matrix(K.data[:nnz]), matrix(K.indices[:nnz].astype(np.int64)), matrix(cols),
                  (n, n))
     if not csc_is_canonical(K.indptr, K.indices, n, nnz):
-        return A, None
+        return A, None, [None]
     Fs = _klu_module().symbolic(A)
-    _KLU_CACHE.append((K.indptr.copy(), K.indices[:nnz].copy(), +A, Fs))
+    info = [None]
+    _KLU_CACHE.append((K.indptr.copy(), K.indices[:nnz].copy(), +A, Fs, info))
     if len(_KLU_CACHE) > KLU_CACHE_SIZE:
         _KLU_CACHE.pop(0)
-    return A, Fs
+    return A, Fs, info
+
+
+def _klu_lu_nnz(A, Fs, Fn, info):
+    """nnz(L) + nnz(U) + nnz(off-diagonal blocks) of a KLU factorization.  kvxopt gives
+    them only as copies of the factors (get_numeric: ~40 us at n = 992, twice per solve);
+    the first two are the leading counts of KLU's numeric object (n, nblocks, lnz, unz:
+    its layout since KLU 1.0), read there, the third is fixed by the symbolic analysis
+    (the pattern's block triangular form) and kept in ``info`` from the first
+    factorization of the pattern.  Every get_numeric made checks the counts read against
+    the factors' own; a mismatch (another layout) turns the reading off for good."""
+    counts = _klu_counts(Fn) if info[0] is not None else None
+    if counts is not None:
+        return counts[0] + counts[1] + info[0]
+    parts = _klu_module().get_numeric(A, Fs, Fn)  # L, U, P, Q, R, F, r (copies)
+    nnz_l, nnz_u, nnz_off = len(parts[0]), len(parts[1]), len(parts[5])
+    read = _klu_counts(Fn)
+    if read is not None and read != (nnz_l, nnz_u):
+        _KLU_COUNTS[:] = [None]  # not the layout assumed
+    elif read is not None:
+        info[0] = nnz_off
+    return nnz_l + nnz_u + nnz_off
+
+
+_KLU_COUNTS: list = []
+"""[PyCapsule_GetPointer] once the counts of KLU's numeric object may be read, [None]
+when they may not (empty until first asked)."""
+
+
+def _klu_counts(Fn):
+    """(lnz, unz) of a kvxopt KLU numeric factorization (int64 fields 2 and 3 of the
+    struct its capsule holds), or None when they cannot be read."""
+    if not _KLU_COUNTS:
+        try:
+            import ctypes
+
+            get = ctypes.pythonapi.PyCapsule_GetPointer
+            get.restype = ctypes.c_void_p
+            get.argtypes = [ctypes.py_object, ctypes.c_char_p]
+            _KLU_COUNTS[:] = [(get, ctypes.c_int64 * 4)]
+        except Exception:  # pragma: no cover - no ctypes: the factors' copies
+            _KLU_COUNTS[:] = [None]
+    st = _KLU_COUNTS[0]
+    if st is None:
+        return None
+    try:
+        ptr = st[0](Fn, b"KLU NUM D FACTOR")
+    except Exception:  # another capsule (name): not the object assumed
+        return None
+    if not ptr:
+        return None
+    head = st[1].from_address(ptr)
+    return int(head[2]), int(head[3])
 
 
 KLU_FROM_FILL = 4.0

@@ -455,3 +455,37 @@ def test_dense_direct_step_does_not_run_off_a_flat_tail_of_mathiesen():
     r = solve_mcp(p.F, p.J, p.lb, p.ub, p.x0, options={"convergence_tolerance": 1e-6})
     assert r.success
     assert p.distance_to_solutions(r.x) <= 1e-4
+
+
+def test_klu_lu_size_read_from_the_factorization_is_the_factors_size(monkeypatch):
+    """nnz(L) + nnz(U) + nnz(off-diagonal blocks) read from KLU's numeric object and the
+    pattern's analysis is the size of the factors kvxopt copies out, over blocks whose
+    values change the pivoting; after a mismatch the factors are counted again."""
+    from kvxopt import klu, matrix
+
+    monkeypatch.setattr(ds, "_KLU_CACHE", [])
+    real = klu.get_numeric
+    copies = []
+    monkeypatch.setattr(klu, "get_numeric", lambda *a: copies.append(1) or real(*a))
+    rng = np.random.default_rng(3)
+    for seed in range(6):
+        K, b = _random_block(120, 0.03, seed=200 + seed)
+        for trial in range(3):
+            Kt = K.copy()
+            Kt.data = Kt.data * rng.uniform(0.01, 100.0, Kt.nnz)  # other pivots
+            f = ds.DirectFactors(klu=True)
+            f.solve(Kt, b)
+            A, Fs, info = ds._klu_analysis(Kt)
+            A.V = matrix(Kt.data)
+            parts = real(A, Fs, klu.numeric(A, Fs))
+            assert f.lu_nnz == len(parts[0]) + len(parts[1]) + len(parts[5])
+    assert len(copies) == 6  # one copy per pattern, at its first factorization
+    monkeypatch.setattr(ds, "_KLU_COUNTS", [])  # (the switch turned off below is this one)
+    real_counts = ds._klu_counts
+    monkeypatch.setattr(ds, "_klu_counts", lambda Fn: real_counts(Fn) and (0, 0))  # another layout
+    monkeypatch.setattr(ds, "_KLU_CACHE", [])
+    f = ds.DirectFactors(klu=True)
+    K, b = _random_block(120, 0.03, seed=200)
+    f.solve(K, b)
+    f.solve(K, b)
+    assert len(copies) == 8 and f.lu_nnz > 0 and ds._KLU_COUNTS == [None]
