@@ -496,12 +496,19 @@ KLU_FILL_LIMIT = 8.0
 to SuperLU for the rest of the solve."""
 
 
+_KLU_MODULE: list = []
+"""[kvxopt's klu module, or None without kvxopt] once looked up (an import statement
+costs a few microseconds at every factorization)."""
+
+
 def _klu_module():
-    try:
-        from kvxopt import klu
-    except ImportError:  # pragma: no cover - kvxopt is a dependency
-        return None
-    return klu
+    if not _KLU_MODULE:
+        try:
+            from kvxopt import klu
+        except ImportError:  # pragma: no cover - kvxopt is a dependency
+            klu = None
+        _KLU_MODULE.append(klu)
+    return _KLU_MODULE[0]
 
 
 def direct_step(M, q, lb, ub, z, basic, factors: DirectFactors | None = None):
@@ -529,7 +536,7 @@ def direct_step(M, q, lb, ub, z, basic, factors: DirectFactors | None = None):
         nnz_lu = factors.lu_nnz
         if zf is None:  # exactly singular: the path's rank repair decides
             return None, nnz_lu
-        if not np.all(np.isfinite(zf)):
+        if not all_finite_kernel(np.ascontiguousarray(zf, dtype=np.float64)):
             return None, nnz_lu
         zt[free] = zf
     res, mz = _end_point(M.indptr, M.indices, M.data, q, lb, ub, basic.astype(np.int64), zt,
