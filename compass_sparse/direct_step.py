@@ -37,6 +37,8 @@ check (:meth:`compass_sparse.path.PivotalPath._verify_solution`).
 """
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -402,6 +404,8 @@ found by exact comparison of the index arrays, never by a hash; the cached matri
 template that is never handed out (each solve gets its own copy to write values into) and
 the symbolic object is only read by KLU's factorization and solve."""
 
+_KLU_LOCK = threading.Lock()
+
 KLU_CACHE_SIZE = 8
 """Patterns kept in :data:`_KLU_CACHE`."""
 
@@ -414,12 +418,13 @@ def _klu_analysis(K):
     and does not keep."""
     from kvxopt import matrix, spmatrix
 
-    for i in range(len(_KLU_CACHE) - 1, -1, -1):
-        e = _KLU_CACHE[i]
-        if csc_same_pattern(K.indptr, K.indices, e[0], e[1]):
-            if i != len(_KLU_CACHE) - 1:
-                _KLU_CACHE.append(_KLU_CACHE.pop(i))
-            return +e[2], e[3], e[4]  # unary plus: a copy of the template
+    with _KLU_LOCK:  # (solves in several threads share the cache)
+        for i in range(len(_KLU_CACHE) - 1, -1, -1):
+            e = _KLU_CACHE[i]
+            if csc_same_pattern(K.indptr, K.indices, e[0], e[1]):
+                if i != len(_KLU_CACHE) - 1:
+                    _KLU_CACHE.append(_KLU_CACHE.pop(i))
+                return +e[2], e[3], e[4]  # unary plus: a copy of the template
     n = K.shape[0]
     nnz = int(K.indptr[-1])
     cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(K.indptr))
@@ -429,9 +434,10 @@ def _klu_analysis(K):
         return A, None, [None]
     Fs = _klu_module().symbolic(A)
     info = [None]
-    _KLU_CACHE.append((K.indptr.copy(), K.indices[:nnz].copy(), +A, Fs, info))
-    if len(_KLU_CACHE) > KLU_CACHE_SIZE:
-        _KLU_CACHE.pop(0)
+    with _KLU_LOCK:
+        _KLU_CACHE.append((K.indptr.copy(), K.indices[:nnz].copy(), +A, Fs, info))
+        if len(_KLU_CACHE) > KLU_CACHE_SIZE:
+            _KLU_CACHE.pop(0)
     return A, Fs, info
 
 
