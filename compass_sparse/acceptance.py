@@ -67,6 +67,14 @@ class Verdict:
 def residuals_small(z, f, lb, ub, tol, phi=None) -> bool:
     """Test (1): both residuals at most tol (``phi``: fb_phi(z, f), when already known)."""
     if phi is None:
+        # The answer is the conjunction of the two tests; without Phi at hand the
+        # natural residual, one compiled pass without an array, is asked first, and
+        # away from a solution (most points asked) it alone says no.
+        if _floats(np.size(z), z, f, lb, ub):
+            if not min_map_within(z, f, lb, ub, float(tol)):
+                return False
+            phi = fb_phi(z, f, lb, ub)
+            return not float(np.sqrt(np.dot(phi, phi))) > tol
         phi = fb_phi(z, f, lb, ub)
     if float(np.sqrt(np.dot(phi, phi))) > tol:
         return False

@@ -374,3 +374,29 @@ def test_scale_test_of_a_non_canonical_jacobian_is_that_of_its_canonical_form():
         assert _scale_test(z, f, lb, ub, phi, J) == want
     assert not want.solved  # the flat row 1 decides: the forms must agree on it
     assert dup.nnz == 6  # the caller's matrix is not summed in place
+
+
+def test_residual_test_asks_the_natural_residual_first_with_the_same_answer():
+    """Without Phi at hand the natural residual is tested first: the answer is still the
+    conjunction of both tests, on points where either, both or none fails (NaN too)."""
+    from compass_sparse.acceptance import residuals_small
+    from compass_sparse.merit import fb_phi, min_map
+
+    rng = np.random.default_rng(1)
+    n = 20
+    lb = np.where(rng.random(n) < 0.5, 0.0, -np.inf)
+    ub = np.where(rng.random(n) < 0.3, 1.0, np.inf)
+    seen = set()
+    for trial in range(400):
+        z = np.clip(rng.standard_normal(n), lb, ub)
+        f = rng.standard_normal(n) * 10.0 ** rng.uniform(-12, -5)
+        if trial % 50 == 0:
+            f[3] = np.nan
+        tol = 10.0 ** rng.uniform(-10, -4)
+        phi = fb_phi(z, f, lb, ub)
+        a = not float(np.sqrt(np.dot(phi, phi))) > tol
+        b = bool((np.abs(min_map(z, f, lb, ub)) <= tol).all())
+        seen.add((a, b))
+        assert residuals_small(z, f, lb, ub, tol) == (a and b)
+        assert residuals_small(z, f, lb, ub, tol, phi=phi) == (a and b)
+    assert len(seen) >= 3
