@@ -27,12 +27,13 @@ Two tests, both at the user's ``convergence_tolerance`` tol:
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 
-from ._merit_kernels import flat_step_kernel, min_map_within, scale_test_kernel
+from ._merit_kernels import (csc_is_canonical, flat_step_kernel, min_map_within,
+                             scale_test_kernel)
 from .merit import fb_jacobian_diagonals, fb_phi, min_map
 from .path import _floats
 from .scaling import scale_entries
@@ -49,6 +50,13 @@ class Verdict:
     small_residual: bool  #: test (1) passed
     flat_row: int = -1  #: when (1) passed but (2) failed: the row with the largest d_i / (1+|z_i|)
     step: float = 0.0  #: that row's d_i
+    #: of a verdict of :meth:`Acceptance.judge` on a scaled problem: whether it is the
+    #: verdict :func:`judge` gives on the user's problem at this point with the user's J
+    #: (read from the evaluator's memo), so that the solve's Result may take it instead of
+    #: judging again.  False when test (2) read J through the scaling (R^-1 (R J C) C^-1)
+    #: or J could not be evaluated there (judging again would ask the user once more).
+    #: (Not compared: two verdicts with the same findings are equal.)
+    reusable: bool = field(default=True, compare=False)
 
     def flat_message(self, row_label) -> str:
         return (f"the residual is below the tolerance only because F is flat: a Newton step "
@@ -59,6 +67,14 @@ class Verdict:
 def residuals_small(z, f, lb, ub, tol, phi=None) -> bool:
     """Test (1): both residuals at most tol (``phi``: fb_phi(z, f), when already known)."""
     if phi is None:
+        # The answer is the conjunction of the two tests; without Phi at hand the
+        # natural residual, one compiled pass without an array, is asked first, and
+        # away from a solution (most points asked) it alone says no.
+        if _floats(np.size(z), z, f, lb, ub):
+            if not min_map_within(z, f, lb, ub, float(tol)):
+                return False
+            phi = fb_phi(z, f, lb, ub)
+            return not float(np.sqrt(np.dot(phi, phi))) > tol
         phi = fb_phi(z, f, lb, ub)
     if float(np.sqrt(np.dot(phi, phi))) > tol:
         return False
@@ -92,7 +108,13 @@ def _scale_test(z, f, lb, ub, phi, J) -> Verdict:
     canonical CSC in one compiled pass (no sparse matrix built per solve)."""
     if not (sp.issparse(J) and J.format == "csc"):
         J = sp.csc_matrix(J)
-    if not J.has_canonical_format:
+    # canonical (the evaluator's J always is) by one compiled scan, where scipy's own
+    # test costs ~10 us on a matrix that does not carry its flag; a matrix it does not
+    # find canonical is asked the flag as before (a canonical one summed is unchanged)
+    if not ((J.indices.dtype == np.int32 or J.indices.dtype == np.int64)
+            and J.indptr.dtype == J.indices.dtype
+            and csc_is_canonical(J.indptr, J.indices, J.shape[0], J.indptr[-1])) \
+            and not J.has_canonical_format:
         J = J.copy()
         J.sum_duplicates()
     if _floats(np.size(z), z, f, lb, ub, phi) and J.data.dtype == np.float64:
@@ -133,9 +155,18 @@ class Acceptance:
     (z_user = col * z, F_user = f / row; see :mod:`compass_sparse.scaling`): the verdict is
     always on the user's problem, at the user's tolerance."""
 
-    def __init__(self, lb, ub, tol, row=None, col=None):
+    def __init__(self, lb, ub, tol, row=None, col=None, user_jac=None):
         self.lb, self.ub, self.tol = lb, ub, tol
         self.row, self.col = row, col
+        #: with a scaling: ``user_jac(z_user)``, the user's J at the user's point (None
+        #: when it cannot be evaluated), which the caller guarantees to be evaluated,
+        #: counted and rejected exactly as the ``jac`` handed to :meth:`judge` would be
+        #: (through the same evaluator's memo), while ``user_jac.applies()``.  The verdict
+        #: then reads the user's J itself, as the verdict on the user's problem (solve's
+        #: Result) does, instead of R^-1 (R J C) C^-1 -- the same entries unless a
+        #: power-of-two factor under- or overflowed -- and two scalings of J per verdict
+        #: are saved.
+        self.user_jac = user_jac
 
     def user_point(self, z, f):
         """(z, F) in the user's units."""
@@ -160,8 +191,19 @@ class Acceptance:
         zu, fu = self.user_point(z, f)
         if self.row is None:
             return judge(zu, fu, self.lb, self.ub, self.tol, jac=jac, phi=phi, small=small)
+        read = []  # whether J was asked for, and obtained
+        if jac is not None and self.user_jac is not None and self.user_jac.applies():
+            def direct(y):
+                J = self.user_jac(y)
+                read.append(J is not None)
+                return J
+
+            v = judge(zu, fu, self.lb, self.ub, self.tol, jac=direct, small=small)
+            v.reusable = all(read)
+            return v
 
         def user_jac(_):
+            read.append(False)
             J = jac(z)
             if J is None:
                 return J
@@ -169,5 +211,7 @@ class Acceptance:
             # products cost a small model ~0.5 ms per verdict
             return scale_entries(J, 1.0 / self.row, 1.0 / self.col)
 
-        return judge(zu, fu, self.lb, self.ub, self.tol,
-                     jac=None if jac is None else user_jac, small=small)
+        v = judge(zu, fu, self.lb, self.ub, self.tol,
+                  jac=None if jac is None else user_jac, small=small)
+        v.reusable = not read
+        return v

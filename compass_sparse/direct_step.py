@@ -37,12 +37,15 @@ check (:meth:`compass_sparse.path.PivotalPath._verify_solution`).
 """
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 import scipy.sparse as sp
 
 from ._csc import trusted_csc
+from ._eval_kernels import csc_same_pattern, free_block
 from ._jit import njit
-from ._merit_kernels import csc_is_canonical
+from ._merit_kernels import all_finite_kernel, csc_is_canonical
 from ._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
 from .basis.types import BasisOptions
 from .merit import max_abs
@@ -245,6 +248,13 @@ def reduced_system(M, free, z, q):
     sorted indices give sorted indices), in one compiled pass without scipy's slicing."""
     if not (sp.issparse(M) and M.format == "csc"):
         M = sp.csc_matrix(M)
+    z = np.asarray(z, dtype=float)
+    q = np.asarray(q, dtype=float)
+    if free.dtype == np.bool_:
+        # positions, arrays and pass in one compiled call (the same pass as below)
+        Kp, Ki, Kx, rhs, k = free_block(M.indptr, M.indices, M.data, free, z, q)
+        nf = rhs.shape[0]
+        return trusted_csc(Kx[:k], Ki[:k], Kp, (nf, nf)), rhs
     n = free.shape[0]
     nf = int(np.count_nonzero(free))
     pos = np.full(n, -1, dtype=np.int64)
@@ -254,8 +264,7 @@ def reduced_system(M, free, z, q):
     Ki = np.empty(nnz, dtype=np.int32)
     Kx = np.empty(nnz)
     rhs = np.empty(nf)
-    k = _free_block(M.indptr, M.indices, M.data, pos, np.asarray(z, dtype=float),
-                    np.asarray(q, dtype=float), Kp, Ki, Kx, rhs)
+    k = _free_block(M.indptr, M.indices, M.data, pos, z, q, Kp, Ki, Kx, rhs)
     return trusted_csc(Kx[:k], Ki[:k], Kp, (nf, nf)), rhs
 
 
@@ -289,11 +298,9 @@ class DirectFactors:
         """x with K x = rhs, or None when K is singular (as the factorization finds)."""
         if self.klu:
             return self._klu_solve(K, rhs)
-        from scipy.sparse.linalg import splu
-
         self.method = ("superlu", "colamd")
         try:
-            lu = splu(K, permc_spec="COLAMD")
+            lu = _superlu_colamd(K)
         except RuntimeError:  # exactly singular
             self.lu_nnz = 0
             return None
@@ -303,41 +310,187 @@ class DirectFactors:
 
     def _klu_solve(self, K, rhs):
         klu = _klu_module()
-        from kvxopt import matrix, spmatrix
+        from kvxopt import matrix
 
         self.method = ("klu", "btf+amd")
         h = self._held
         # (kvxopt keeps each column's entries sorted by row: new values can be copied in
         # only when K's are in that order too)
-        if (h is not None and np.array_equal(h[0], K.indptr)
-                and np.array_equal(h[1], K.indices)
-                and csc_is_canonical(K.indptr, K.indices, K.shape[0], K.nnz)):
+        if (h is not None and csc_same_pattern(K.indptr, K.indices, h[0], h[1])
+                and csc_is_canonical(K.indptr, K.indices, K.shape[0], K.indptr[-1])):
             # the block of the last step (the active set did not move): KLU's symbolic
             # analysis (BTF, AMD) depends on the pattern only, so it is kept; only the
             # values change (~40% of a factorization at n = 362 saved)
-            A, Fs = h[2], h[3]
-            A.V = matrix(K.data)
+            A, Fs, info = h[2], h[3], h[4]
+            A.V = matrix(K.data[:K.indptr[-1]])
         else:
-            n = K.shape[0]
-            cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(K.indptr))
-            A = spmatrix(matrix(K.data), matrix(K.indices.astype(np.int64)), matrix(cols),
-                         (n, n))
-            Fs = None
+            A, Fs, info = _klu_analysis(K)
+            if Fs is not None:
+                self._held = (K.indptr.copy(), K.indices[:K.indptr[-1]].copy(), A, Fs, info)
+                A.V = matrix(K.data[:K.indptr[-1]])
         try:
-            if Fs is None:
+            if Fs is None:  # a block that is not canonical: analysed for itself
                 Fs = klu.symbolic(A)
-                self._held = (K.indptr.copy(), K.indices.copy(), A, Fs)
             Fn = klu.numeric(A, Fs)
         except ArithmeticError:  # singular
             self.lu_nnz = 0
             return None
-        parts = klu.get_numeric(A, Fs, Fn)  # L, U, P, Q, R, F (copies: ~10 us at n = 1e3)
-        self.lu_nnz = len(parts[0]) + len(parts[1]) + len(parts[5])
+        self.lu_nnz = _klu_lu_nnz(A, Fs, Fn, info)
         if self.lu_nnz > KLU_FILL_LIMIT * max(K.nnz, 1):
             self.klu_allowed = self.klu = False
         b = matrix(np.ascontiguousarray(rhs, dtype=np.float64))
         klu.solve(A, Fs, Fn, b)
         return np.array(b, dtype=np.float64).ravel()
+
+
+def _superlu_colamd(K):
+    """``splu(K, permc_spec="COLAMD")``.  For the direct step's blocks (float64 data,
+    int32 canonical index arrays: nothing for splu to sum, cast or sort) the factorization
+    routine is called with splu's own arguments directly, without its wrapper's checks and
+    conversions (~15 us of a 0.15 ms factorization at n = 100): the same call, so the same
+    factors.  Anything else, or a scipy without that routine, goes through splu."""
+    from scipy.sparse.linalg import splu
+
+    gstrf = _superlu_gstrf()
+    n = K.shape[0]
+    if (gstrf is None or K.shape[1] != n or K.data.dtype != np.float64
+            or K.indices.dtype != np.int32 or K.indptr.dtype != np.int32
+            or not csc_is_canonical(K.indptr, K.indices, n, K.indptr[-1])):
+        return splu(K, permc_spec="COLAMD")
+    nnz = int(K.indptr[-1])
+    return gstrf(n, nnz, K.data[:nnz], K.indices[:nnz], K.indptr,
+                 csc_construct_func=_superlu_gstrf.csc_array, ilu=False,
+                 options=dict(DiagPivotThresh=None, ColPerm="COLAMD", PanelSize=None,
+                              Relax=None))
+
+
+def _superlu_gstrf():
+    """scipy's SuperLU factorization routine when its splu passes exactly the arguments
+    :func:`_superlu_colamd` passes (checked once from splu's signature and source), else
+    None."""
+    if not hasattr(_superlu_gstrf, "fn"):
+        _superlu_gstrf.fn = None
+        try:
+            import inspect
+
+            from scipy.sparse import csc_array
+            from scipy.sparse.linalg._dsolve import _superlu, linsolve
+
+            sig = inspect.signature(linsolve.splu)
+            src = inspect.getsource(linsolve.splu)
+            defaults = {k: sig.parameters[k].default for k in
+                        ("permc_spec", "diag_pivot_thresh", "relax", "panel_size", "options")}
+            if (defaults == dict(permc_spec=None, diag_pivot_thresh=None, relax=None,
+                                 panel_size=None, options=None)
+                    and "_options = dict(DiagPivotThresh=diag_pivot_thresh, "
+                        "ColPerm=permc_spec,\n                    PanelSize=panel_size, "
+                        "Relax=relax)" in src
+                    and "return _superlu.gstrf(N, A.nnz, A.data, indices, indptr,\n"
+                        "                          csc_construct_func=csc_construct_func,\n"
+                        "                          ilu=False, options=_options)" in src):
+                _superlu_gstrf.fn = _superlu.gstrf
+                _superlu_gstrf.csc_array = csc_array
+        except Exception:  # pragma: no cover - another scipy: splu itself
+            _superlu_gstrf.fn = None
+    return _superlu_gstrf.fn
+
+
+_KLU_CACHE: list = []
+"""KLU analyses of recent block patterns, newest last: (indptr, indices, kvxopt matrix
+holding the pattern, symbolic factorization).  A loop of solves of one model meets the
+same M_FF patterns in every solve; the analysis (BTF, AMD, ~0.25 ms at n = 992) and the
+kvxopt matrix (~0.1 ms) depend on the pattern alone and are made once.  Entries are
+found by exact comparison of the index arrays, never by a hash; the cached matrix is a
+template that is never handed out (each solve gets its own copy to write values into) and
+the symbolic object is only read by KLU's factorization and solve."""
+
+_KLU_LOCK = threading.Lock()
+
+KLU_CACHE_SIZE = 8
+"""Patterns kept in :data:`_KLU_CACHE`."""
+
+
+def _klu_analysis(K):
+    """(kvxopt matrix with K's pattern, KLU symbolic analysis of it, [entries of the
+    off-diagonal blocks, once known]) from the cache or made and cached; (matrix, None,
+    [None]) for a K that is not canonical (kvxopt sorts the entries it is given: the
+    values of such a K could not be copied in later), whose analysis the caller makes
+    and does not keep."""
+    from kvxopt import matrix, spmatrix
+
+    with _KLU_LOCK:  # (solves in several threads share the cache)
+        for i in range(len(_KLU_CACHE) - 1, -1, -1):
+            e = _KLU_CACHE[i]
+            if csc_same_pattern(K.indptr, K.indices, e[0], e[1]):
+                if i != len(_KLU_CACHE) - 1:
+                    _KLU_CACHE.append(_KLU_CACHE.pop(i))
+                return +e[2], e[3], e[4]  # unary plus: a copy of the template
+    n = K.shape[0]
+    nnz = int(K.indptr[-1])
+    cols = np.repeat(np.arange(n, dtype=np.int64), np.diff(K.indptr))
+    A = spmatrix(matrix(K.data[:nnz]), matrix(K.indices[:nnz].astype(np.int64)), matrix(cols),
+                 (n, n))
+    if not csc_is_canonical(K.indptr, K.indices, n, nnz):
+        return A, None, [None]
+    Fs = _klu_module().symbolic(A)
+    info = [None]
+    with _KLU_LOCK:
+        _KLU_CACHE.append((K.indptr.copy(), K.indices[:nnz].copy(), +A, Fs, info))
+        if len(_KLU_CACHE) > KLU_CACHE_SIZE:
+            _KLU_CACHE.pop(0)
+    return A, Fs, info
+
+
+def _klu_lu_nnz(A, Fs, Fn, info):
+    """nnz(L) + nnz(U) + nnz(off-diagonal blocks) of a KLU factorization.  kvxopt gives
+    them only as copies of the factors (get_numeric: ~40 us at n = 992, twice per solve);
+    the first two are the leading counts of KLU's numeric object (n, nblocks, lnz, unz:
+    its layout since KLU 1.0), read there, the third is fixed by the symbolic analysis
+    (the pattern's block triangular form) and kept in ``info`` from the first
+    factorization of the pattern.  Every get_numeric made checks the counts read against
+    the factors' own; a mismatch (another layout) turns the reading off for good."""
+    counts = _klu_counts(Fn) if info[0] is not None else None
+    if counts is not None:
+        return counts[0] + counts[1] + info[0]
+    parts = _klu_module().get_numeric(A, Fs, Fn)  # L, U, P, Q, R, F, r (copies)
+    nnz_l, nnz_u, nnz_off = len(parts[0]), len(parts[1]), len(parts[5])
+    read = _klu_counts(Fn)
+    if read is not None and read != (nnz_l, nnz_u):
+        _KLU_COUNTS[:] = [None]  # not the layout assumed
+    elif read is not None:
+        info[0] = nnz_off
+    return nnz_l + nnz_u + nnz_off
+
+
+_KLU_COUNTS: list = []
+"""[PyCapsule_GetPointer] once the counts of KLU's numeric object may be read, [None]
+when they may not (empty until first asked)."""
+
+
+def _klu_counts(Fn):
+    """(lnz, unz) of a kvxopt KLU numeric factorization (int64 fields 2 and 3 of the
+    struct its capsule holds), or None when they cannot be read."""
+    if not _KLU_COUNTS:
+        try:
+            import ctypes
+
+            get = ctypes.pythonapi.PyCapsule_GetPointer
+            get.restype = ctypes.c_void_p
+            get.argtypes = [ctypes.py_object, ctypes.c_char_p]
+            _KLU_COUNTS[:] = [(get, ctypes.c_int64 * 4)]
+        except Exception:  # pragma: no cover - no ctypes: the factors' copies
+            _KLU_COUNTS[:] = [None]
+    st = _KLU_COUNTS[0]
+    if st is None:
+        return None
+    try:
+        ptr = st[0](Fn, b"KLU NUM D FACTOR")
+    except Exception:  # another capsule (name): not the object assumed
+        return None
+    if not ptr:
+        return None
+    head = st[1].from_address(ptr)
+    return int(head[2]), int(head[3])
 
 
 KLU_FROM_FILL = 4.0
@@ -349,12 +502,19 @@ KLU_FILL_LIMIT = 8.0
 to SuperLU for the rest of the solve."""
 
 
+_KLU_MODULE: list = []
+"""[kvxopt's klu module, or None without kvxopt] once looked up (an import statement
+costs a few microseconds at every factorization)."""
+
+
 def _klu_module():
-    try:
-        from kvxopt import klu
-    except ImportError:  # pragma: no cover - kvxopt is a dependency
-        return None
-    return klu
+    if not _KLU_MODULE:
+        try:
+            from kvxopt import klu
+        except ImportError:  # pragma: no cover - kvxopt is a dependency
+            klu = None
+        _KLU_MODULE.append(klu)
+    return _KLU_MODULE[0]
 
 
 def direct_step(M, q, lb, ub, z, basic, factors: DirectFactors | None = None):
@@ -382,7 +542,7 @@ def direct_step(M, q, lb, ub, z, basic, factors: DirectFactors | None = None):
         nnz_lu = factors.lu_nnz
         if zf is None:  # exactly singular: the path's rank repair decides
             return None, nnz_lu
-        if not np.all(np.isfinite(zf)):
+        if not all_finite_kernel(np.ascontiguousarray(zf, dtype=np.float64)):
             return None, nnz_lu
         zt[free] = zf
     res, mz = _end_point(M.indptr, M.indices, M.data, q, lb, ub, basic.astype(np.int64), zt,

@@ -44,7 +44,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._csc import trusted_csc
-from ._merit_kernels import all_finite_kernel, has_nan_kernel, memo_key_kernel
+from ._eval_kernels import csc_copy_on_pattern
+from ._merit_kernels import all_finite_kernel, csc_is_canonical, has_nan_kernel, memo_key_kernel
 from .exceptions import (CompassError, EvaluationError, JacobianPatternError, ProblemError,
                          ShapeError)
 
@@ -90,8 +91,6 @@ def canonical_csc(J, n: int) -> sp.csc_matrix:
             raise ShapeError(f"the Jacobian has shape {J.shape}, expected ({n}, {n})")
         if (J.format == "csc" and J.data.dtype == np.float64
                 and J.indices.dtype == np.int32 and J.indptr.dtype == np.int32):
-            from ._merit_kernels import csc_is_canonical
-
             nnz = J.indptr[-1]
             if csc_is_canonical(J.indptr, J.indices, n, nnz):
                 # already canonical (the common case): copies of its arrays, without
@@ -345,6 +344,25 @@ class Evaluator:
         """A Jacobian returned earlier, on the current pattern (which may have grown)."""
         return self._fix_pattern(canonical_csc(J, self.n))
 
+    def _user_J_on_pattern(self, J) -> sp.csc_matrix:
+        """A J the user returned, checked, copied and on the pattern:
+        ``_fix_pattern(canonical_csc(J, n))``.  The common case -- a float64 CSC with int32
+        index arrays holding exactly the stored pattern (canonical: so is J then) -- is
+        recognised and copied in one compiled pass, where the general route (canonical
+        test, three copies, two array comparisons) costs ~20 us per evaluation of a small
+        model; it gives that route's matrix: J's values on the pattern's index arrays,
+        which are J's own."""
+        P = self._pattern
+        n = self.n
+        if (P is not None and sp.issparse(J) and J.format == "csc" and J.shape == (n, n)
+                and J.data.dtype == np.float64 and J.indices.dtype == np.int32
+                and J.indptr.dtype == np.int32 and P.indices.dtype == np.int32
+                and P.indptr.dtype == np.int32):
+            data = np.empty(P.indices.shape[0])
+            if csc_copy_on_pattern(J.indptr, J.indices, J.data, P.indptr, P.indices, data):
+                return trusted_csc(data, P.indices.copy(), P.indptr.copy(), (n, n))
+        return self._fix_pattern(canonical_csc(J, n))
+
     def _set_constant_mask(self):
         spec = self._constant_spec
         if spec is None or self._pattern is None:
@@ -386,7 +404,7 @@ class Evaluator:
         if not (f.__class__ is np.ndarray and f.dtype is _F64 and f.shape == (self.n,)):
             f = self._as_values(f)
         if J is not None:
-            J = self._fix_pattern(canonical_csc(J, self.n))
+            J = self._user_J_on_pattern(J)
         return f, J
 
     def _as_values(self, f):
@@ -407,7 +425,7 @@ class Evaluator:
         """J from one call of the user's jac callable."""
         self.counters.njev += 1
         J = self._user_jac(np.array(x, dtype=float, copy=True))
-        return self._fix_pattern(canonical_csc(J, self.n))
+        return self._user_J_on_pattern(J)
 
     def _fd_jacobian(self, x, f):
         """Forward differences on the pattern, one F call per colour of columns."""

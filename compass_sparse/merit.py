@@ -32,6 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from ._eval_kernels import top_abs_distinct
 from ._merit_kernels import (csc_rmatvec, fb_diagonals_kernel, fb_phi_kernel,
                              max_abs_kernel, normal_map_kernel,
                              residual_maxima_kernel)
@@ -310,8 +311,13 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5,
         # every row is listed (small problems): one sort, no partition first
         idx = np.argsort(-aphi, kind="stable")  # ties: the lower row first
     else:
-        idx = np.argpartition(-aphi, k - 1)[:k] if k > 0 else np.array([], dtype=int)
-        idx = idx[np.argsort(-aphi[idx])]
+        idx = np.empty(k, dtype=np.int64)
+        # the k largest in one compiled pass when they are distinct (then the answer is
+        # unique, the partition and sort below give it too); ties keep numpy's order
+        if not (k > 0 and phi.__class__ is np.ndarray and phi.ndim == 1
+                and phi.dtype is _F64 and top_abs_distinct(phi, idx)):
+            idx = np.argpartition(-aphi, k - 1)[:k] if k > 0 else np.array([], dtype=int)
+            idx = idx[np.argsort(-aphi[idx])]
     if names is None:
         label = lambda i: f"F[{i}]"  # noqa: E731
     elif callable(names):

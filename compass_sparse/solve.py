@@ -384,11 +384,14 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
         return _finish(problem, pre, status, msg, z0, opt, t0, passes,
                        f_reduced=f0, start_z=problem.x0, basis=basis)
     sc, passes["scaling"] = _scaling_pass(J0, opt)
-    acceptance = Acceptance(work.lb, work.ub, opt.convergence_tolerance,
-                            *((sc.row, sc.col) if sc is not None else ()))
     inner = work
+    user_jac = None
     if sc is not None:  # the solver works in the scaled units
         inner = scale_problem(work, sc)
+        user_jac = _UserJacobian(work.evaluator, inner.evaluator, sc)
+    acceptance = Acceptance(work.lb, work.ub, opt.convergence_tolerance,
+                            *((sc.row, sc.col) if sc is not None else ()), user_jac=user_jac)
+    if sc is not None:
         z0, f0, J0 = z0 / sc.col, sc.row * f0, sc.scale_jacobian(J0)
         phi0 = fb_phi(z0, f0, inner.lb, inner.ub)
     solver = NMSSolver(inner, opt, manager_factory=_manager_factory(opt, deadline),
@@ -416,6 +419,10 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
     # the verdict stands for the Result.
     same = pre is None and sc is None
     verdict = out.verdict if same else None
+    if pre is None and sc is not None and out.verdict is not None and out.verdict.reusable:
+        # taken on the user's problem at the user's point (zb, fb: the same products as
+        # the verdict's) with the user's J: what judging again would find
+        verdict = out.verdict
     res = _finish(problem, pre, out.status, out.message, zb, opt, t0, passes,
                   start_z=problem.x0, verdict=verdict, phi=out.best.phi if same else None,
                   f_reduced=fb, nit=out.nit, minor_iterations=out.minor,
@@ -427,6 +434,41 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
     if opt.verbosity >= 1:
         logger.info(res.summary())
     return res
+
+
+class _UserJacobian:
+    """The user's J at a user's point z = C y, for the verdicts of a scaled solve
+    (:class:`~compass_sparse.acceptance.Acceptance`): evaluated, counted and rejected
+    exactly as the scaled evaluator's guarded ``jac(y)`` would do it -- the parent's J at
+    C y (one memo, one count), an exception or a non-finite entry of R J C (tested
+    without building it) rejected on the scaled evaluator -- but returned unscaled.
+    Applies while the scaled evaluator shares the parent's pattern object (it does not
+    check J against a pattern of its own) and J is not taken by differences on the
+    scaled problem."""
+
+    __slots__ = ("parent", "scaled", "row", "col")
+
+    def __init__(self, parent, scaled, sc):
+        self.parent, self.scaled = parent, scaled
+        self.row, self.col = sc.row, sc.col
+
+    def applies(self) -> bool:
+        s = self.scaled
+        return s.jac_mode is not None and s.pattern_ref is not None and \
+            s.pattern_ref is self.parent.pattern_ref
+
+    def __call__(self, zu):
+        from ._eval_kernels import csc_scaled_all_finite
+
+        try:
+            J = self.parent.J(zu)
+        except (CompassError, KeyboardInterrupt):
+            raise
+        except Exception as exc:  # as the scaled evaluator's guarded jac
+            return self.scaled._reject(repr(exc))
+        if not csc_scaled_all_finite(J.indptr, J.indices, J.data, self.row, self.col):
+            return self.scaled._reject("J returned NaN/Inf")
+        return J
 
 
 def _history(solver, out, phi0):

@@ -108,9 +108,7 @@ def test_residual_tolerance_from_both_sides(monkeypatch, rel, accepted):
     """An end point is returned only when it satisfies M z + q - w + v = 0 to
     RESIDUAL_TOLERANCE relative to 1 + max|M z| + max|q|: an inaccurate solve (simulated by
     perturbing the factor's solution) beyond it is declined."""
-    import scipy.sparse.linalg as sla
-
-    real = sla.splu
+    real = ds._superlu_colamd
 
     class Inaccurate:
         def __init__(self, lu):
@@ -120,7 +118,7 @@ def test_residual_tolerance_from_both_sides(monkeypatch, rel, accepted):
             x = self.lu.solve(b)
             return x * (1.0 + rel)
 
-    monkeypatch.setattr(sla, "splu", lambda K, **kw: Inaccurate(real(K, **kw)))
+    monkeypatch.setattr(ds, "_superlu_colamd", lambda K: Inaccurate(real(K)))
     rng = np.random.default_rng(0)
     n = 60
     M = sp.random(n, n, density=0.05, random_state=1, format="csc") + 4.0 * sp.identity(n)
@@ -266,6 +264,7 @@ def test_klu_keeps_its_symbolic_analysis_for_a_block_of_the_same_pattern(monkeyp
     calls = []
     real = klu.symbolic
     monkeypatch.setattr(klu, "symbolic", lambda A: calls.append(1) or real(A))
+    monkeypatch.setattr(ds, "_KLU_CACHE", [])  # no analysis kept from another test
     f = ds.DirectFactors(klu=True)
     K, b = _random_block(200, 0.01, seed=4)
     f.solve(K, b)
@@ -295,6 +294,95 @@ def test_klu_reuse_needs_row_sorted_columns():
     f._held = (U.indptr.copy(), U.indices.copy()) + f._held[2:]
     x = f.solve(U, b)
     np.testing.assert_allclose(U.toarray() @ x, b, atol=1e-12)
+
+
+def test_klu_analysis_is_cached_across_solves_with_the_same_bits(monkeypatch):
+    """A later solve (a new DirectFactors) meeting a block pattern seen before takes the
+    cached analysis: no new symbolic analysis, the same bits as a fresh analysis, the
+    cached template untouched by the values written into its copy; the cache is bounded
+    and finds patterns by their index arrays only."""
+    from kvxopt import klu
+
+    monkeypatch.setattr(ds, "_KLU_CACHE", [])
+    K, b = _random_block(200, 0.01, seed=7)
+    fresh = ds.DirectFactors(klu=True).solve(K, b)
+    calls = []
+    real = klu.symbolic
+    monkeypatch.setattr(klu, "symbolic", lambda A: calls.append(1) or real(A))
+    template = np.array(ds._KLU_CACHE[-1][2].V).ravel().copy()
+    K2 = K.copy()
+    K2.data = K2.data * np.linspace(0.5, 2.0, K2.nnz)
+    x2 = ds.DirectFactors(klu=True).solve(K2, b)
+    x = ds.DirectFactors(klu=True).solve(K, b)
+    assert calls == [] and np.array_equal(x, fresh)
+    assert np.array_equal(np.array(ds._KLU_CACHE[-1][2].V).ravel(), template)
+    monkeypatch.setattr(ds, "_KLU_CACHE", [])
+    assert np.array_equal(ds.DirectFactors(klu=True).solve(K2, b), x2)  # fresh analysis
+    assert len(calls) == 1
+    for seed in range(ds.KLU_CACHE_SIZE + 3):
+        Ks, bs = _random_block(50, 0.05, seed=100 + seed)
+        ds.DirectFactors(klu=True).solve(Ks, bs)
+    assert len(ds._KLU_CACHE) == ds.KLU_CACHE_SIZE
+
+
+def test_superlu_direct_call_is_splu():
+    """The direct step's SuperLU call gives splu's factors and solution bit for bit; a
+    block splu would have to sort or sum goes through splu itself."""
+    from scipy.sparse.linalg import splu
+
+    assert ds._superlu_gstrf() is not None  # this scipy: the direct call is taken
+    for n, density in [(60, 0.05), (300, 0.01)]:
+        K, b = _random_block(n, density, seed=n + 1)
+        K = ds.trusted_csc(K.data.copy(), K.indices.astype(np.int32),
+                           K.indptr.astype(np.int32), K.shape)
+        a, r = ds._superlu_colamd(K), splu(K, permc_spec="COLAMD")
+        for attr in ("perm_r", "perm_c"):
+            assert np.array_equal(getattr(a, attr), getattr(r, attr))
+        for attr in ("L", "U"):
+            A, R = getattr(a, attr), getattr(r, attr)
+            assert (np.array_equal(A.indptr, R.indptr) and np.array_equal(A.indices, R.indices)
+                    and np.array_equal(A.data, R.data))
+        assert np.array_equal(a.solve(b), r.solve(b))
+    U = sp.csc_matrix((np.array([1.0, 5.0, 1.0, 3.0, 1.0, 2.0]),
+                       np.array([1, 0, 0, 1, 2, 2], dtype=np.int32),
+                       np.array([0, 2, 4, 6], dtype=np.int32)), shape=(3, 3))
+    x = ds._superlu_colamd(U.copy()).solve(np.ones(3))
+    assert np.array_equal(x, splu(U.copy(), permc_spec="COLAMD").solve(np.ones(3)))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_reduced_system_compiled_pass_is_the_general_one(seed):
+    """The one-call compiled M_FF (a boolean ``free``) has the bits of the general pass
+    (positions and arrays made outside it, ``free`` as indices)."""
+    rng = np.random.default_rng(seed)
+    n = 80
+    M = sp.csc_matrix(sp.random(n, n, density=0.06, random_state=seed) + sp.eye(n))
+    free = rng.random(n) < 0.6
+    z, q = rng.standard_normal(n), rng.standard_normal(n)
+    K, rhs = ds.reduced_system(M, free, z, q)
+    K2, rhs2 = _reduced_system_general(M, free, z, q)
+    assert np.array_equal(rhs, rhs2)
+    for a in ("indptr", "indices", "data"):
+        assert np.array_equal(getattr(K, a), getattr(K2, a))
+        assert getattr(K, a).dtype == getattr(K2, a).dtype
+    assert K.shape == K2.shape
+    none = np.zeros(n, dtype=bool)
+    K0, r0 = ds.reduced_system(M, none, z, q)
+    assert K0.shape == (0, 0) and r0.size == 0
+
+
+def _reduced_system_general(M, free, z, q):
+    n = free.shape[0]
+    nf = int(np.count_nonzero(free))
+    pos = np.full(n, -1, dtype=np.int64)
+    pos[free] = np.arange(nf, dtype=np.int64)
+    nnz = M.indptr[-1]
+    Kp = np.zeros(nf + 1, dtype=np.int32)
+    Ki = np.empty(nnz, dtype=np.int32)
+    Kx = np.empty(nnz)
+    rhs = np.empty(nf)
+    k = ds._free_block(M.indptr, M.indices, M.data, pos, z, q, Kp, Ki, Kx, rhs)
+    return ds.trusted_csc(Kx[:k], Ki[:k], Kp, (nf, nf)), rhs
 
 
 # ----------------------------------------------------------------- the dense direct step
@@ -367,3 +455,37 @@ def test_dense_direct_step_does_not_run_off_a_flat_tail_of_mathiesen():
     r = solve_mcp(p.F, p.J, p.lb, p.ub, p.x0, options={"convergence_tolerance": 1e-6})
     assert r.success
     assert p.distance_to_solutions(r.x) <= 1e-4
+
+
+def test_klu_lu_size_read_from_the_factorization_is_the_factors_size(monkeypatch):
+    """nnz(L) + nnz(U) + nnz(off-diagonal blocks) read from KLU's numeric object and the
+    pattern's analysis is the size of the factors kvxopt copies out, over blocks whose
+    values change the pivoting; after a mismatch the factors are counted again."""
+    from kvxopt import klu, matrix
+
+    monkeypatch.setattr(ds, "_KLU_CACHE", [])
+    real = klu.get_numeric
+    copies = []
+    monkeypatch.setattr(klu, "get_numeric", lambda *a: copies.append(1) or real(*a))
+    rng = np.random.default_rng(3)
+    for seed in range(6):
+        K, b = _random_block(120, 0.03, seed=200 + seed)
+        for trial in range(3):
+            Kt = K.copy()
+            Kt.data = Kt.data * rng.uniform(0.01, 100.0, Kt.nnz)  # other pivots
+            f = ds.DirectFactors(klu=True)
+            f.solve(Kt, b)
+            A, Fs, info = ds._klu_analysis(Kt)
+            A.V = matrix(Kt.data)
+            parts = real(A, Fs, klu.numeric(A, Fs))
+            assert f.lu_nnz == len(parts[0]) + len(parts[1]) + len(parts[5])
+    assert len(copies) == 6  # one copy per pattern, at its first factorization
+    monkeypatch.setattr(ds, "_KLU_COUNTS", [])  # (the switch turned off below is this one)
+    real_counts = ds._klu_counts
+    monkeypatch.setattr(ds, "_klu_counts", lambda Fn: real_counts(Fn) and (0, 0))  # another layout
+    monkeypatch.setattr(ds, "_KLU_CACHE", [])
+    f = ds.DirectFactors(klu=True)
+    K, b = _random_block(120, 0.03, seed=200)
+    f.solve(K, b)
+    f.solve(K, b)
+    assert len(copies) == 8 and f.lu_nnz > 0 and ds._KLU_COUNTS == [None]

@@ -229,3 +229,68 @@ def test_canonical_csc_fast_path_matches_scipys_canonical_form(case):
     assert np.array_equal(C.data, ref.data)
     assert C.data is not J.data and C.indices is not J.indices
     assert not csc_is_canonical(np.array([0, 1], np.int32), np.array([7], np.int32), 5, 1)
+
+
+@pytest.mark.parametrize("case", ["same", "unsorted", "duplicates", "missing", "int64",
+                                  "longer_arrays", "csc_array", "coo"])
+def test_user_jacobian_on_the_pattern_fast_path_is_the_general_route(case):
+    """A J the user returns holding exactly the stored pattern is copied in one compiled
+    pass; any other form takes canonical_csc and _fix_pattern.  Either way the evaluator
+    hands out the general route's matrix (same index arrays and values, bit for bit),
+    which owns its arrays (neither the user's nor the pattern's)."""
+    from compass_sparse.evaluation import canonical_csc
+
+    n = 5
+    indptr = np.array([0, 2, 3, 3, 5, 6], dtype=np.int32)
+    indices = np.array([0, 3, 1, 2, 4, 0], dtype=np.int32)
+    P = sp.csc_matrix((np.ones(6), indices.copy(), indptr.copy()), shape=(n, n))
+    ev = Evaluator(lambda x: np.zeros(n), None, n, pattern=P)
+    data = np.arange(1.0, 7.0)
+    J = sp.csc_matrix((data.copy(), indices.copy(), indptr.copy()), shape=(n, n))
+    if case == "unsorted":
+        J.indices[[0, 1]] = J.indices[[1, 0]]
+        J.data[[0, 1]] = J.data[[1, 0]]
+    elif case == "duplicates":  # (2, 3) given as two parts
+        J = sp.csc_matrix((np.array([1.0, 2.0, 3.0, 4.0, 0.5, 5.0, 6.0]),
+                           np.array([0, 3, 1, 2, 2, 4, 0], np.int32),
+                           np.array([0, 2, 3, 3, 6, 7], np.int32)), shape=(n, n))
+    elif case == "missing":
+        J = sp.csc_matrix((np.array([1.0, 2.0, 4.0, 5.0, 6.0]),
+                           np.array([0, 3, 2, 4, 0], np.int32),
+                           np.array([0, 2, 2, 2, 4, 5], np.int32)), shape=(n, n))
+    elif case == "int64":
+        J.indices, J.indptr = J.indices.astype(np.int64), J.indptr.astype(np.int64)
+    elif case == "longer_arrays":  # room beyond nnz, as scipy may leave after pruning
+        J.indices = np.concatenate([J.indices, np.array([4, 4], np.int32)])
+        J.data = np.concatenate([J.data, [9.0, 9.0]])
+    elif case == "csc_array":
+        J = sp.csc_array(J)
+    elif case == "coo":
+        J = J.tocoo()
+    ref = ev._fix_pattern(canonical_csc(J, n))
+    got = ev._user_J_on_pattern(J)
+    for a in ("indptr", "indices", "data"):
+        assert np.array_equal(getattr(got, a), getattr(ref, a)), a
+        assert getattr(got, a).dtype == getattr(ref, a).dtype
+        assert getattr(got, a) is not getattr(ev.pattern_ref, a)
+    if sp.issparse(J) and J.format == "csc":
+        assert got.data is not J.data and got.indices is not J.indices
+    assert got.has_canonical_format and got.shape == (n, n)
+    ev2 = Evaluator(lambda x: np.zeros(n), lambda x: J, n, pattern=P)
+    assert np.array_equal(ev2.J(np.zeros(n)).toarray(), ref.toarray())
+
+
+def test_user_jacobian_outside_a_declared_pattern_still_raises():
+    """The fast path only takes a J with exactly the pattern: an entry outside a declared
+    pattern still raises, an undeclared pattern still grows."""
+    n = 3
+    P = sp.csc_matrix(np.eye(n))
+    J = sp.csc_matrix(np.array([[1.0, 2.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]))
+    ev = Evaluator(lambda x: np.zeros(n), lambda x: J, n, pattern=P)
+    with pytest.raises(JacobianPatternError):
+        ev.J(np.zeros(n))
+    Js = [sp.csc_matrix(np.eye(n)), J]
+    ev = Evaluator(lambda x: np.zeros(n), lambda x: Js.pop(0), n)
+    ev.J(np.zeros(n))
+    assert np.array_equal(ev.J(np.ones(n)).toarray(), J.toarray())
+    assert ev.pattern_growths == 1

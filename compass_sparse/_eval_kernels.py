@@ -1,0 +1,141 @@
+"""Compiled helpers of the evaluation layer and of the direct Newton step: the checks and
+copies that every Jacobian evaluation and every sparse direct step of a small problem
+makes, each in one pass instead of several array operations (a few microseconds each,
+asked several times per major iteration)."""
+import numpy as np
+
+from ._jit import njit
+
+
+@njit(cache=True)
+def csc_copy_on_pattern(indptr, indices, data, pindptr, pindices, out):
+    """Whether the CSC index arrays (indptr, indices) are exactly the pattern (pindptr,
+    pindices) -- the same column pointers and, in the nnz = pindptr[-1] first places, the
+    same row indices -- and if so, data[:nnz] copied into ``out`` (length nnz).  A pattern
+    that is canonical (sorted, duplicate-free) makes an equal matrix canonical too."""
+    m = pindptr.shape[0]
+    if indptr.shape[0] != m:
+        return False
+    for j in range(m):
+        if indptr[j] != pindptr[j]:
+            return False
+    nnz = pindices.shape[0]
+    if indptr[m - 1] != nnz or indices.shape[0] < nnz or data.shape[0] < nnz:
+        return False
+    for k in range(nnz):
+        if indices[k] != pindices[k]:
+            return False
+    for k in range(nnz):
+        out[k] = data[k]
+    return True
+
+
+@njit(cache=True)
+def csc_same_pattern(indptr, indices, pindptr, pindices):
+    """Whether two CSC index arrays hold the same pattern (pointers equal, the nnz first
+    row indices equal; nnz = pindptr[-1] = len(pindices))."""
+    m = pindptr.shape[0]
+    if indptr.shape[0] != m:
+        return False
+    for j in range(m):
+        if indptr[j] != pindptr[j]:
+            return False
+    nnz = pindices.shape[0]
+    if indptr[m - 1] != nnz or indices.shape[0] < nnz:
+        return False
+    for k in range(nnz):
+        if indices[k] != pindices[k]:
+            return False
+    return True
+
+
+@njit(cache=True)
+def free_block(indptr, indices, data, free, z, q):
+    """(Kp, Ki, Kx, rhs, nnz) of M_FF (CSC, int32 index arrays with room for nnz(M)) and
+    rhs = -(q + M_FN z_N)_F for the indices F where ``free`` is True: the positions in F,
+    the arrays and the pass of :func:`compass_sparse.direct_step._free_block` in one
+    call (same operations in the same order, so the same bits)."""
+    n = free.shape[0]
+    pos = np.empty(n, dtype=np.int64)
+    nf = 0
+    for i in range(n):
+        if free[i]:
+            pos[i] = nf
+            nf += 1
+        else:
+            pos[i] = -1
+    nnz = indptr[n]
+    Kp = np.zeros(nf + 1, dtype=np.int32)
+    Ki = np.empty(nnz, dtype=np.int32)
+    Kx = np.empty(nnz)
+    rhs = np.empty(nf)
+    for i in range(n):
+        if pos[i] >= 0:
+            rhs[pos[i]] = -q[i]
+    k = 0
+    for j in range(n):
+        pj = pos[j]
+        for e in range(indptr[j], indptr[j + 1]):
+            pi = pos[indices[e]]
+            if pi < 0:
+                continue
+            if pj >= 0:
+                Ki[k] = pi
+                Kx[k] = data[e]
+                k += 1
+            else:
+                rhs[pi] -= data[e] * z[j]
+        if pj >= 0:
+            Kp[pj + 1] = k
+    return Kp, Ki, Kx, rhs, k
+
+
+@njit(cache=True)
+def csc_scaled_all_finite(indptr, indices, data, row, col):
+    """Whether every stored entry of diag(row) J diag(col), computed as the scaling's
+    kernel computes it ((a_ij row_i) col_j), is finite -- without building it."""
+    for j in range(indptr.shape[0] - 1):
+        for k in range(indptr[j], indptr[j + 1]):
+            if not np.isfinite(data[k] * row[indices[k]] * col[j]):
+                return False
+    return True
+
+
+@njit(cache=True)
+def top_abs_distinct(v, idx):
+    """The indices of the k = len(idx) largest |v_i|, largest first, into idx, when that
+    answer is unique: the k largest values distinct and the k-th larger than the next
+    (ties are ordered by the caller's own sort instead, which this pass need not
+    imitate).  Returns False (idx undefined) on a tie, a NaN, or k > len(v)."""
+    k = idx.shape[0]
+    n = v.shape[0]
+    if k == 0 or k > n:
+        return False
+    vals = np.empty(k + 1)
+    ids = np.empty(k + 1, dtype=np.int64)
+    cnt = 0
+    for i in range(n):
+        a = abs(v[i])
+        if a != a:  # NaN
+            return False
+        if cnt == k + 1 and not a > vals[k]:
+            continue
+        # insertion into the descending list (the last entry drops when it is full)
+        p = cnt if cnt < k + 1 else k
+        while p > 0 and vals[p - 1] < a:
+            if p < k + 1:
+                vals[p] = vals[p - 1]
+                ids[p] = ids[p - 1]
+            p -= 1
+        vals[p] = a
+        ids[p] = i
+        if cnt < k + 1:
+            cnt += 1
+    for j in range(1, k):
+        if not vals[j - 1] > vals[j]:
+            return False
+    if cnt > k and not vals[k - 1] > vals[k]:
+        return False
+    for j in range(k):
+        idx[j] = ids[j]
+    return True
