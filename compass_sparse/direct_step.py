@@ -409,6 +409,11 @@ _KLU_LOCK = threading.Lock()
 KLU_CACHE_SIZE = 8
 """Patterns kept in :data:`_KLU_CACHE`."""
 
+KLU_CACHE_MAX_NNZ = 200_000
+"""Largest block (stored entries) whose analysis is kept: the cache lives as long as the
+process, and eight analyses of blocks this size hold ~30 MB; larger blocks are analysed
+for their own solve only (their factorization dwarfs the analysis anyway)."""
+
 
 def _klu_analysis(K):
     """(kvxopt matrix with K's pattern, KLU symbolic analysis of it, [entries of the
@@ -434,6 +439,8 @@ def _klu_analysis(K):
         return A, None, [None]
     Fs = _klu_module().symbolic(A)
     info = [None]
+    if nnz > KLU_CACHE_MAX_NNZ:
+        return A, Fs, info
     with _KLU_LOCK:
         _KLU_CACHE.append((K.indptr.copy(), K.indices[:nnz].copy(), +A, Fs, info))
         if len(_KLU_CACHE) > KLU_CACHE_SIZE:

@@ -325,6 +325,20 @@ def test_klu_analysis_is_cached_across_solves_with_the_same_bits(monkeypatch):
     assert len(ds._KLU_CACHE) == ds.KLU_CACHE_SIZE
 
 
+def test_klu_analysis_of_a_block_above_the_cache_limit_is_not_kept(monkeypatch):
+    """The process-wide cache keeps no analysis of a block larger than KLU_CACHE_MAX_NNZ
+    (memory held for the life of the process); such a block still solves."""
+    monkeypatch.setattr(ds, "_KLU_CACHE", [])
+    K, b = _random_block(200, 0.01, seed=7)
+    monkeypatch.setattr(ds, "KLU_CACHE_MAX_NNZ", K.nnz - 1)
+    x = ds.DirectFactors(klu=True).solve(K, b)
+    assert ds._KLU_CACHE == []
+    np.testing.assert_allclose(K @ x, b, rtol=1e-10, atol=1e-10)
+    monkeypatch.setattr(ds, "KLU_CACHE_MAX_NNZ", K.nnz)
+    ds.DirectFactors(klu=True).solve(K, b)
+    assert len(ds._KLU_CACHE) == 1
+
+
 def test_superlu_direct_call_is_splu():
     """The direct step's SuperLU call gives splu's factors and solution bit for bit; a
     block splu would have to sort or sum goes through splu itself."""
