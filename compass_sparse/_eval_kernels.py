@@ -8,29 +8,6 @@ from ._jit import njit
 
 
 @njit(cache=True)
-def csc_copy_on_pattern(indptr, indices, data, pindptr, pindices, out):
-    """Whether the CSC index arrays (indptr, indices) are exactly the pattern (pindptr,
-    pindices) -- the same column pointers and, in the nnz = pindptr[-1] first places, the
-    same row indices -- and if so, data[:nnz] copied into ``out`` (length nnz).  A pattern
-    that is canonical (sorted, duplicate-free) makes an equal matrix canonical too."""
-    m = pindptr.shape[0]
-    if indptr.shape[0] != m:
-        return False
-    for j in range(m):
-        if indptr[j] != pindptr[j]:
-            return False
-    nnz = pindices.shape[0]
-    if indptr[m - 1] != nnz or indices.shape[0] < nnz or data.shape[0] < nnz:
-        return False
-    for k in range(nnz):
-        if indices[k] != pindices[k]:
-            return False
-    for k in range(nnz):
-        out[k] = data[k]
-    return True
-
-
-@njit(cache=True)
 def csc_same_pattern(indptr, indices, pindptr, pindices):
     """Whether two CSC index arrays hold the same pattern (pointers equal, the nnz first
     row indices equal; nnz = pindptr[-1] = len(pindices))."""
@@ -50,11 +27,24 @@ def csc_same_pattern(indptr, indices, pindptr, pindices):
 
 
 @njit(cache=True)
+def csc_copy_on_pattern(indptr, indices, data, pindptr, pindices, out):
+    """Whether the CSC index arrays (indptr, indices) are exactly the pattern (pindptr,
+    pindices) -- the same column pointers and, in the nnz = pindptr[-1] first places, the
+    same row indices -- and if so, data[:nnz] copied into ``out`` (length nnz).  A pattern
+    that is canonical (sorted, duplicate-free) makes an equal matrix canonical too."""
+    nnz = pindices.shape[0]
+    if data.shape[0] < nnz or not csc_same_pattern(indptr, indices, pindptr, pindices):
+        return False
+    for k in range(nnz):
+        out[k] = data[k]
+    return True
+
+
+@njit(cache=True)
 def free_block(indptr, indices, data, free, z, q):
     """(Kp, Ki, Kx, rhs, nnz) of M_FF (CSC, int32 index arrays with room for nnz(M)) and
     rhs = -(q + M_FN z_N)_F for the indices F where ``free`` is True: the positions in F,
-    the arrays and the pass of :func:`compass_sparse.direct_step._free_block` in one
-    call (same operations in the same order, so the same bits)."""
+    the arrays and the pass of :func:`free_block_into` in one call."""
     n = free.shape[0]
     pos = np.empty(n, dtype=np.int64)
     nf = 0
@@ -69,11 +59,20 @@ def free_block(indptr, indices, data, free, z, q):
     Ki = np.empty(nnz, dtype=np.int32)
     Kx = np.empty(nnz)
     rhs = np.empty(nf)
-    for i in range(n):
+    k = free_block_into(indptr, indices, data, pos, z, q, Kp, Ki, Kx, rhs)
+    return Kp, Ki, Kx, rhs, k
+
+
+@njit(cache=True)
+def free_block_into(indptr, indices, data, pos, z, q, Kp, Ki, Kx, rhs):
+    """The CSC arrays of M_FF (``pos[i]``: position of i in F, or -1) into Kp/Ki/Kx and
+    rhs = -(q + M_FN z_N)_F; returns nnz(M_FF)."""
+    for i in range(pos.shape[0]):
         if pos[i] >= 0:
             rhs[pos[i]] = -q[i]
     k = 0
-    for j in range(n):
+    Kp[0] = 0
+    for j in range(pos.shape[0]):
         pj = pos[j]
         for e in range(indptr[j], indptr[j + 1]):
             pi = pos[indices[e]]
@@ -87,7 +86,7 @@ def free_block(indptr, indices, data, free, z, q):
                 rhs[pi] -= data[e] * z[j]
         if pj >= 0:
             Kp[pj + 1] = k
-    return Kp, Ki, Kx, rhs, k
+    return k
 
 
 @njit(cache=True)

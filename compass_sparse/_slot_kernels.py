@@ -10,7 +10,6 @@ semantics (a NaN propagates; on a tie the second argument: max(-0.0, 0.0) = 0.0)
 where several slots name the same index, the assignment order of the array version
 (kinds in the order z, w, v, fixed slack; slots in order within a kind).
 """
-import numpy as np
 
 from ._jit import njit
 from ._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z

@@ -96,33 +96,6 @@ def direct_step_applies(M, options) -> bool:
 
 
 @njit(cache=True)
-def _free_block(indptr, indices, data, pos, z, q, Kp, Ki, Kx, rhs):
-    """The CSC arrays of M_FF (``pos[i]``: position of i in F, or -1) into Kp/Ki/Kx and
-    rhs = -(q + M_FN z_N)_F; returns nnz(M_FF)."""
-    nf = rhs.shape[0]
-    for i in range(pos.shape[0]):
-        if pos[i] >= 0:
-            rhs[pos[i]] = -q[i]
-    k = 0
-    Kp[0] = 0
-    for j in range(pos.shape[0]):
-        pj = pos[j]
-        for e in range(indptr[j], indptr[j + 1]):
-            pi = pos[indices[e]]
-            if pi < 0:
-                continue
-            if pj >= 0:
-                Ki[k] = pi
-                Kx[k] = data[e]
-                k += 1
-            else:
-                rhs[pi] -= data[e] * z[j]
-        if pj >= 0:
-            Kp[pj + 1] = k
-    return k
-
-
-@njit(cache=True)
 def _end_point(indptr, indices, data, q, lb, ub, basic, z, w, v, tol):
     """w, v of the end point from s = M z + q; z_F put on its bound when outside by at
     most ``tol`` (relative).  Returns the largest |residual| over F (-1.0: infeasible, or
@@ -250,21 +223,10 @@ def reduced_system(M, free, z, q):
         M = sp.csc_matrix(M)
     z = np.asarray(z, dtype=float)
     q = np.asarray(q, dtype=float)
-    if free.dtype == np.bool_:
-        # positions, arrays and pass in one compiled call (the same pass as below)
-        Kp, Ki, Kx, rhs, k = free_block(M.indptr, M.indices, M.data, free, z, q)
-        nf = rhs.shape[0]
-        return trusted_csc(Kx[:k], Ki[:k], Kp, (nf, nf)), rhs
-    n = free.shape[0]
-    nf = int(np.count_nonzero(free))
-    pos = np.full(n, -1, dtype=np.int64)
-    pos[free] = np.arange(nf, dtype=np.int64)
-    nnz = M.indptr[-1]
-    Kp = np.zeros(nf + 1, dtype=np.int32)
-    Ki = np.empty(nnz, dtype=np.int32)
-    Kx = np.empty(nnz)
-    rhs = np.empty(nf)
-    k = _free_block(M.indptr, M.indices, M.data, pos, z, q, Kp, Ki, Kx, rhs)
+    # positions, arrays and the pass in one compiled call
+    Kp, Ki, Kx, rhs, k = free_block(M.indptr, M.indices, M.data,
+                                    np.asarray(free, dtype=np.bool_), z, q)
+    nf = rhs.shape[0]
     return trusted_csc(Kx[:k], Ki[:k], Kp, (nf, nf)), rhs
 
 
