@@ -481,13 +481,14 @@ class NMSSolver:
                 st.nfev += self.p.counters.nfev - nf0
                 st.njev += self.p.counters.njev - nj0
                 self.crash_its += st.iterations - it0
+            st.reason = cr.stop_reason  # (of the last run's crash; a skip's reason is stale)
             if cr.iterations > 0 and all_finite(cr.f):
                 pt = self._point(cr.z, cr.f)
                 self._consider(pt.z, pt.f, pt.phi, pt.psi)
                 if pt.psi <= opt.nms_initial_reference_factor * cur.psi:
                     cur, x = pt, cr.x
                     self._crash_factors = cr.factors
-        elif self.passes["crash"].reason == "":
+        elif not self.passes["crash"].ran and self.passes["crash"].reason == "":
             self.passes["crash"].reason = (
                 "crash_method none" if opt.crash_method == "none"
                 else f"n < crash_minimum_dimension ({opt.crash_minimum_dimension})")

@@ -220,3 +220,24 @@ def test_crash_norm_is_numpys_two_norm_bit_for_bit():
             v = rng.normal(size=n) * 10.0 ** e
             with np.errstate(over="ignore"):  # (1e200 squared: both give inf)
                 assert _norm(v) == float(np.linalg.norm(v))
+
+
+def test_crash_report_of_a_solve_whose_restart_ran_it_is_not_a_skip_reason():
+    """With crash_method none the first run skips the crash and billups' restarts run it
+    (their schedule turns it on); the report said ran=True with the reason
+    'crash_method none'.  It now gives the stop reason of the crash that ran."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    import known_problems as kp
+
+    p = kp.billups()
+    r = cs.solve_mcp(p.F, p.J, p.lb, p.ub, p.x0, options={"crash_method": "none"})
+    st = r.passes["crash"]
+    assert r.restarts > 0 and st.ran and st.iterations > 0
+    assert st.reason and "none" not in st.reason and "dimension" not in st.reason
+    skipped = cs.solve_mcp(p.F, p.J, p.lb, p.ub, p.x0,
+                           options={"crash_method": "none", "major_iteration_limit": 2})
+    assert not skipped.passes["crash"].ran
+    assert skipped.passes["crash"].reason == "crash_method none"
