@@ -46,15 +46,6 @@ def fb_phi_kernel(z, f, lb, ub, phi):
 
 
 @njit(cache=True)
-def has_nan_kernel(x):
-    """Whether the float vector x holds a NaN (evaluation.has_nan)."""
-    for i in range(x.shape[0]):
-        if np.isnan(x[i]):
-            return True
-    return False
-
-
-@njit(cache=True)
 def memo_key_kernel(x, out):
     """out = x with -0.0 made 0.0 (the bytes of equal points are then equal); returns
     whether x holds a NaN (evaluation._Memo.probe)."""

@@ -45,9 +45,10 @@ import scipy.sparse as sp
 from ._csc import trusted_csc
 from ._eval_kernels import csc_same_pattern, free_block
 from ._jit import njit
-from ._merit_kernels import all_finite_kernel, csc_is_canonical
+from ._merit_kernels import csc_is_canonical
 from ._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
 from .basis.types import BasisOptions
+from .evaluation import all_finite
 from .merit import max_abs
 
 __all__ = ["DIRECT_MAX_DENSITY", "DIRECT_MAX_N", "DIRECT_MIN_N", "KLU_FILL_LIMIT", "KLU_FROM_FILL",
@@ -511,7 +512,7 @@ def direct_step(M, q, lb, ub, z, basic, factors: DirectFactors | None = None):
         nnz_lu = factors.lu_nnz
         if zf is None:  # exactly singular: the path's rank repair decides
             return None, nnz_lu
-        if not all_finite_kernel(np.ascontiguousarray(zf, dtype=np.float64)):
+        if not all_finite(zf):
             return None, nnz_lu
         zt[free] = zf
     res, mz = _end_point(M.indptr, M.indices, M.data, q, lb, ub, basic.astype(np.int64), zt,

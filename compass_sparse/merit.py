@@ -92,17 +92,22 @@ def _broadcast_box(lb, ub, z):
             np.broadcast_to(np.asarray(ub, dtype=float), z.shape))
 
 
-_F64 = np.dtype(np.float64)  # (an identity test on dtypes: a tenth of ``==``'s cost)
+_F64 = np.dtype(np.float64)
+
+
+def float_vector(x) -> bool:
+    """x is a float64 vector, the compiled kernels' argument (every point of a solve).
+    (Identity tests: a tenth of a microsecond where ``dtype ==`` and the flags cost a
+    microsecond, asked several times at every evaluated point.)"""
+    return x.__class__ is np.ndarray and x.ndim == 1 and x.dtype is _F64
 
 
 def _solver_vectors(z, f, lb, ub) -> bool:
     """z, F, l, u are float64 vectors of one length: the solver's own vectors at every
     evaluated point, handed straight to the compiled kernels (a microsecond of tests
     instead of the conversions of the general case)."""
-    return (z.__class__ is np.ndarray and f.__class__ is np.ndarray
-            and lb.__class__ is np.ndarray and ub.__class__ is np.ndarray and z.ndim == 1
-            and z.dtype is _F64 and f.dtype is _F64 and lb.dtype is _F64
-            and ub.dtype is _F64 and z.shape == f.shape == lb.shape == ub.shape)
+    return (float_vector(z) and float_vector(f) and float_vector(lb) and float_vector(ub)
+            and z.shape == f.shape == lb.shape == ub.shape)
 
 
 def _kinds(lb, ub):
@@ -198,7 +203,7 @@ def max_abs(x) -> float:
     """||x||_inf of a vector (0 when empty; NaN when x holds a NaN), in one compiled pass
     for a float vector: np.max(np.abs(x)) costs ~5 us of dispatch on a short one, and the
     solver asks it several times per major iteration."""
-    if x.__class__ is np.ndarray and x.ndim == 1 and x.dtype is _F64:
+    if float_vector(x):
         return float(max_abs_kernel(x, x, False))
     x = np.asarray(x, dtype=float)
     return float(np.max(np.abs(x))) if x.size else 0.0
@@ -206,8 +211,7 @@ def max_abs(x) -> float:
 
 def max_abs_diff(x, y) -> float:
     """||x - y||_inf of two vectors of one length (as :func:`max_abs`)."""
-    if (x.__class__ is np.ndarray and y.__class__ is np.ndarray and x.ndim == 1
-            and x.dtype is _F64 and y.dtype is _F64 and x.shape == y.shape):
+    if float_vector(x) and float_vector(y) and x.shape == y.shape:
         return float(max_abs_kernel(x, y, True))
     return max_abs(np.asarray(x, dtype=float) - np.asarray(y, dtype=float))
 
@@ -314,8 +318,7 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5,
         idx = np.empty(k, dtype=np.int64)
         # the k largest in one compiled pass when they are distinct (then the answer is
         # unique, the partition and sort below give it too); ties keep numpy's order
-        if not (k > 0 and phi.__class__ is np.ndarray and phi.ndim == 1
-                and phi.dtype is _F64 and top_abs_distinct(phi, idx)):
+        if not (k > 0 and float_vector(phi) and top_abs_distinct(phi, idx)):
             idx = np.argpartition(-aphi, k - 1)[:k] if k > 0 else np.array([], dtype=int)
             idx = idx[np.argsort(-aphi[idx])]
     if names is None:

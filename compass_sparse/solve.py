@@ -460,15 +460,10 @@ class _UserJacobian:
     def __call__(self, zu):
         from ._eval_kernels import csc_scaled_all_finite
 
-        try:
-            J = self.parent.J(zu)
-        except (CompassError, KeyboardInterrupt):
-            raise
-        except Exception as exc:  # as the scaled evaluator's guarded jac
-            return self.scaled._reject(repr(exc))
-        if not csc_scaled_all_finite(J.indptr, J.indices, J.data, self.row, self.col):
-            return self.scaled._reject("J returned NaN/Inf")
-        return J
+        return self.scaled.guarded(
+            lambda: self.parent.J(zu),
+            lambda J: csc_scaled_all_finite(J.indptr, J.indices, J.data, self.row, self.col),
+            "J")
 
 
 def _history(solver, out, phi0):
