@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ._matching import column_matching
+from ._crash_kernels import dense_perturbed_solve, structurally_singular
 from ._merit_kernels import crash_active_set, csc_diagonal, csc_to_dense
 from ._blas import single_threaded_blas
 from .basis.backends import DENSE_SOLVE_MAX_N, SingularFactorError, solve_sparse
@@ -76,15 +76,6 @@ def _norm(v) -> float:
     return math.sqrt(float(v.dot(v)))
 
 
-def _numerical(A):
-    """A without its stored zeros (the pattern that decides structural regularity)."""
-    if np.all(A.data != 0.0):
-        return A
-    A = A.copy()
-    A.eliminate_zeros()
-    return A
-
-
 CRASH_STEP_LIMIT = 10.0
 """Largest ||d||_inf / (1 + ||z||_inf) of a crash step solved on a PERTURBED J_II + eps I.
 On a singular J_II a tiny eps leaves the matrix nearly singular, and the step has length
@@ -108,7 +99,9 @@ def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None, labels=None, lu=("aut
 
     Returns (d or None, eps, factorizations, why, held): ``why`` is None on success, else
     the crash's stop reason; ``held`` the kept factors of the last matrix (or None).  A step
-    on a perturbed matrix longer than ``step_limit`` (max norm) is refused.  Each
+    on a perturbed matrix longer than ``step_limit`` (max norm) is refused.  A block of
+    order <= ``DENSE_SOLVE_MAX_N`` is factored densely, all attempts in one compiled call
+    (the deadline is checked before it); a larger one attempt by attempt: each
     factorization is atomic, so the deadline is checked before every attempt and handed to
     the factorization's budget (one whose estimate does not fit in the time left is not
     started)."""
@@ -117,28 +110,31 @@ def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None, labels=None, lu=("aut
     held = None
     n = Jii.shape[0]
     full = Jii.nnz == n * n and np.count_nonzero(Jii.data) == n * n  # (regular)
-    if perturb and n and not full and np.any(column_matching(_numerical(Jii)) < 0):
+    if perturb and n and not full and structurally_singular(Jii.indptr, Jii.indices,
+                                                            Jii.data, n):
         # Structurally singular: no value of its entries makes it regular, so the
         # unperturbed factorization can only fail -- and without a zero-free diagonal it
         # runs in the slow fallback ordering (40 s at n = 3e4 on the dynamic CGE model).
         eps = eps0
-    # A block that solve_sparse factors densely is perturbed densely too: the same sums
-    # a_ii + eps, without a sparse identity and a sparse sum per attempt (~0.1 ms each,
-    # more than the 4 x 4 solve).
-    dense = None
-    if n <= DENSE_SOLVE_MAX_N:
+    if 0 < n <= DENSE_SOLVE_MAX_N:
+        # A block that solve_sparse factors densely: all attempts in one compiled call
+        # (the same LAPACK routines, so the same steps; see compass_sparse._crash_kernels).
+        # Eight attempts at this order cost milliseconds at most: the deadline is checked
+        # before them, not between them.
+        if deadline is not None and time.perf_counter() > deadline:
+            return None, eps, nf, "time limit", None
         dense = np.empty((n, n), order="F")  # (LAPACK's order; scipy's toarray ~10 us more)
         csc_to_dense(Jii.indptr, Jii.indices, Jii.data, dense)
+        d, eps, nf, found = dense_perturbed_solve(
+            dense, np.ascontiguousarray(rhs, dtype=np.float64), eps, float(eps0),
+            bool(perturb), PERTURB_ATTEMPTS, float(step_limit))
+        if found:
+            return d, eps, nf, None, None
+        return None, eps, nf, "singular reduced Jacobian", None
     for attempt in range(PERTURB_ATTEMPTS):
         if deadline is not None and time.perf_counter() > deadline:
             return None, eps, nf, "time limit", None
-        if eps == 0.0:
-            A = Jii if dense is None else dense
-        elif dense is None:
-            A = Jii + eps * sp.identity(Jii.shape[0], format="csc")
-        else:
-            A = dense.copy(order="F")
-            A.flat[::A.shape[0] + 1] += eps
+        A = Jii if eps == 0.0 else Jii + eps * sp.identity(n, format="csc")
         try:
             nf += 1
             d, held = solve_sparse(A, rhs, deadline=deadline, labels=labels, keep=True,

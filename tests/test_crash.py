@@ -241,3 +241,90 @@ def test_crash_report_of_a_solve_whose_restart_ran_it_is_not_a_skip_reason():
                            options={"crash_method": "none", "major_iteration_limit": 2})
     assert not skipped.passes["crash"].ran
     assert skipped.passes["crash"].reason == "crash_method none"
+
+
+def _python_perturbed_attempts(Jii, rhs, eps, eps0, limit, attempts=8):
+    """The crash's attempts written with the Python route (solve_sparse's dense LAPACK
+    solve per attempt): the reference of the compiled loop."""
+    from compass_sparse.basis.backends import SingularFactorError, solve_sparse
+
+    nf = 0
+    for _ in range(attempts):
+        A = Jii if eps == 0.0 else Jii + eps * sp.identity(Jii.shape[0], format="csc")
+        nf += 1
+        try:
+            d = solve_sparse(A, rhs)
+            if np.all(np.isfinite(d)) and not (eps > 0.0 and np.max(np.abs(d)) > limit):
+                return d, eps, nf
+        except SingularFactorError:
+            pass
+        eps = eps0 if eps == 0.0 else eps * 10.0
+    return None, eps, nf
+
+
+def test_compiled_perturbed_attempts_give_the_python_routes_steps_bit_for_bit():
+    """All attempts of a dense crash step in one compiled call (numba's LAPACK gesv):
+    the same d, bit for bit, the same final eps and the same number of factorizations as
+    getrf + getrs called per attempt, on regular blocks of orders 1 ... 200, exactly
+    singular ones (a zero column: shifted), and blocks whose shifted steps run away until
+    eps is large (the step limit)."""
+    from compass_sparse._blas import single_threaded_blas
+    from compass_sparse._crash_kernels import dense_perturbed_solve
+    from compass_sparse._merit_kernels import csc_to_dense
+
+    rng = np.random.default_rng(11)
+    cases = []
+    for n in (1, 2, 3, 4, 7, 10, 31, 64, 101, 200):
+        A = sp.random(n, n, density=min(1.0, 6.0 / n), random_state=rng, format="csc")
+        A = sp.csc_matrix(A + sp.identity(n) * rng.uniform(0.5, 2.0))
+        cases.append((A, 0.0, np.inf))                        # regular: eps = 0 works
+        B = A.tolil()
+        B[:, n // 2] = 0.0
+        B = sp.csc_matrix(B)
+        cases.append((B, 1e-8, np.inf))                       # singular: the first shift
+        cases.append((B, 1e-8, 10.0))                         # ... refused until eps grows
+        C = B.copy()
+        C.data[:] = 0.0
+        cases.append((C, 1e-8, 1e-30))                        # every attempt refused
+    with single_threaded_blas():
+        for A, eps_start, limit in cases:
+            n = A.shape[0]
+            rhs = rng.normal(size=n)
+            ref, eps_r, nf_r = _python_perturbed_attempts(A, rhs, eps_start, 1e-8, limit)
+            dense = np.empty((n, n), order="F")
+            csc_to_dense(A.indptr, A.indices, A.data, dense)
+            d, eps, nf, found = dense_perturbed_solve(dense, rhs, eps_start, 1e-8, True, 8,
+                                                      limit)
+            assert found == (ref is not None) and nf == nf_r and eps == eps_r, (n, limit)
+            if found:
+                assert d.tobytes() == ref.tobytes(), n
+    # not perturbed: one attempt, and a singular block fails at once
+    S = np.zeros((3, 3), order="F")
+    d, eps, nf, found = dense_perturbed_solve(S, np.ones(3), 0.0, 1e-8, False, 8, np.inf)
+    assert not found and nf == 1 and eps == 0.0
+
+
+def test_structural_singularity_reads_nonzero_entries_only():
+    """The crash's structural test: a block is structurally singular exactly when a
+    maximum matching of its NONZERO entries (stored zeros dropped) leaves a column
+    unmatched -- compared with the matching of scipy's copy without stored zeros (the
+    test it replaced) on random patterns with stored zeros."""
+    from compass_sparse._crash_kernels import structurally_singular
+    from compass_sparse._matching import column_matching
+
+    rng = np.random.default_rng(5)
+    seen = set()
+    for trial in range(300):
+        n = int(rng.integers(1, 30))
+        A = sp.random(n, n, density=float(rng.uniform(0.02, 0.3)), random_state=rng,
+                      format="csc")
+        A.data[rng.random(A.nnz) < 0.3] = 0.0   # stored zeros
+        B = A.copy()
+        B.eliminate_zeros()
+        ref = bool(np.any(column_matching(B) < 0))
+        assert structurally_singular(A.indptr, A.indices, A.data, n) == ref
+        seen.add(ref)
+    assert seen == {True, False}
+    # a diagonal of stored zeros is singular however many entries are stored
+    Z = sp.csc_matrix((np.zeros(3), (np.arange(3), np.arange(3))), shape=(3, 3))
+    assert Z.nnz == 3 and structurally_singular(Z.indptr, Z.indices, Z.data, 3)

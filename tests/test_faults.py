@@ -239,6 +239,10 @@ def test_time_limit_holds_through_the_crash_factorizations(clock, monkeypatch):
         raise SingularFactorError("singular (simulated)")
 
     monkeypatch.setattr(crash_module, "solve_sparse", slow_singular)
+    # Slow factorizations are those of large blocks, which go through solve_sparse one
+    # attempt at a time; blocks up to DENSE_SOLVE_MAX_N (milliseconds for all attempts)
+    # are solved in one compiled call.  This small problem stands for a large one.
+    monkeypatch.setattr(crash_module, "DENSE_SOLVE_MAX_N", 0)
     F = _costly(lambda x: x - 1.0 + 0.01 * (_B @ x), clock)
     J = lambda x: sp.csc_matrix(np.eye(N) + 0.01 * _B)  # noqa: E731
     start = clock.now

@@ -1,0 +1,92 @@
+"""Compiled parts of the crash's reduced solve (see :func:`compass_sparse.crash._solve_reduced`).
+
+A crash step on a small problem solves (J_II + eps I) d = rhs for a block of order <= 200
+in up to eight attempts of growing eps.  Each attempt in Python -- a copy, the diagonal
+shift, LAPACK's getrf and getrs through their wrappers, a finiteness test and a max norm --
+cost ~20 us, and the structural test that decides whether eps = 0 is tried at all built a
+scipy copy of the block without its stored zeros (~60 us): on kojshin's start, a third of a
+solve.  Here the attempts run in one compiled call.
+
+The factorization is numpy's ``linalg.solve`` as numba compiles it: LAPACK's gesv, which
+is getrf followed by getrs -- the routines the Python route calls -- on the same library,
+so the same bits (checked against that route by the tests on orders 1 ... 200).  Its
+singular-matrix error is raised exactly when getrf reports a zero pivot (info > 0), the
+Python route's :class:`~compass_sparse.basis.backends.SingularFactorError`.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ._jit import njit
+from ._matching import _augmenting_matching
+
+__all__ = ["dense_perturbed_solve", "structurally_singular"]
+
+
+@njit(cache=True)
+def structurally_singular(indptr, indices, data, n):
+    """Whether the n x n CSC block has no zero-free diagonal in any row and column order
+    (a maximum matching of its NONZERO entries -- stored zeros do not count -- leaves a
+    column unmatched): then no value of its entries makes it regular."""
+    if n == 0:
+        return False
+    ptr = np.empty(n + 1, np.int64)
+    idx = np.empty(indptr[n], np.int64)
+    k = 0
+    for j in range(n):
+        ptr[j] = k
+        for e in range(indptr[j], indptr[j + 1]):
+            if data[e] != 0.0:
+                idx[k] = indices[e]
+                k += 1
+    ptr[n] = k
+    row_of, _ = _augmenting_matching(n, n, ptr, idx[:k])
+    for j in range(n):
+        if row_of[j] < 0:
+            return True
+    return False
+
+
+@njit(cache=True)
+def _solve_or_none(A, b):
+    """(x, True) with A x = b, or (b, False) when LAPACK finds A exactly singular."""
+    try:
+        return np.linalg.solve(A, b), True
+    except Exception:  # numba's LinAlgError: getrf's info > 0, a zero pivot
+        return b, False
+
+
+@njit(cache=True)
+def dense_perturbed_solve(dense, rhs, eps, eps0, perturb, attempts, step_limit):
+    """The attempts of :func:`compass_sparse.crash._solve_reduced` on a dense block.
+
+    ``dense``: the block (Fortran order); ``eps``: the first shift (0, or eps0 for a
+    structurally singular block).  Attempt k solves (dense + eps I) d = rhs; a solution is
+    taken when it is finite and, on a shifted matrix, ``max|d| <= step_limit``; otherwise
+    eps becomes eps0 (after 0) or grows tenfold -- when ``perturb`` -- up to ``attempts``
+    factorizations.  Returns (d, eps of the last attempt, factorizations, found)."""
+    n = dense.shape[0]
+    A = np.empty((n, n), dtype=np.float64).T  # Fortran order, as LAPACK works
+    nf = 0
+    for _ in range(attempts):
+        A[:, :] = dense
+        if eps != 0.0:
+            for i in range(n):
+                A[i, i] += eps
+        nf += 1
+        d, ok = _solve_or_none(A, rhs)
+        if ok:
+            finite = True
+            big = 0.0
+            for i in range(n):
+                v = d[i]
+                if not np.isfinite(v):
+                    finite = False
+                    break
+                big = max(big, abs(v))
+            if finite and not (eps > 0.0 and big > step_limit):
+                return d, eps, nf, True
+        if not perturb:
+            break
+        eps = eps0 if eps == 0.0 else eps * 10.0
+    return rhs, eps, nf, False
