@@ -66,15 +66,19 @@ def dense_perturbed_solve(dense, rhs, eps, eps0, perturb, attempts, step_limit):
     eps becomes eps0 (after 0) or grows tenfold -- when ``perturb`` -- up to ``attempts``
     factorizations.  Returns (d, eps of the last attempt, factorizations, found)."""
     n = dense.shape[0]
-    A = np.empty((n, n), dtype=np.float64).T  # Fortran order, as LAPACK works
+    A = np.empty((0, 0), dtype=np.float64).T  # the shifted matrix, made when needed
     nf = 0
     for _ in range(attempts):
-        A[:, :] = dense
-        if eps != 0.0:
+        nf += 1
+        if eps == 0.0:
+            d, ok = _solve_or_none(dense, rhs)  # (solve factors a copy: dense stays)
+        else:
+            if A.shape[0] != n:
+                A = np.empty((n, n), dtype=np.float64).T  # Fortran order, as LAPACK's
+            A[:, :] = dense
             for i in range(n):
                 A[i, i] += eps
-        nf += 1
-        d, ok = _solve_or_none(A, rhs)
+            d, ok = _solve_or_none(A, rhs)
         if ok:
             finite = True
             big = 0.0
