@@ -228,6 +228,30 @@ def test_dense_jacobian_gets_canonical_full_pattern_each_call():
     assert C2.nnz == 9
 
 
+
+def test_dense_jacobian_on_its_full_pattern_matches_the_general_route():
+    """A dense float J (the user's array) on the stored full pattern is copied straight
+    into the pattern's column order: the same matrix as canonical_csc + _fix_pattern, its
+    zeros kept, owning its arrays (the pattern's stay untouched); an integer array or a
+    Fortran-ordered one give that route's matrix too."""
+    from compass_sparse.evaluation import Evaluator, canonical_csc
+
+    n = 4
+    A = np.arange(16.0).reshape(n, n)
+    A[1, 2] = 0.0
+    ev = Evaluator(lambda x: np.zeros(n), lambda x: A, n)
+    ev.J(np.zeros(n))  # records the (full) pattern
+    for J in (A, np.asfortranarray(A), A.astype(np.int64), A[:, ::-1].copy()):
+        ref = ev._fix_pattern(canonical_csc(J, n))
+        got = ev._user_J_on_pattern(J)
+        for a in ("indptr", "indices", "data"):
+            assert np.array_equal(getattr(got, a), getattr(ref, a)), a
+            assert getattr(got, a) is not getattr(ev.pattern_ref, a)
+        assert got.nnz == n * n and np.array_equal(got.toarray(), J)
+        got.data[:] = -1.0
+        assert np.array_equal(ev._user_J_on_pattern(J).toarray(), J)  # no shared buffer
+
+
 # ---------------------------------------------------------------- fixed per-solve cost
 def _valid_csc_arrays(rng, n, density, sort=True):
     cols = [np.flatnonzero(rng.random(n) < density) for _ in range(n)]
