@@ -17,7 +17,9 @@ Timing
 ------
 Everything runs in this one warm process: numba kernels are compiled (or loaded from the
 disk cache) by a warm-up before anything is timed.  Each problem is solved ``--repeats`` times
-by each solver and the MEDIAN is reported.  For compass_sparse, ``time`` is the wall time of
+by each solver (PATH: ``--path-repeats``) in each of ``--rounds`` passes over all problems, and
+the MEDIAN over all rounds is reported: with several rounds a problem's samples are spread
+over the whole run, so that a slow minute of a shared machine weighs on every problem alike.  For compass_sparse, ``time`` is the wall time of
 ``solve_mcp`` MINUS the time spent inside the user's F and J (measured by wrapping the
 callbacks); ``user`` is that F/J time.  For PATH, ``time`` is PATH's own "Total Time" from
 its log (the GAMS process start and model generation are not counted; PATH evaluates F and J
@@ -26,6 +28,7 @@ through GAMS' compiled instructions, included in its time).  Success = OUR natur
 
     python3 benchmarks/bench_small.py                     # all groups, 5 repeats
     python3 benchmarks/bench_small.py --groups known --repeats 21
+    python3 benchmarks/bench_small.py --rounds 3 --repeats 3 --path-repeats 1
     python3 benchmarks/bench_small.py --no-path           # compass_sparse only
     python3 benchmarks/bench_small.py --import-time       # only the import-time measurement
 
@@ -273,12 +276,16 @@ def _timed_problem(problem, clock):
     return p
 
 
-def run_ours(case, repeats, time_limit):
+def run_ours(case, repeats, time_limit, samples=None):
+    """``repeats`` timed solves of the case; the row reports the medians over these and
+    the solves already in ``samples`` (a dict kept by the caller across rounds)."""
     from compass_sparse import solve_mcp
 
     clock = [0.0, 0.0]
     prob = _timed_problem(case.problem, clock)
-    times, users, walls, cpus, ucpus = [], [], [], [], []
+    samples = {} if samples is None else samples
+    times, users, walls, cpus, ucpus = (samples.setdefault(k, []) for k in
+                                        ("time", "user", "wall", "cpu", "user_cpu"))
     res = None
     for _ in range(repeats):
         clock[:] = [0.0, 0.0]
@@ -297,11 +304,14 @@ def run_ours(case, repeats, time_limit):
                 time=statistics.median(times), user=statistics.median(users),
                 wall=statistics.median(walls), cpu=statistics.median(cpus),
                 user_cpu=statistics.median(ucpus), major=res.nit, minor=res.minor_iterations,
-                repeats=repeats, error="", cpu_min=min(cpus))
+                repeats=len(times), error="", cpu_min=min(cpus))
 
 
-def run_path(case, repeats):
-    times, x, status = [], None, ""
+def run_path(case, repeats, times=None):
+    """``repeats`` PATH runs; the row reports the median over these and the run times
+    already in ``times`` (a list kept by the caller across rounds)."""
+    times = [] if times is None else times
+    x, status = None, ""
     try:
         for _ in range(repeats):
             x, t, status = case.path_run()
@@ -315,7 +325,7 @@ def run_path(case, repeats):
     return dict(group=case.group, name=case.name, n=case.n, solver="PATH",
                 success=nat <= SUCCESS_TOL, status=status, natural=nat,
                 time=statistics.median(times), user=math.nan, wall=math.nan,
-                major="", minor="", repeats=repeats, error="")
+                major="", minor="", repeats=len(times), error="")
 
 
 # --------------------------------------------------------------------------- import time
@@ -434,6 +444,8 @@ def main(argv=None):
                     choices=["known", "thesis", "cge"])
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--path-repeats", type=int, default=3)
+    ap.add_argument("--rounds", type=int, default=1,
+                    help="passes over all problems; medians over all rounds' samples")
     ap.add_argument("--thesis-n", nargs="+", type=int, default=[10, 50, 100, 200])
     ap.add_argument("--families", nargs="+", type=int, default=[1, 2])
     ap.add_argument("--seeds", nargs="+", type=int, default=[1, 2])
@@ -473,21 +485,31 @@ def main(argv=None):
         cases += _thesis_cases(a.thesis_n, a.families, a.seeds)
     if "cge" in a.groups:
         cases += _cge_cases(a.ramsey_T, a.static_n)
-    log = CsvLog(RESULTS / f"small{a.suffix}.csv", FIELDS)
+    # Rounds: every round times every problem (``--repeats`` solves, ``--path-repeats``
+    # PATH runs), so that each problem's samples are spread over the whole run and a slow
+    # minute of the shared machine touches all problems alike instead of a few; the rows
+    # of the last round report the medians over all rounds.
+    ours_samples = {c.name: {} for c in cases}
+    path_samples = {c.name: [] for c in cases}
     rows = []
-    for c in cases:
-        run_ours(c, 1, a.time_limit)  # first solve of a new shape: not timed
-        r = run_ours(c, a.repeats, a.time_limit)
-        log.write(r)
-        rows.append(r)
-        line = f"{c.group:7s} {c.name:22s} n={c.n:5d} ours {fmt_time(r['time']):>9s} " \
-               f"(F/J {fmt_time(r['user'])}) {'ok' if r['success'] else 'FAIL'}"
-        if use_path and c.path_run is not None:
-            p = run_path(c, a.path_repeats)
-            log.write(p)
-            rows.append(p)
-            line += f" | PATH {fmt_time(p['time']):>9s} {'ok' if p['success'] else 'FAIL'}"
-        print(line, flush=True)
+    log = CsvLog(RESULTS / f"small{a.suffix}.csv", FIELDS)  # rows of the last round
+    for rnd in range(a.rounds):
+        last = rnd == a.rounds - 1
+        for c in cases:
+            if rnd == 0:
+                run_ours(c, 1, a.time_limit)  # first solve of a new shape: not timed
+            r = run_ours(c, a.repeats, a.time_limit, ours_samples[c.name])
+            line = f"{c.group:7s} {c.name:22s} n={c.n:5d} ours {fmt_time(r['time']):>9s} " \
+                   f"(F/J {fmt_time(r['user'])}) {'ok' if r['success'] else 'FAIL'}"
+            p = None
+            if use_path and c.path_run is not None:
+                p = run_path(c, a.path_repeats, path_samples[c.name])
+                line += f" | PATH {fmt_time(p['time']):>9s} {'ok' if p['success'] else 'FAIL'}"
+            if last:
+                for row in [r] + ([p] if p is not None else []):
+                    log.write(row)
+                    rows.append(row)
+            print(f"[round {rnd + 1}/{a.rounds}] " + line, flush=True)
     log.close()
     imp = import_time()
     print()
