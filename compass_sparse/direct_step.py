@@ -15,8 +15,8 @@ rest (z_N at its current values),
 
     M_FF z_F = -(q + M_FN z_N)_F,      s_N = (M z + q)_N = w_N - v_N,
 
-one sparse LU of M_FF (:class:`DirectFactors`: SuperLU, then KLU while the blocks do not
-fill) and a product.  It is the path's end point when z_F lies in its box and each slack
+one sparse LU of M_FF (:class:`DirectFactors`: KLU while the blocks do not fill, then
+SuperLU) and a product.  It is the path's end point when z_F lies in its box and each slack
 has its sign (w basic: s >= 0; v basic: s <= 0; the slack of a fixed variable is free).
 Otherwise, or when M_FF is singular or the residual check fails, nothing is returned and
 the caller runs the path as always: the answer is then exactly the path's, and the cost
@@ -51,7 +51,7 @@ from .basis.types import BasisOptions
 from .evaluation import all_finite
 from .merit import max_abs
 
-__all__ = ["DIRECT_MAX_DENSITY", "DIRECT_MAX_N", "DIRECT_MIN_N", "KLU_FILL_LIMIT", "KLU_FROM_FILL",
+__all__ = ["DIRECT_MAX_DENSITY", "DIRECT_MAX_N", "DIRECT_MIN_N", "KLU_FILL_LIMIT",
            "REUSE_BEATS_REFACTOR_NNZ", "DirectFactors", "direct_step", "direct_step_applies",
            "reduced_system"]
 
@@ -81,7 +81,7 @@ RESIDUAL_TOLERANCE = 1e-9
 def direct_step_applies(M, options) -> bool:
     """Whether the Newton paths of a linearization with matrix M try the direct step:
     a sparse M of moderate order, and no LU backend or ordering forced by the user (the
-    direct step factors with SuperLU and COLAMD)."""
+    direct step factors with KLU, or SuperLU and COLAMD, by its own choice)."""
     n = M.shape[0]
     if not DIRECT_MIN_N <= n <= DIRECT_MAX_N:
         return False
@@ -234,25 +234,28 @@ def reduced_system(M, free, z, q):
 class DirectFactors:
     """The sparse LUs of one solve's direct steps.
 
-    SuperLU with COLAMD factors the first block.  When its LU holds at most
-    ``KLU_FROM_FILL`` times the block's entries, later blocks (the same active set, or
-    nearly) are factored by KLU (SuiteSparse, through kvxopt: block triangular form, AMD,
-    a diagonal preference, no supernodes), which on such low-fill blocks is 3-5x faster,
-    SuperLU's set-up dominating there (0.13 against 0.40 ms at n = 362, 0.33 against
-    0.83 ms at n = 992 on the Ramsey model's M_FF).  On blocks that fill, SuperLU is the
-    faster (2x on the static CGE model's, 1.3e5 entries from 8e3), so a KLU factorization
-    holding more than ``KLU_FILL_LIMIT`` times its block's entries returns the rest of the
-    solve to SuperLU.  ``lu_nnz`` is the size of the last LU (L + U, and KLU's
-    off-diagonal blocks); ``method`` its (backend, ordering)."""
+    KLU (SuiteSparse, through kvxopt: block triangular form, AMD, a diagonal preference,
+    no supernodes) factors the blocks while they fill little: on such blocks it is 3-5x
+    faster than SuperLU, whose set-up dominates there (0.13 against 0.40 ms at n = 362,
+    0.33 against 0.83 ms at n = 992 on the Ramsey model's M_FF), and its symbolic analysis
+    of a block pattern is kept across solves (:data:`_KLU_CACHE`).  On blocks that fill,
+    SuperLU with COLAMD is the faster (2x on the static CGE model's, 1.3e5 entries from
+    8e3), so a KLU factorization holding more than ``KLU_FILL_LIMIT`` times its block's
+    entries returns the rest of the solve to SuperLU: a block that fills costs one slow
+    factorization at most.  (SuperLU used to factor the first block, to learn its fill
+    before KLU was tried: KLU first takes 6% off a Ramsey solve at n = 363 and 13% at
+    n = 993, measured in one process, with the same major iterations.)
+    Without kvxopt, or with ``klu=False``, SuperLU factors every block.  ``lu_nnz`` is
+    the size of the last LU (L + U, and KLU's off-diagonal blocks); ``method`` its
+    (backend, ordering)."""
 
-    def __init__(self, klu: bool = False, dense: bool = False, rank_tolerance: float = 1e-9):
+    def __init__(self, klu: bool = True, dense: bool = False, rank_tolerance: float = 1e-9):
         #: small problems (order below ``DIRECT_MIN_N``): M_FF is solved densely in one
         #: compiled pass with the end point (:func:`_dense_direct`), no sparse LU; a block
         #: singular to the compiled engine's ``rank_tolerance`` is left to the path
         self.dense = dense
         self.rank_tolerance = float(rank_tolerance)
         self.klu = klu and not dense and _klu_module() is not None
-        self.klu_allowed = not dense and _klu_module() is not None
         self.lu_nnz = 0
         self.method = ("", "")
         self._held = None  # (indptr, indices, kvxopt matrix, KLU symbolic) of the last block
@@ -268,7 +271,6 @@ class DirectFactors:
             self.lu_nnz = 0
             return None
         self.lu_nnz = int(lu.nnz)
-        self.klu = self.klu_allowed and self.lu_nnz <= KLU_FROM_FILL * max(K.nnz, 1)
         return lu.solve(rhs)
 
     def _klu_solve(self, K, rhs):
@@ -300,7 +302,7 @@ class DirectFactors:
             return None
         self.lu_nnz = _klu_lu_nnz(A, Fs, Fn, info)
         if self.lu_nnz > KLU_FILL_LIMIT * max(K.nnz, 1):
-            self.klu_allowed = self.klu = False
+            self.klu = False  # SuperLU for the rest of the solve
         b = matrix(np.ascontiguousarray(rhs, dtype=np.float64))
         klu.solve(A, Fs, Fn, b)
         return np.array(b, dtype=np.float64).ravel()
@@ -463,10 +465,6 @@ def _klu_counts(Fn):
     return int(head[2]), int(head[3])
 
 
-KLU_FROM_FILL = 4.0
-"""Largest nnz(LU) / nnz(block) of a SuperLU factorization after which the direct step
-factors with KLU (see :class:`DirectFactors`)."""
-
 KLU_FILL_LIMIT = 8.0
 """Largest nnz(LU) / nnz(block) of a KLU factorization before the direct step returns
 to SuperLU for the rest of the solve."""
@@ -491,7 +489,7 @@ def direct_step(M, q, lb, ub, z, basic, factors: DirectFactors | None = None):
     """(z, w, v, nnz of the LU) of the end point at t = 1 of the path from ``z`` in the
     start basis ``basic`` (per index: VAR_Z, VAR_W, VAR_V or VAR_S) when that path makes
     no pivot, else (None, nnz of the LU).  ``M``: CSC (n x n); ``z``: the current z, at
-    its bounds off F; ``factors``: the solve's :class:`DirectFactors` (default: SuperLU)."""
+    its bounds off F; ``factors``: the solve's :class:`DirectFactors` (default: a new one)."""
     factors = DirectFactors() if factors is None else factors
     n = z.shape[0]
     zt = np.array(z, dtype=float)

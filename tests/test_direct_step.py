@@ -125,7 +125,8 @@ def test_residual_tolerance_from_both_sides(monkeypatch, rel, accepted):
     M = sp.csc_matrix(M)
     q = rng.uniform(-1.0, 1.0, n)
     lb, ub = np.full(n, -np.inf), np.full(n, np.inf)
-    end, _ = ds.direct_step(M, q, lb, ub, np.zeros(n), np.full(n, VAR_Z, np.int8))
+    end, _ = ds.direct_step(M, q, lb, ub, np.zeros(n), np.full(n, VAR_Z, np.int8),
+                            ds.DirectFactors(klu=False))  # (the SuperLU route: simulated)
     assert (end is not None) is accepted
     if end is not None:
         z = end[0]
@@ -214,27 +215,27 @@ def test_klu_and_superlu_agree(n, density):
         assert np.max(np.abs(x - ref)) <= 1e-10 * (1.0 + np.max(np.abs(ref)))
 
 
-def test_superlu_first_then_klu_while_blocks_do_not_fill():
-    """SuperLU factors the first block; one that fills at most KLU_FROM_FILL times its
-    entries sends the next to KLU, which keeps them while its own LU stays within
-    KLU_FILL_LIMIT times the block; a block that fills more returns the rest of the
-    solve to SuperLU for good."""
+def test_klu_first_then_superlu_for_good_once_a_block_fills():
+    """KLU factors the blocks while its LU stays within KLU_FILL_LIMIT times the block's
+    entries; a block that fills more returns the rest of the solve to SuperLU for good
+    (its answer is still the KLU one: the factorization is done).  Without KLU
+    (``klu=False``) SuperLU factors every block."""
     f = ds.DirectFactors()
     low, b = _random_block(300, 0.003, seed=1)   # little fill
     f.solve(low, b)
-    assert f.method == ("superlu", "colamd") and f.lu_nnz <= ds.KLU_FROM_FILL * low.nnz
-    assert f.klu
+    assert f.method[0] == "klu" and f.lu_nnz <= ds.KLU_FILL_LIMIT * low.nnz and f.klu
     f.solve(low, b)
     assert f.method[0] == "klu" and f.klu
     high, b2 = _random_block(300, 0.05, seed=2)  # fills most of L and U
     x = f.solve(high, b2)
     assert f.method[0] == "klu" and f.lu_nnz > ds.KLU_FILL_LIMIT * high.nnz and not f.klu
     np.testing.assert_allclose(high @ x, b2, atol=1e-9)
-    f.solve(low, b)
+    x = f.solve(low, b)
     assert f.method == ("superlu", "colamd") and not f.klu  # for good
-    g = ds.DirectFactors()
-    g.solve(high, b2)                               # SuperLU fills it: KLU never tried
-    assert g.lu_nnz > ds.KLU_FROM_FILL * high.nnz and not g.klu
+    np.testing.assert_allclose(low @ x, b, atol=1e-9)
+    g = ds.DirectFactors(klu=False)
+    g.solve(low, b)
+    assert g.method == ("superlu", "colamd") and not g.klu
 
 
 @pytest.mark.parametrize("klu", [True, False])
