@@ -52,6 +52,7 @@ from .evaluation import all_finite
 from .merit import max_abs
 
 __all__ = ["DIRECT_MAX_DENSITY", "DIRECT_MAX_N", "DIRECT_MIN_N", "KLU_FILL_LIMIT",
+           "automatic_lu", "klu_available",
            "REUSE_BEATS_REFACTOR_NNZ", "DirectFactors", "direct_step", "direct_step_applies",
            "reduced_system"]
 
@@ -85,15 +86,23 @@ def direct_step_applies(M, options) -> bool:
     n = M.shape[0]
     if not DIRECT_MIN_N <= n <= DIRECT_MAX_N:
         return False
-    if getattr(options, "lu_backend", "auto") != "auto" or \
-            getattr(options, "lu_ordering", "auto") != "auto":
-        return False
-    from .basis.backends import _ENV
-    import os
-
-    if os.environ.get(_ENV):
+    if not automatic_lu(getattr(options, "lu_backend", "auto"),
+                        getattr(options, "lu_ordering", "auto")):
         return False
     return M.nnz <= DIRECT_MAX_DENSITY * float(n) * n
+
+
+def automatic_lu(backend="auto", ordering="auto") -> bool:
+    """Whether the sparse LU is left to the solver: the options ``lu_backend`` and
+    ``lu_ordering`` are "auto" and the environment does not choose them either
+    (``COMPASS_SPARSE_LU``).  Only then do the direct step and the crash pick KLU."""
+    if backend != "auto" or ordering != "auto":
+        return False
+    import os
+
+    from .basis.backends import _ENV
+
+    return not os.environ.get(_ENV)
 
 
 @njit(cache=True)
@@ -468,6 +477,11 @@ def _klu_counts(Fn):
 KLU_FILL_LIMIT = 8.0
 """Largest nnz(LU) / nnz(block) of a KLU factorization before the direct step returns
 to SuperLU for the rest of the solve."""
+
+
+def klu_available() -> bool:
+    """Whether KLU (kvxopt) can be used."""
+    return _klu_module() is not None
 
 
 _KLU_MODULE: list = []

@@ -83,6 +83,10 @@ def _dynamic_cge_crash(monkeypatch, **consts):
     # the default LU whatever COMPASS_SPARSE_LU asks: the reuse holds SuperLU's factors
     # (the UMFPACK route keeps none), and another ordering takes other crash steps
     monkeypatch.delenv("COMPASS_SPARSE_LU", raising=False)
+    # this model's blocks (n = 1281, 6e3 entries) are small enough for KLU, which keeps
+    # no factors (a KLU refactorization costs less than GMRES on old factors there: the
+    # crash 9-13 ms against 21 ms); the reuse is that of the larger blocks, on SuperLU
+    monkeypatch.setattr(crash_module, "_klu_suits", lambda J, lu: False)
     for k, v in consts.items():
         monkeypatch.setattr(crash_module, k, v)
     p = ramsey_cge(periods=20, sectors=10, seed=0).with_shock(capital_tax=0.25).problem
@@ -328,3 +332,42 @@ def test_structural_singularity_reads_nonzero_entries_only():
     # a diagonal of stored zeros is singular however many entries are stored
     Z = sp.csc_matrix((np.zeros(3), (np.arange(3), np.arange(3))), shape=(3, 3))
     assert Z.nnz == 3 and structurally_singular(Z.indptr, Z.indices, Z.data, 3)
+
+
+def test_crash_factors_small_sparse_blocks_by_klu_and_large_ones_by_superlu(monkeypatch):
+    """A sparse block above the dense order (200) whose LU could not reach the size the
+    basis reuses is factored by KLU, with the same steps (to working accuracy) and the
+    same perturbations as SuperLU's route; a block with more entries, a chosen LU backend
+    or the environment's choice keeps SuperLU (and its factors, for reuse)."""
+    import compass_sparse.crash as crash_module
+    from compass_sparse.crash import _klu_suits, _solve_reduced
+    from compass_sparse.direct_step import klu_available
+
+    monkeypatch.delenv("COMPASS_SPARSE_LU", raising=False)
+    rng = np.random.default_rng(3)
+    n = 400
+    A = sp.random(n, n, density=3.0 / n, random_state=rng, format="csc")
+    A = sp.csc_matrix(A + sp.identity(n) * 2.0)
+    assert _klu_suits(A, ("auto", "auto")) == klu_available()
+    assert not _klu_suits(A, ("superlu", "auto")) and not _klu_suits(A, ("auto", "amd"))
+    dense_ish = sp.csc_matrix(sp.random(n, n, density=0.1, random_state=rng) +
+                              sp.identity(n))
+    assert not _klu_suits(dense_ish, ("auto", "auto"))  # its LU may be worth keeping
+    assert not _klu_suits(sp.csc_matrix(sp.identity(150)), ("auto", "auto"))  # dense order
+    monkeypatch.setenv("COMPASS_SPARSE_LU", "superlu:colamd")
+    assert not _klu_suits(A, ("auto", "auto"))
+    monkeypatch.delenv("COMPASS_SPARSE_LU")
+    B = A.tolil()
+    B[:, 7] = 0.0                                   # structurally singular: shifted
+    B = sp.csc_matrix(B)
+    b = rng.normal(size=n)
+    for M, eps0 in ((A, 1e-8), (B, 1e-3)):
+        d, eps, nf, why, held = _solve_reduced(M, b, True, eps0)
+        monkeypatch.setattr(crash_module, "_klu_suits", lambda J, lu: False)
+        d_s, eps_s, nf_s, why_s, held_s = _solve_reduced(M, b, True, eps0)
+        monkeypatch.undo()
+        monkeypatch.delenv("COMPASS_SPARSE_LU", raising=False)
+        assert why is None and why_s is None and (eps, nf) == (eps_s, nf_s)
+        np.testing.assert_allclose(d, d_s, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose((M + eps * sp.identity(n)) @ d, b, atol=1e-9)
+        assert held_s is not None and (held is None) == klu_available()

@@ -241,8 +241,10 @@ def test_time_limit_holds_through_the_crash_factorizations(clock, monkeypatch):
     monkeypatch.setattr(crash_module, "solve_sparse", slow_singular)
     # Slow factorizations are those of large blocks, which go through solve_sparse one
     # attempt at a time; blocks up to DENSE_SOLVE_MAX_N (milliseconds for all attempts)
-    # are solved in one compiled call.  This small problem stands for a large one.
+    # are solved in one compiled call, small sparse ones by KLU.  This small problem
+    # stands for a large one.
     monkeypatch.setattr(crash_module, "DENSE_SOLVE_MAX_N", 0)
+    monkeypatch.setattr(crash_module, "_klu_suits", lambda J, lu: False)
     F = _costly(lambda x: x - 1.0 + 0.01 * (_B @ x), clock)
     J = lambda x: sp.csc_matrix(np.eye(N) + 0.01 * _B)  # noqa: E731
     start = clock.now

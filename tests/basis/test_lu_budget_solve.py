@@ -12,7 +12,10 @@ from compass_sparse.result import Status
 
 @pytest.fixture
 def problem():
-    g = structured_quadratic(900, seed=3)
+    # above the direct step's orders (2000): its factorizations and the crash's go
+    # through the budgeted sparse LU (smaller sparse blocks are factored by KLU, without
+    # an estimate, whatever their factorizations would cost)
+    g = structured_quadratic(2100, seed=3)
     return g
 
 
