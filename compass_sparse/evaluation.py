@@ -44,7 +44,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._csc import trusted_csc
-from ._eval_kernels import csc_copy_on_pattern
+from ._eval_kernels import csc_copy_on_pattern, csc_same_pattern
 from ._merit_kernels import all_finite_kernel, csc_is_canonical, memo_key_kernel
 from .exceptions import (CompassError, EvaluationError, JacobianPatternError, ProblemError,
                          ShapeError)
@@ -292,8 +292,8 @@ class Evaluator:
         P = self._pattern
         if C.nnz == P.nnz == self.n * self.n:
             return C  # two canonical full patterns are the same pattern
-        if (C.indptr.shape == P.indptr.shape and C.indices.shape == P.indices.shape
-                and np.array_equal(C.indptr, P.indptr) and np.array_equal(C.indices, P.indices)):
+        if C.indices.shape == P.indices.shape and csc_same_pattern(C.indptr, C.indices,
+                                                                    P.indptr, P.indices):
             return C
         kp, kc = _keys(P), _keys(C)
         pos = np.searchsorted(kp, kc)

@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .._jit import njit
+from .._eval_kernels import csc_same_pattern
 from .postsolve import FixVariables, PostsolveStack, Record
 
 logger = logging.getLogger("compass_sparse.presolve")
@@ -143,10 +144,7 @@ def _index(problem, J0):
     made them in every solve: an argsort and five array passes over the entries)."""
     ev = getattr(problem, "evaluator", None)
     P = ev.pattern_ref if ev is not None else None
-    if P is None or not (J0.indptr.shape == P.indptr.shape
-                         and J0.indices.shape == P.indices.shape
-                         and np.array_equal(J0.indptr, P.indptr)
-                         and np.array_equal(J0.indices, P.indices)):
+    if P is None or not csc_same_pattern(J0.indptr, J0.indices, P.indptr, P.indices):
         return _index_arrays(J0)
     return ev.for_pattern("presolve_index", lambda: _index_arrays(P))
 
