@@ -636,3 +636,30 @@ def test_fb_phi_fast_path_on_views_and_mixed_inputs_matches_the_array_formula(se
     phi = fb_phi(z, f, lb, ub)
     assert fb_psi(phi) == 0.5 * float(np.dot(phi, phi))
     assert fb_psi(list(phi)) == 0.5 * float(np.dot(phi, phi))
+
+
+def test_csc_same_pattern_compares_pointers_and_the_stored_indices():
+    """The pattern test of the evaluator, the preprocessor and the KLU cache: equal when
+    the pointers and the first nnz row indices agree (room beyond nnz is ignored), and
+    against numpy's comparison of the arrays on random patterns, equal and not."""
+    from compass_sparse._eval_kernels import csc_same_pattern
+
+    rng = np.random.default_rng(9)
+    seen = set()
+    for trial in range(200):
+        n = int(rng.integers(1, 12))
+        A = sp.csc_matrix(sp.random(n, n, density=0.4, random_state=rng))
+        B = A.copy()
+        if trial % 3 == 1 and B.nnz:
+            B.indices[int(rng.integers(B.nnz))] = (B.indices[0] + 1) % n  # a row moved
+        elif trial % 3 == 2:
+            B = sp.csc_matrix(sp.random(n, n, density=0.4, random_state=rng))
+        ref = (np.array_equal(A.indptr, B.indptr)
+               and np.array_equal(A.indices[:A.nnz], B.indices[:B.nnz]))
+        assert csc_same_pattern(B.indptr, B.indices, A.indptr, A.indices[:A.nnz]) == ref
+        seen.add(ref)
+    assert seen == {True, False}
+    P = sp.csc_matrix(np.eye(3))
+    longer = np.concatenate([P.indices, np.array([7, 7], np.int32)])
+    assert csc_same_pattern(P.indptr, longer, P.indptr, P.indices)
+    assert not csc_same_pattern(P.indptr[:-1], P.indices, P.indptr, P.indices)
