@@ -30,7 +30,7 @@ through GAMS' compiled instructions, included in its time).  Success = OUR natur
     python3 benchmarks/bench_small.py --groups known --repeats 21
     python3 benchmarks/bench_small.py --rounds 3 --repeats 3 --path-repeats 1
     python3 benchmarks/bench_small.py --no-path           # compass_sparse only
-    python3 benchmarks/bench_small.py --import-time       # only the import-time measurement
+    python3 benchmarks/bench_small.py --import-time       # import and first solve only
 
 Results: ``benchmarks/results/small<suffix>.csv`` (one row per problem and solver) and a
 summary printed as markdown (copied into small.md).
@@ -330,23 +330,26 @@ def run_path(case, repeats, times=None):
 
 # --------------------------------------------------------------------------- import time
 def import_time(repeats=7):
-    """Median wall times of ``import compass_sparse`` in fresh interpreters (warm caches:
-    one discarded run first): (total, own) where own is the import after numpy and
-    scipy.sparse are already loaded (what the package itself adds)."""
-    code = ("import time; t = time.perf_counter(); import numpy, scipy.sparse; "
-            "t1 = time.perf_counter(); import compass_sparse; t2 = time.perf_counter(); "
-            "print(t2 - t, t2 - t1)")
+    """Median wall times in fresh interpreters (warm caches: one discarded run first):
+    (total, own, first, second) -- ``import compass_sparse`` in all and after numpy and
+    scipy.sparse are loaded (what the package itself adds), then the first solve of a
+    small problem (kojshin, n = 4: numba's start-up and the kernels loaded from its disk
+    cache, what a fresh batch worker pays once) and a second solve of it."""
+    code = ("import sys, time; sys.path.insert(0, 'tests'); t = time.perf_counter(); "
+            "import numpy, scipy.sparse; t1 = time.perf_counter(); import compass_sparse; "
+            "t2 = time.perf_counter(); import known_problems as kp; q = kp.kojima_shindo(); "
+            "s = time.perf_counter(); compass_sparse.solve_mcp(q.F, q.J, q.lb, q.ub, q.x0); "
+            "s1 = time.perf_counter(); compass_sparse.solve_mcp(q.F, q.J, q.lb, q.ub, q.x0); "
+            "s2 = time.perf_counter(); print(t2 - t, t2 - t1, s1 - s, s2 - s1)")
     env = dict(os.environ)
     env["PYTHONPATH"] = str(HERE.parent)
-    tot, own = [], []
+    runs = []
     for k in range(repeats + 1):
         r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                            check=True, env=env, cwd=HERE.parent)
         if k:
-            a, b = r.stdout.strip().splitlines()[-1].split()
-            tot.append(float(a))
-            own.append(float(b))
-    return statistics.median(tot), statistics.median(own)
+            runs.append([float(v) for v in r.stdout.strip().splitlines()[-1].split()])
+    return tuple(statistics.median(col) for col in zip(*runs))
 
 
 # --------------------------------------------------------------------------- summary
@@ -408,7 +411,9 @@ def summarize(rows, imp=None) -> str:
                        f"{fmt_time(statistics.median(mins))}")
     if imp is not None:
         out.append(f"import compass_sparse (fresh interpreter, warm caches, median of 7): "
-                   f"{imp[0]:.3f} s in all, {imp[1]:.3f} s after numpy and scipy.sparse")
+                   f"{imp[0]:.3f} s in all, {imp[1]:.3f} s after numpy and scipy.sparse; "
+                   f"then the first solve (kojshin) {imp[2]:.3f} s, the second "
+                   f"{imp[3] * 1e3:.2f} ms")
     return "\n".join(out)
 
 
@@ -453,7 +458,7 @@ def main(argv=None):
     ap.add_argument("--static-n", nargs="+", type=int, default=[90, 830])
     ap.add_argument("--time-limit", type=float, default=60.0)
     ap.add_argument("--no-path", action="store_true")
-    ap.add_argument("--import-time", action="store_true", help="only measure import time")
+    ap.add_argument("--import-time", action="store_true", help="only measure the import and the first solve in fresh interpreters")
     ap.add_argument("--suffix", default="")
     ap.add_argument("--summarize", metavar="CSV", help="print the tables of an existing CSV")
     ap.add_argument("--compare", nargs=2, metavar=("BEFORE", "AFTER"),
@@ -470,9 +475,10 @@ def main(argv=None):
         print(summarize(read_csv(Path(a.summarize))))
         return
     if a.import_time:
-        tot, own = import_time()
+        tot, own, first, second = import_time()
         print(f"import compass_sparse: {tot:.3f} s in all, {own:.3f} s after numpy and "
-              f"scipy.sparse (median of 7)")
+              f"scipy.sparse; first solve (kojshin) {first:.3f} s, second "
+              f"{second * 1e3:.2f} ms (medians of 7 fresh interpreters)")
         return
     info = machine_info()
     print_machine(info)
