@@ -19,9 +19,9 @@ Everything runs in this one warm process: numba kernels are compiled (or loaded 
 disk cache) by a warm-up before anything is timed.  Each problem is solved ``--repeats`` times
 by each solver (PATH: ``--path-repeats``) in each of ``--rounds`` passes over all problems, and
 the MEDIAN over all rounds is reported: with several rounds a problem's samples are spread
-over the whole run, so that a slow minute of a shared machine weighs on every problem alike.  For compass_sparse, ``time`` is the wall time of
-``solve_mcp`` MINUS the time spent inside the user's F and J (measured by wrapping the
-callbacks); ``user`` is that F/J time.  For PATH, ``time`` is PATH's own "Total Time" from
+over the whole run, so that a slow minute of a shared machine weighs on every problem alike.
+For compass_sparse, ``time`` is the wall time of ``solve_mcp`` MINUS the time spent inside
+the user's F and J (measured by wrapping the callbacks); ``user`` is that F/J time.  For PATH, ``time`` is PATH's own "Total Time" from
 its log (the GAMS process start and model generation are not counted; PATH evaluates F and J
 through GAMS' compiled instructions, included in its time).  Success = OUR natural residual
 ``||z - clip(z - F(z), l, u)||_inf <= 1e-6`` of the returned point, for both solvers.
@@ -458,7 +458,8 @@ def main(argv=None):
     ap.add_argument("--static-n", nargs="+", type=int, default=[90, 830])
     ap.add_argument("--time-limit", type=float, default=60.0)
     ap.add_argument("--no-path", action="store_true")
-    ap.add_argument("--import-time", action="store_true", help="only measure the import and the first solve in fresh interpreters")
+    ap.add_argument("--import-time", action="store_true",
+                    help="only measure the import and the first solve in fresh interpreters")
     ap.add_argument("--suffix", default="")
     ap.add_argument("--summarize", metavar="CSV", help="print the tables of an existing CSV")
     ap.add_argument("--compare", nargs=2, metavar=("BEFORE", "AFTER"),

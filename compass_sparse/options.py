@@ -139,14 +139,14 @@ class Options(OptionsMixin):
         "1e-12 in 30 steps, and before any pivot)")
     lu_backend: str = _opt(
         "auto", "sparse LU of the basis (problems above n = 500; below, the compiled dense "
-        "engine) and of the crash's reduced Jacobians (above order 200; below, dense LU): 'superlu' (scipy) with the ordering of "
-        "lu_ordering, 'umfpack' (SuiteSparse through kvxopt; orders by itself, so "
-        "lu_ordering must be 'auto'), or 'auto' (SuperLU; with 'auto' for both options "
-        "the Newton steps that need no pivot (orders 50-2000) and the crash's sparse blocks "
-        "of at most 2000 rows and 6250 entries are factored by KLU when kvxopt is "
-        "installed, without the time and memory estimates of the SuperLU route; the "
-        "environment variable COMPASS_SPARSE_LU='backend[:ordering]' replaces 'auto' "
-        "values)",
+        "engine) and of the crash's reduced Jacobians (above order 200; below, dense LU): "
+        "'superlu' (scipy) with the ordering of lu_ordering, 'umfpack' (SuiteSparse "
+        "through kvxopt; orders by itself, so lu_ordering must be 'auto'), or 'auto' "
+        "(SuperLU; with 'auto' for both options the Newton steps that need no pivot "
+        "(orders 50-2000) and the crash's sparse blocks of at most 2000 rows and 6250 "
+        "entries are factored by KLU when kvxopt is installed, without the time and memory "
+        "estimates of the SuperLU route; the environment variable "
+        "COMPASS_SPARSE_LU='backend[:ordering]' replaces 'auto' values)",
         choices=("auto", "superlu", "umfpack"))
     lu_ordering: str = _opt(
         "auto", "fill-reducing column ordering for SuperLU: 'colamd', 'amd' or 'metis' "
