@@ -21,9 +21,10 @@ by each solver (PATH: ``--path-repeats``) in each of ``--rounds`` passes over al
 the MEDIAN over all rounds is reported: with several rounds a problem's samples are spread
 over the whole run, so that a slow minute of a shared machine weighs on every problem alike.
 For compass_sparse, ``time`` is the wall time of ``solve_mcp`` MINUS the time spent inside
-the user's F and J (measured by wrapping the callbacks); ``user`` is that F/J time.  For PATH, ``time`` is PATH's own "Total Time" from
-its log (the GAMS process start and model generation are not counted; PATH evaluates F and J
-through GAMS' compiled instructions, included in its time).  Success = OUR natural residual
+the user's F and J (measured by wrapping the callbacks); ``user`` is that F/J time.  For
+PATH, ``time`` is PATH's own "Total Time" from its log (the GAMS process start and model
+generation are not counted; PATH evaluates F and J through GAMS' compiled instructions,
+included in its time).  Success = OUR natural residual
 ``||z - clip(z - F(z), l, u)||_inf <= 1e-6`` of the returned point, for both solvers.
 
     python3 benchmarks/bench_small.py                     # all groups, 5 repeats
