@@ -203,14 +203,23 @@ class MCP:
 
     @classmethod
     def from_evaluator(cls, evaluator: Evaluator, lb, ub, x0, *, var_names=None,
-                       eqn_names=None) -> "MCP":
+                       eqn_names=None, exact_bounds: bool = False) -> "MCP":
         """An MCP whose F and J are those of an existing evaluator (e.g. the restriction
-        built by :meth:`Evaluator.restrict` for the preprocessor's reduced problem)."""
+        built by :meth:`Evaluator.restrict` for the preprocessor's reduced problem).
+
+        ``exact_bounds``: lb and ub are float vectors of length n derived exactly from a
+        validated problem's bounds (the scaling's l / C, u / C) and are taken as they are:
+        no validation, and in particular no reading of |b| >= INFINITY as infinite -- a
+        finite user bound of 1e15 divided by a column factor 2^-20 is 1.05e21 there, and
+        read as infinite it vanished from the scaled problem (the solve then ran past it)."""
         self = cls.__new__(cls)
         self.n = evaluator.n
         self.var_names = self._check_names(var_names, "var_names")
         self.eqn_names = self._check_names(eqn_names, "eqn_names")
-        self.lb, self.ub = as_bounds(lb, ub, self.n, self.var_names)
+        if exact_bounds:
+            self.lb, self.ub = lb, ub
+        else:
+            self.lb, self.ub = as_bounds(lb, ub, self.n, self.var_names)
         self.x0 = np.clip(np.asarray(x0, dtype=float), self.lb, self.ub)
         self.evaluator = evaluator
         return self

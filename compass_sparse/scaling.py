@@ -164,7 +164,10 @@ def scale_problem(problem: MCP, s: Scaling) -> MCP:
     """The scaled MCP G(y) = R F(C y) on l / C <= y <= u / C (names and pattern kept); its
     evaluations go through the problem's evaluator (shared memo and counters)."""
     ev = ScaledEvaluator(problem.evaluator, s)
-    out = MCP.from_evaluator(ev, problem.lb / s.col, problem.ub / s.col, problem.x0 / s.col)
+    # The column factors are powers of two: l / C and u / C are exact, and kept as they
+    # are (a large finite bound must not turn infinite in the scaled problem).
+    out = MCP.from_evaluator(ev, problem.lb / s.col, problem.ub / s.col, problem.x0 / s.col,
+                             exact_bounds=True)
     # The name lists are the problem's own, already checked: from_evaluator would convert
     # and copy them (0.15 ms per solve at n = 993, measured), for the same strings.
     out.var_names, out.eqn_names = problem.var_names, problem.eqn_names

@@ -222,3 +222,29 @@ def test_equilibrate_takes_the_spread_the_caller_has():
     assert a.spread_before == b.spread_before == spread(J)
     np.testing.assert_array_equal(a.row, b.row)
     np.testing.assert_array_equal(a.col, b.col)
+
+
+def test_scaling_keeps_a_large_finite_bound_that_the_scaled_problem_would_read_as_infinite():
+    """J = diag(1e12, 1) is equilibrated with the column factor 2^-20 on x1, so the
+    scaled problem's bound is u1 / 2^-20 = 1.05e21 for the user's u1 = 1e15.  The scaled
+    problem was built through the bounds' validation, which reads |b| >= 1e20 as
+    infinite: the upper bound vanished, the solve ran to the unconstrained root x1 = 2e15
+    (outside the box) and failed, where the unscaled solve finds x1 = 1e15.  The scaled
+    bounds are now exactly l / C and u / C."""
+    def F(x):
+        return np.array([1e12 * (x[0] - 2e15), x[1] - 1.0])
+
+    def J(x):
+        return sp.csc_matrix(np.diag([1e12, 1.0]))
+
+    lb, ub = np.array([0.0, -np.inf]), np.array([1e15, np.inf])
+    r = solve_mcp(F, J, lb, ub, np.array([1.0, 0.0]))
+    assert r.passes["scaling"].ran
+    assert r.success and r.x[0] == 1e15 and abs(r.x[1] - 1.0) <= 1e-9
+    assert np.all(r.x >= lb) and np.all(r.x <= ub)
+    p = MCP(F, J, lb, ub, np.array([1.0, 0.0]))
+    s = equilibrate(J(p.x0))
+    q = scale_problem(p, s)
+    assert s.col[0] < 1e-5                                # the factor that lifts u1
+    assert np.array_equal(q.ub, p.ub / s.col) and np.array_equal(q.lb, p.lb / s.col)
+    assert np.isfinite(q.ub[0]) and q.ub[0] > 1e20
