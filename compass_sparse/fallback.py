@@ -104,7 +104,8 @@ def gradient_steps(evalr, z, f, J, lb, ub, opt, *, on_point=None, deadline=None)
             trial = lambda a, z=z, g=g: project(z - a * g, lb, ub)  # noqa: E731
         else:
             pz = project(z - g, lb, ub) - z
-            trial = lambda a, z=z, pz=pz: z + a * pz  # noqa: E731
+            # (projected: z + a pz can round to a unit in the last place beyond a bound)
+            trial = lambda a, z=z, pz=pz: project(z + a * pz, lb, ub)  # noqa: E731
             a0 = 1.0
         acc = _armijo(evalr, z, psi, g, trial, lb, ub, opt.gradient_sigma,
                       opt.gradient_shrink_factor, max(opt.gradient_stepsize_minimum, 1e-20),

@@ -601,7 +601,9 @@ class NMSSolver:
             if self._past_deadline():
                 raise _Stop(Status.TIME_LIMIT, "time limit reached")
             if opt.nms_searchtype == "line":
-                zt = (1.0 - alpha) * c.z + alpha * zN
+                # (projected: the combination of two points at one bound can round to a
+                # unit in the last place beyond it, and a returned point must lie in the box)
+                zt = project((1.0 - alpha) * c.z + alpha * zN, lb, ub)
             else:
                 zt = project((1.0 - alpha) * xc + alpha * xN, lb, ub)
             pt = self._point(zt)
