@@ -461,8 +461,11 @@ class _Tracker:
                 break
             # The end game is local: a step much longer than the point is a singular
             # Jacobian's, not Newton's convergence (it once jumped from 1 to 1e7).
-            alpha = min(1.0, NEWTON_STEP_MAX * (1.0 + np.linalg.norm(x, np.inf))
-                        / max(np.linalg.norm(dx, np.inf), 1e-300))
+            # (the ratio only when it is below 1: at |x| ~ 1e17 and |dx| ~ 1e-300 it
+            # overflowed, with a RuntimeWarning, to a min() that took 1 anyway)
+            cap = NEWTON_STEP_MAX * (1.0 + np.linalg.norm(x, np.inf))
+            size = np.linalg.norm(dx, np.inf)
+            alpha = 1.0 if size <= cap else cap / size
             accepted = False
             while alpha >= 1e-3:
                 xt = x + alpha * dx

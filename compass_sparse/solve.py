@@ -354,8 +354,14 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
         if pre.reduced is None:
             z = pre.postsolve(np.zeros(0))
             f = problem.F(z)
+            verdict = _judge_on(problem, z, f, opt)
+            if not verdict.solved:
+                # The postsolve's arithmetic missed the tolerance on the user's problem
+                # (e.g. a free variable of 1e17 recovered from a row with coefficients of
+                # 1e-3 and 1e0: its F is exact only to ~0.1): not a solution to report.
+                return _without_preprocessor(problem, z, f, opt, t0, passes)
             return _result(problem, Status.SOLVED, "solved by the preprocessor", z, f, opt,
-                           t0, passes=passes)
+                           t0, passes=passes, verdict=verdict)
         if pre.reduced is problem:
             pre = None  # nothing removed: no postsolve needed
         else:
@@ -431,9 +437,33 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
                   factorizations=out.factorizations, basis_updates=out.updates,
                   basis=out.basis, history=_history(solver, out, phi0))
     res.lu = _lu_report(solver.bm)
+    if pre is not None and out.status is Status.SOLVED and not res.success:
+        # solved on the reduced problem, but its postsolved point misses the tolerance on
+        # the user's problem (see the preprocessor-only case above)
+        return _without_preprocessor(problem, res.x, res.fun, opt, t0, passes)
     if opt.verbosity >= 1:
         logger.info(res.summary())
     return res
+
+
+def _without_preprocessor(problem, z, f, opt, t0, passes, why=None) -> Result:
+    """The whole problem solved again from z without the preprocessor, in what is left of
+    the time limit (the clock does not restart): the preprocessor's point z (F values f)
+    missed the tolerance on the user's problem, or (``why``) the pass that ran before
+    could not finish.  The Result keeps the earlier passes' reports."""
+    left = opt.time_limit - (time.perf_counter() - t0)
+    if left <= 0:
+        return _result(problem, Status.TIME_LIMIT, "time limit reached", z, f, opt, t0,
+                       start_z=problem.x0, passes=passes)
+    if why is None:
+        st = passes.get("presolve")
+        if st is not None:
+            st.reason += ("; its point missed the tolerance on the original problem "
+                          "(the postsolve's rounding): solved again without it")
+    general = _solve_problem(problem.with_start(z), opt.replace(presolve=False, time_limit=left))
+    general.passes = {**passes, **{k: v for k, v in general.passes.items() if k != "presolve"}}
+    general.time = time.perf_counter() - t0
+    return general
 
 
 class _UserJacobian:
@@ -637,15 +667,12 @@ def _lcp_path(problem, M, q, z, f, x, opt, t0, deadline, passes, st, crash_its, 
         return out
     # The path cycled, hit a limit or lost accuracy: the stabilized Newton method takes over,
     # within what is left of the time limit (the clock does not restart).
-    left = opt.time_limit - (time.perf_counter() - t0)
-    if left <= 0:
+    if opt.time_limit - (time.perf_counter() - t0) <= 0:
         return _result(problem, Status.TIME_LIMIT, "time limit reached in the pivotal path",
                        z, f, opt, t0, start_z=problem.x0, **counts)
-    general = _solve_problem(problem.with_start(z), opt.replace(presolve=False, time_limit=left))
-    general.passes = {**passes, **{k: v for k, v in general.passes.items() if k != "presolve"}}
+    general = _without_preprocessor(problem, z, f, opt, t0, passes, why="the path")
     general.minor_iterations += pivots
     general.crash_iterations += crash_its
-    general.time = time.perf_counter() - t0
     return general
 
 

@@ -680,3 +680,67 @@ def test_other_reductions_are_still_made_for_small_problems():
     r = solve_mcp(p)
     assert r.message == "solved by the preprocessor"
     check_success(r, lambda z: A @ z + q, 0.0, np.inf)
+
+
+def test_preprocessor_point_missing_the_tolerance_is_solved_again_not_an_internal_error():
+    """The preprocessor solved a 3 x 3 linear MCP by itself and postsolved x_0 = -1.3e17
+    from the row 0.0057 x_0 + 3.70 x_2 - 7.55 = 0 with x_2 = 1.98e14 at its bound: F_0 is
+    exact there only to ~0.1, and the user's problem read F_0 = -0.049.  The point was
+    reported SOLVED, which the final check turned into Status.ERROR ("internal error: a
+    non-solution was marked solved").  Now a preprocessor's point that misses the
+    tolerance on the user's problem is solved again without the preprocessor, from that
+    point; here no point does better at these magnitudes, and the status says so."""
+    import warnings
+
+    M = np.array([[5.6637305561408518e-03, 0.0, 3.6970301919591009e+00],
+                  [0.0, 1.0894321570792496e+01, 0.0],
+                  [0.0, -1.6341482356188744e+06, 0.0]])
+    q = np.array([-7.5489941768819815e+00, -8.7005936066453689e-03, -1.6426934876217497e+03])
+    lb = np.array([-np.inf, 0.0, -np.inf])
+    ub = np.array([np.inf, np.inf, 1.9791005503999338e+14])
+    A = sp.csc_matrix(M)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)   # (the homotopy's step cap overflowed)
+        r = solve_mcp(lambda z: A @ z + q, lambda z: A, lb, ub, np.zeros(3), constant_jac=A)
+    assert r.status is not Status.ERROR
+    assert "solved again without it" in r.passes["presolve"].reason
+    assert np.all(r.x >= lb) and np.all(r.x <= ub)
+    assert r.success == (r.residual.natural <= 1e-6) and not r.success
+
+
+def test_reduced_solve_whose_postsolved_point_misses_the_tolerance_is_solved_again(
+        monkeypatch):
+    """The same check after a solve of the reduced problem: a postsolve that loses
+    accuracy (simulated: 1e-3 added to the recovered variable) gave a point that is no
+    solution of the user's problem; the solve goes on without the preprocessor from it
+    and finds the solution."""
+    from compass_sparse.presolve.core import PresolveResult
+
+    n = 4
+    A = sp.csc_matrix(np.array([[2.0, 0.0, 0.0, 0.0],     # a singleton row: x_0 = 1
+                                [1.0, 3.0, 1.0, 0.0],
+                                [0.0, 1.0, 4.0, 1.0],
+                                [0.0, 0.0, 1.0, 5.0]]))
+    q = np.array([-2.0, -1.0, -2.0, -3.0])
+    const = sp.csc_matrix(np.array([[2.0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 0, 0]]))
+
+    def F(z):
+        return A @ z + q + np.array([0.0, 0.1, 0.1, 0.1]) * z ** 3
+
+    def J(z):
+        return sp.csc_matrix(A + sp.diags(np.array([0.0, 0.3, 0.3, 0.3]) * z ** 2))
+
+    real = PresolveResult.postsolve
+
+    def lossy(self, z_red):
+        z = real(self, z_red)
+        if z_red.size:
+            z = z.copy()
+            z[0] += 1e-3
+        return z
+
+    monkeypatch.setattr(PresolveResult, "postsolve", lossy)
+    p = MCP(F, J, np.full(n, -np.inf), np.full(n, np.inf), np.zeros(n), constant_jac=const)
+    r = solve_mcp(p)
+    assert r.success and "solved again without it" in r.passes["presolve"].reason
+    check_success(r, F, -np.inf, np.inf)
