@@ -62,7 +62,7 @@ from .path import LinearCode, WarmBasis, solve_linear_mcp
 from .progress import ProgressLine
 from .restarts import FROM_RANDOM, FROM_START, RestartSchedule, near_point, random_point
 from .result import Iteration, PassStats, Status
-from .stationary import stationarity
+from .stationary import stationarity, worst_rows
 
 logger = logging.getLogger("compass_sparse")
 
@@ -728,6 +728,14 @@ class NMSSolver:
         except KeyboardInterrupt:
             return status, message
         st = stationarity(self.best.z, self.best.f, J, self.lb, self.ub)
+        sc = getattr(self.ev, "scaling", None)
+        if sc is not None:
+            # The verdict is the scaled problem's (better conditioned); the rows are named
+            # with the user's |Phi_i| at the user's point z = C y, F = R^-1 G (the Result's
+            # residual report reads the same values), not the scaled ones.
+            col = sc.col
+            st.rows = worst_rows(fb_phi(col * self.best.z, self.best.f / sc.row,
+                                        col * self.lb, col * self.ub))
         text = st.message(self.p.row_label)
         if status is Status.NO_PROGRESS and st.stationary:
             return Status.STATIONARY_POINT, text

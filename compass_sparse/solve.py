@@ -435,12 +435,8 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
                   crash_iterations=out.crash_iterations, restarts=out.restarts,
                   gradient_steps=out.gradient_steps, lm_steps=out.lm_steps,
                   factorizations=out.factorizations, basis_updates=out.updates,
-                  basis=out.basis, history=_history(solver, out, phi0))
-    res.lu = _lu_report(solver.bm)
-    if pre is not None and out.status is Status.SOLVED and not res.success:
-        # solved on the reduced problem, but its postsolved point misses the tolerance on
-        # the user's problem (see the preprocessor-only case above)
-        return _without_preprocessor(problem, res.x, res.fun, opt, t0, passes)
+                  basis=out.basis, history=_history(solver, out, phi0),
+                  lu=_lu_report(solver.bm))
     if opt.verbosity >= 1:
         logger.info(res.summary())
     return res
@@ -552,8 +548,13 @@ def _finish(problem, pre, status, message, z_red, opt, t0, passes, *, f_reduced=
             f = np.full(problem.n, np.nan)
     if "basis" in counts:
         counts["basis"] = _postsolve_basis(pre, counts["basis"], z, problem.lb, problem.ub)
-    return _result(problem, status, message, z, f, opt, t0, start_z=start_z,
-                   passes=passes, **counts)
+    res = _result(problem, status, message, z, f, opt, t0, start_z=start_z, passes=passes,
+                  **counts)
+    if pre is not None and status is Status.SOLVED and not res.success:
+        # solved on the reduced problem, but the postsolved point misses the tolerance on
+        # the user's problem (see the preprocessor-only case in _solve_evaluated)
+        return _without_preprocessor(problem, res.x, res.fun, opt, t0, passes)
+    return res
 
 
 # ---------------------------------------------------------------------------- LCP

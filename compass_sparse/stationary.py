@@ -23,7 +23,7 @@ import scipy.sparse as sp
 
 from .merit import fb_jacobian_diagonals, fb_phi
 
-__all__ = ["STATIONARY_RTOL", "Stationarity", "stationarity"]
+__all__ = ["STATIONARY_RTOL", "Stationarity", "stationarity", "worst_rows"]
 
 STATIONARY_RTOL = 0.1
 """First-order relative decrease of Psi over a step of length max(1, ||z||) below which a
@@ -54,14 +54,20 @@ class Stationarity:
                 + self.rows_text(row_label))
 
 
+def worst_rows(phi) -> list:
+    """(row index, |Phi_i|) of the rows that keep the merit up: at most ``ROWS_NAMED``,
+    largest first, each at least ``ROW_SHARE`` of the largest."""
+    k = min(ROWS_NAMED, phi.size)
+    idx = np.argsort(-np.abs(phi))[:k]
+    big = np.max(np.abs(phi)) if phi.size else 0.0
+    return [(int(i), float(abs(phi[i]))) for i in idx if abs(phi[i]) >= ROW_SHARE * big > 0]
+
+
 def stationarity(z, f, J, lb, ub) -> Stationarity:
     """Whether z is a stationary point of Psi that is not a solution (see module docs)."""
     phi = fb_phi(z, f, lb, ub)
     nphi = float(np.linalg.norm(phi))
-    k = min(ROWS_NAMED, phi.size)
-    idx = np.argsort(-np.abs(phi))[:k]
-    big = np.max(np.abs(phi)) if phi.size else 0.0
-    rows = [(int(i), float(abs(phi[i]))) for i in idx if abs(phi[i]) >= ROW_SHARE * big > 0]
+    rows = worst_rows(phi)
     if nphi == 0.0 or J is None:
         return Stationarity(False, np.inf, rows)
     da, db = fb_jacobian_diagonals(z, f, lb, ub)

@@ -248,3 +248,24 @@ def test_scaling_keeps_a_large_finite_bound_that_the_scaled_problem_would_read_a
     assert s.col[0] < 1e-5                                # the factor that lifts u1
     assert np.array_equal(q.ub, p.ub / s.col) and np.array_equal(q.lb, p.lb / s.col)
     assert np.isfinite(q.ub[0]) and q.ub[0] > 1e20
+
+
+def test_failure_message_names_rows_with_the_users_residuals_not_the_scaled_ones():
+    """F_0 = 1e6 (x_0^2 + 1) has no root: the solve ends at a stationary point with
+    |Phi_0| = 1e6 at x_0 = 0, which the Result's residual report says.  The message,
+    built by the solver on the scaled problem (J spread 2e6, so the scaling pass ran),
+    named 'F[0] (|Phi| 9.77e+02)', the scaled row's value; it now names the user's."""
+    import re
+
+    def F(x):
+        return np.array([1e6 * (x[0] ** 2 + 1.0), x[1] - 1.0])
+
+    def J(x):
+        return sp.csc_matrix(np.diag([2e6 * x[0], 1.0]))
+
+    r = solve_mcp(F, J, np.full(2, -np.inf), np.full(2, np.inf), np.array([1.0, 0.0]))
+    assert r.passes["scaling"].ran and not r.success
+    named = dict(re.findall(r"(F\[\d+\]) \(\|Phi\| ([0-9.e+-]+)\)", r.message))
+    worst_name, worst_phi, _ = r.residual.worst[0]
+    assert worst_name in named
+    assert float(named[worst_name]) == pytest.approx(worst_phi, rel=1e-2)
