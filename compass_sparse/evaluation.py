@@ -65,6 +65,10 @@ class EvalCounters:
     nfev_fd: int = 0  #: of nfev: F calls spent on finite differences
     domain_errors: int = 0  #: guarded evaluations rejected (an exception or NaN/Inf)
 
+    def reset(self):
+        """All counts back to 0, in place (whoever holds this object sees the new counts)."""
+        self.nfev = self.njev = self.nfev_fd = self.domain_errors = 0
+
 
 @functools.lru_cache(maxsize=16)
 def _full_pattern(n: int):

@@ -219,8 +219,11 @@ def solve_mcp(F, jac=None, lb=0.0, ub=np.inf, x0=None, *, options=None, callback
     opt = Options.coerce(options)
     if isinstance(F, MCP):
         # Built earlier: the data its functions read may have changed since the start
-        # point was checked, so the values remembered then are not trusted.
+        # point was checked, so the values remembered then are not trusted.  Its counts
+        # start again: a Result counts the calls of its own solve (they included the
+        # construction's start check and every earlier solve of the object).
         F.evaluator.forget()
+        F.evaluator.counters.reset()
     problem, check = _as_problem(F, jac, lb, ub, x0, problem_kwargs)
     return _solve_problem(problem, opt, callback=callback, basis=basis, check=check)
 
@@ -456,8 +459,12 @@ def _without_preprocessor(problem, z, f, opt, t0, passes, why=None) -> Result:
         if st is not None:
             st.reason += ("; its point missed the tolerance on the original problem "
                           "(the postsolve's rounding): solved again without it")
+    c = problem.counters  # the evaluations so far (the new solve counts its own)
     general = _solve_problem(problem.with_start(z), opt.replace(presolve=False, time_limit=left))
     general.passes = {**passes, **{k: v for k, v in general.passes.items() if k != "presolve"}}
+    general.nfev += c.nfev
+    general.njev += c.njev
+    general.domain_errors += c.domain_errors
     general.time = time.perf_counter() - t0
     return general
 
@@ -552,9 +559,18 @@ def _finish(problem, pre, status, message, z_red, opt, t0, passes, *, f_reduced=
                   **counts)
     if pre is not None and status is Status.SOLVED and not res.success:
         # solved on the reduced problem, but the postsolved point misses the tolerance on
-        # the user's problem (see the preprocessor-only case in _solve_evaluated)
-        return _without_preprocessor(problem, res.x, res.fun, opt, t0, passes)
+        # the user's problem (see the preprocessor-only case in _solve_evaluated); the
+        # work of both solves is counted
+        general = _without_preprocessor(problem, res.x, res.fun, opt, t0, passes)
+        for k in _WORK_COUNTS:
+            setattr(general, k, getattr(general, k) + getattr(res, k))
+        return general
     return res
+
+
+_WORK_COUNTS = ("nit", "minor_iterations", "crash_iterations", "restarts", "gradient_steps",
+                "lm_steps", "factorizations", "basis_updates")
+"""Result fields that count work done (summed over a solve and its hand-over)."""
 
 
 # ---------------------------------------------------------------------------- LCP

@@ -724,7 +724,10 @@ def test_reduced_solve_whose_postsolved_point_misses_the_tolerance_is_solved_aga
     q = np.array([-2.0, -1.0, -2.0, -3.0])
     const = sp.csc_matrix(np.array([[2.0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 0, 0]]))
 
+    calls = [0]
+
     def F(z):
+        calls[0] += 1
         return A @ z + q + np.array([0.0, 0.1, 0.1, 0.1]) * z ** 3
 
     def J(z):
@@ -741,6 +744,31 @@ def test_reduced_solve_whose_postsolved_point_misses_the_tolerance_is_solved_aga
 
     monkeypatch.setattr(PresolveResult, "postsolve", lossy)
     p = MCP(F, J, np.full(n, -np.inf), np.full(n, np.inf), np.zeros(n), constant_jac=const)
+    calls[0] = 0
     r = solve_mcp(p)
     assert r.success and "solved again without it" in r.passes["presolve"].reason
+    assert r.nfev == calls[0] and r.nit >= 2  # the work of both solves is counted
     check_success(r, F, -np.inf, np.inf)
+
+
+def test_solving_one_mcp_object_twice_counts_each_solve_alone():
+    """Result.nfev read the MCP object's counters, which ran on from its construction
+    (the start check) and over every earlier solve: the second solve of one object
+    reported the evaluations of both.  Each solve now counts its own calls."""
+    calls = [0]
+
+    def F(x):
+        calls[0] += 1
+        return x ** 3 + x - 1.0
+
+    def J(x):
+        return sp.diags(3 * x ** 2 + 1).tocsc()
+
+    p = MCP(F, J, 0.0, np.inf, np.zeros(3))
+    counts = []
+    for _ in range(2):
+        calls[0] = 0
+        r = solve_mcp(p)
+        assert r.success and r.nfev == calls[0] == p.counters.nfev
+        counts.append(r.nfev)
+    assert counts[0] == counts[1]
