@@ -8,10 +8,10 @@ scipy copy of the block without its stored zeros (~60 us): on kojshin's start, a
 solve.  Here the attempts run in one compiled call.
 
 The factorization is numpy's ``linalg.solve`` as numba compiles it: LAPACK's gesv, which
-is getrf followed by getrs -- the routines the Python route calls -- on the same library,
-so the same bits (checked against that route by the tests on orders 1 ... 200).  Its
-singular-matrix error is raised exactly when getrf reports a zero pivot (info > 0), the
-Python route's :class:`~compass_sparse.basis.backends.SingularFactorError`.
+is getrf followed by getrs on scipy's library, so the bits of scipy's lu_factor + lu_solve
+(checked by the tests on orders 1 ... 200).  Its singular-matrix error is raised exactly
+when getrf reports a zero pivot (info > 0).  :func:`dense_solve_or_none` is also the dense
+solve of :func:`compass_sparse.basis.backends.solve_sparse`: one dense LU in the package.
 """
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ import numpy as np
 from ._jit import njit
 from ._matching import _augmenting_matching
 
-__all__ = ["dense_perturbed_solve", "structurally_singular"]
+__all__ = ["dense_perturbed_solve", "dense_solve_or_none", "structurally_singular"]
 
 
 @njit(cache=True)
@@ -48,7 +48,7 @@ def structurally_singular(indptr, indices, data, n):
 
 
 @njit(cache=True)
-def _solve_or_none(A, b):
+def dense_solve_or_none(A, b):
     """(x, True) with A x = b, or (b, False) when LAPACK finds A exactly singular."""
     try:
         return np.linalg.solve(A, b), True
@@ -71,14 +71,14 @@ def dense_perturbed_solve(dense, rhs, eps, eps0, perturb, attempts, step_limit):
     for _ in range(attempts):
         nf += 1
         if eps == 0.0:
-            d, ok = _solve_or_none(dense, rhs)  # (solve factors a copy: dense stays)
+            d, ok = dense_solve_or_none(dense, rhs)  # (solve factors a copy: dense stays)
         else:
             if A.shape[0] != n:
                 A = np.empty((n, n), dtype=np.float64).T  # Fortran order, as LAPACK's
             A[:, :] = dense
             for i in range(n):
                 A[i, i] += eps
-            d, ok = _solve_or_none(A, rhs)
+            d, ok = dense_solve_or_none(A, rhs)
         if ok:
             finite = True
             big = 0.0

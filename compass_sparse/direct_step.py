@@ -264,7 +264,7 @@ class DirectFactors:
         #: singular to the compiled engine's ``rank_tolerance`` is left to the path
         self.dense = dense
         self.rank_tolerance = float(rank_tolerance)
-        self.klu = klu and not dense and _klu_module() is not None
+        self.klu = klu and not dense and klu_available()
         self.lu_nnz = 0
         self.method = ("", "")
         self._held = None  # (indptr, indices, kvxopt matrix, KLU symbolic) of the last block

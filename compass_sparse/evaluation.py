@@ -48,7 +48,7 @@ from ._eval_kernels import csc_copy_on_pattern, csc_same_pattern
 from ._merit_kernels import all_finite_kernel, csc_is_canonical, memo_key_kernel
 from .exceptions import (CompassError, EvaluationError, JacobianPatternError, ProblemError,
                          ShapeError)
-from .merit import _F64, float_vector
+from .merit import float_vector
 
 __all__ = ["Evaluator", "EvalCounters", "canonical_csc"]
 
@@ -341,14 +341,6 @@ class Evaluator:
         which are J's own."""
         P = self._pattern
         n = self.n
-        if (J.__class__ is np.ndarray and P is not None and J.dtype is _F64
-                and J.shape == (n, n) and P.indices.shape[0] == n * n
-                and P.indices.dtype == np.int32 and P.indptr.dtype == np.int32):
-            # a dense J on its (full) stored pattern: its columns are the data, which is
-            # what the general route makes of it (zeros stay stored), without the
-            # canonical test and the pattern comparison (~10 us per evaluation of a
-            # small dense model)
-            return trusted_csc(J.T.flatten(), P.indices.copy(), P.indptr.copy(), (n, n))
         if (P is not None and sp.issparse(J) and J.format == "csc" and J.shape == (n, n)
                 and J.data.dtype == np.float64 and J.indices.dtype == np.int32
                 and J.indptr.dtype == np.int32 and P.indices.dtype == np.int32

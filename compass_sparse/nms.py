@@ -728,14 +728,13 @@ class NMSSolver:
         except KeyboardInterrupt:
             return status, message
         st = stationarity(self.best.z, self.best.f, J, self.lb, self.ub)
-        sc = getattr(self.ev, "scaling", None)
-        if sc is not None:
+        a = self.acceptance
+        if a.row is not None:
             # The verdict is the scaled problem's (better conditioned); the rows are named
-            # with the user's |Phi_i| at the user's point z = C y, F = R^-1 G (the Result's
-            # residual report reads the same values), not the scaled ones.
-            col = sc.col
-            st.rows = worst_rows(fb_phi(col * self.best.z, self.best.f / sc.row,
-                                        col * self.lb, col * self.ub))
+            # with the user's |Phi_i| at the user's point (the Result's residual report
+            # reads the same values), not the scaled ones.
+            zu, fu = a.user_point(self.best.z, self.best.f)
+            st.rows = worst_rows(fb_phi(zu, fu, a.lb, a.ub))
         text = st.message(self.p.row_label)
         if status is Status.NO_PROGRESS and st.stationary:
             return Status.STATIONARY_POINT, text

@@ -78,12 +78,12 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _path_kernels as _PK
+from ._merit_kernels import csc_matvec
 from ._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
 from ._slot_kernels import slot_basis, slot_point, slot_table, start_basis
 from .basis import KIND_DENSE, KIND_M, KIND_UNIT, FactorReuseFailed, UpdateStatus
 from .direct_step import DirectFactors, direct_step
 from .exceptions import ShapeError, SingularBasisError
-from ._merit_kernels import csc_matvec
 from .merit import float_vector, max_abs
 
 _VAR_NAMES = "zwvatS"

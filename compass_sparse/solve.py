@@ -27,6 +27,7 @@ from .path import LinearCode, WarmBasis, default_basis, solve_linear_mcp
 from .problem import MCP
 from .result import Iteration, PassStats, PointStatus, Result, Status
 from ._blas import single_threaded_blas
+from ._eval_kernels import csc_scaled_all_finite
 from .scaling import SPREAD_TRIGGER, equilibrate, scale_problem, spread
 
 logger = logging.getLogger("compass_sparse")
@@ -445,16 +446,17 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
     return res
 
 
-def _without_preprocessor(problem, z, f, opt, t0, passes, why=None) -> Result:
+def _without_preprocessor(problem, z, f, opt, t0, passes, presolve_missed=True) -> Result:
     """The whole problem solved again from z without the preprocessor, in what is left of
     the time limit (the clock does not restart): the preprocessor's point z (F values f)
-    missed the tolerance on the user's problem, or (``why``) the pass that ran before
-    could not finish.  The Result keeps the earlier passes' reports."""
+    missed the tolerance on the user's problem (``presolve_missed``, said in its report),
+    or the pass that ran before could not finish.  The Result keeps the earlier passes'
+    reports and counts the evaluations of both."""
     left = opt.time_limit - (time.perf_counter() - t0)
     if left <= 0:
         return _result(problem, Status.TIME_LIMIT, "time limit reached", z, f, opt, t0,
                        start_z=problem.x0, passes=passes)
-    if why is None:
+    if presolve_missed:
         st = passes.get("presolve")
         if st is not None:
             st.reason += ("; its point missed the tolerance on the original problem "
@@ -491,8 +493,6 @@ class _UserJacobian:
             s.pattern_ref is self.parent.pattern_ref
 
     def __call__(self, zu):
-        from ._eval_kernels import csc_scaled_all_finite
-
         return self.scaled.guarded(
             lambda: self.parent.J(zu),
             lambda J: csc_scaled_all_finite(J.indptr, J.indices, J.data, self.row, self.col),
@@ -687,7 +687,7 @@ def _lcp_path(problem, M, q, z, f, x, opt, t0, deadline, passes, st, crash_its, 
     if opt.time_limit - (time.perf_counter() - t0) <= 0:
         return _result(problem, Status.TIME_LIMIT, "time limit reached in the pivotal path",
                        z, f, opt, t0, start_z=problem.x0, **counts)
-    general = _without_preprocessor(problem, z, f, opt, t0, passes, why="the path")
+    general = _without_preprocessor(problem, z, f, opt, t0, passes, presolve_missed=False)
     general.minor_iterations += pivots
     general.crash_iterations += crash_its
     return general

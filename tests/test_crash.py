@@ -184,9 +184,10 @@ def test_compiled_crash_active_set_matches_the_array_formulas():
 
 
 def test_dense_solve_of_the_crash_gives_the_bits_of_scipy_lu_factor_and_lu_solve():
-    """The crash's reduced systems up to DENSE_SOLVE_MAX_N are solved by LAPACK getrf and
-    getrs called directly; the result must be bitwise that of scipy.linalg.lu_factor +
-    lu_solve (the same two calls), and an exactly singular matrix must still raise."""
+    """The crash's reduced systems up to DENSE_SOLVE_MAX_N are solved by LAPACK's getrf and
+    getrs (through the compiled gesv); the result must be bitwise that of
+    scipy.linalg.lu_factor + lu_solve (the same two calls), and an exactly singular matrix
+    must still raise."""
     import scipy.linalg as sla
 
     from compass_sparse.basis.backends import SingularFactorError, solve_sparse
@@ -248,20 +249,23 @@ def test_crash_report_of_a_solve_whose_restart_ran_it_is_not_a_skip_reason():
 
 
 def _python_perturbed_attempts(Jii, rhs, eps, eps0, limit, attempts=8):
-    """The crash's attempts written with the Python route (solve_sparse's dense LAPACK
-    solve per attempt): the reference of the compiled loop."""
-    from compass_sparse.basis.backends import SingularFactorError, solve_sparse
+    """The crash's attempts written in Python on scipy's LU (lu_factor + lu_solve, an
+    exactly zero pivot meaning singular): the reference of the compiled loop."""
+    import warnings
+
+    import scipy.linalg as sla
 
     nf = 0
     for _ in range(attempts):
         A = Jii if eps == 0.0 else Jii + eps * sp.identity(Jii.shape[0], format="csc")
         nf += 1
-        try:
-            d = solve_sparse(A, rhs)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", sla.LinAlgWarning)
+            lu = sla.lu_factor(A.toarray())
+        if np.all(np.diag(lu[0]) != 0.0):
+            d = sla.lu_solve(lu, rhs)
             if np.all(np.isfinite(d)) and not (eps > 0.0 and np.max(np.abs(d)) > limit):
                 return d, eps, nf
-        except SingularFactorError:
-            pass
         eps = eps0 if eps == 0.0 else eps * 10.0
     return None, eps, nf
 

@@ -475,37 +475,22 @@ illegal leading dimension on small finite blocks (the "DTRSV parameter number 6"
 with a suspect solve)."""
 
 
-_GETRF_GETRS = []
-"""(dgetrf, dgetrs) of scipy's LAPACK, looked up on first use (import cost)."""
-
-
 def _dense_solve(A, b):
-    """x with A x = b by LAPACK getrf + getrs, called directly: ``scipy.linalg.lu_factor``
-    and ``lu_solve`` make the same two calls but wrap them in argument checks, a warnings
-    context and the LinAlgWarning of a zero pivot, which cost as much as the factorization
-    itself at the crash's orders (237 -> 120 us at n = 101, measured; same bits)."""
+    """x with A x = b by LAPACK's LU (getrf + getrs, through the crash's compiled solve:
+    one dense solve in the package); raises :class:`SingularFactorError` on an exactly
+    zero pivot."""
     from .._blas import single_threaded_blas
+    from .._crash_kernels import dense_solve_or_none
 
-    if not _GETRF_GETRS:
-        from scipy.linalg import lapack  # lazy: import cost
-        _GETRF_GETRS.append((lapack.dgetrf, lapack.dgetrs))
-    getrf, getrs = _GETRF_GETRS[0]
-    # Fortran order: LAPACK factors it in place (a C-ordered array is copied first)
+    # Fortran order, as LAPACK factors it
     D = A.toarray(order="F") if sp.issparse(A) else np.array(A, dtype=np.float64, order="F")
     rhs = np.array(b, dtype=np.float64)
     if D.shape[0] == 0:
         return rhs
     with single_threaded_blas():
-        lu, piv, info = getrf(D, overwrite_a=True)
-        if info < 0:  # pragma: no cover - an argument error: a bug here, not singularity
-            raise ValueError(f"dgetrf: illegal value in argument {-info}")
-        # info > 0: U[info-1, info-1] is exactly zero, the first zero pivot (getrf
-        # reports one whenever any pivot is exactly zero: the old test of diag(lu))
-        if info > 0:
-            raise SingularFactorError("exactly singular (a zero pivot in the dense LU)")
-        x, info = getrs(lu, piv, rhs, overwrite_b=True)
-    if info != 0:  # pragma: no cover - an argument error
-        raise ValueError(f"dgetrs: illegal value in argument {-info}")
+        x, ok = dense_solve_or_none(D, rhs)
+    if not ok:
+        raise SingularFactorError("exactly singular (a zero pivot in the dense LU)")
     return x
 
 
