@@ -32,6 +32,7 @@ import numpy as np
 
 from .._jit import njit
 from .._eval_kernels import csc_same_pattern
+from . import _kernels
 from .postsolve import FixVariables, PostsolveStack, Record
 
 logger = logging.getLogger("compass_sparse.presolve")
@@ -56,23 +57,6 @@ class InfeasibilityDiagnostic:
 
     def __str__(self):
         return self.message
-
-
-def ranges(ptr: np.ndarray, ids: np.ndarray) -> np.ndarray:
-    """Concatenation of arange(ptr[k], ptr[k+1]) for k in ids (vectorized)."""
-    ids = np.asarray(ids, dtype=np.intp)
-    if ids.size == 0:
-        return np.zeros(0, dtype=np.intp)
-    if ids.size == 1:  # (one column or row, e.g. one fixed price: no cumsum and repeat)
-        k = int(ids.ravel()[0])
-        return np.arange(ptr[k], ptr[k + 1], dtype=np.intp)
-    starts = ptr[ids]
-    lens = ptr[ids + 1] - starts
-    total = int(lens.sum())
-    if total == 0:
-        return np.zeros(0, dtype=np.intp)
-    offs = np.repeat(starts - (np.cumsum(lens) - lens), lens)
-    return offs + np.arange(total)
 
 
 @njit(cache=True)
@@ -213,9 +197,10 @@ class Workspace:
         """Recompute counts, constants and activity bounds of the remaining problem."""
         n = self.n
         er, ec, ev = self.er, self.ec, self.ev
-        live = self.live_mask()
-        nz = live & self.const & (np.abs(ev) > self.opts.zero_tolerance)
-        nl = live & ~self.const
+        nz = np.empty(ev.shape[0], dtype=bool)
+        nl = np.empty(ev.shape[0], dtype=bool)
+        _kernels.refresh_masks(self.live_mask(), self.const, ev,
+                               float(self.opts.zero_tolerance), nz, nl)
         self.nz = nz
         self.nl = nl
         f = self.evaluate(self.base)
@@ -269,12 +254,9 @@ class Workspace:
 
     # -- mutation ------------------------------------------------------------------------
     def _touch(self, cols, rows):
-        cols = np.asarray(cols, dtype=np.intp)
-        rows = np.asarray(rows, dtype=np.intp)
-        self.touched_col[cols] = True
-        self.touched_row[rows] = True
-        self.touched_row[self.er[ranges(self.col_ptr, cols)]] = True
-        self.touched_col[self.ec[self.row_order[ranges(self.row_ptr, rows)]]] = True
+        _kernels.touch(np.asarray(cols, dtype=np.intp), np.asarray(rows, dtype=np.intp),
+                       self.col_ptr, self.er, self.row_ptr, self.row_order, self.ec,
+                       self.touched_col, self.touched_row)
 
     def touch(self, cols=(), rows=()):
         """Mark rows/columns as used by a reduction of this round (no removal)."""

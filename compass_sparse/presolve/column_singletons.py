@@ -19,13 +19,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._kernels import linear_columns_with
 from .postsolve import DiagonalColumnSingletons, FreeColumnSingletons
 
 NAME = "column_singletons"
 
 
 def run(ws) -> None:
-    cols = np.flatnonzero(ws.col_active & (ws.col_nnz == 1) & (ws.col_nl == 0) & ~ws.touched_col)
+    cols = linear_columns_with(ws.col_active, ws.col_nnz, ws.col_nl, ws.touched_col, ws.lb, ws.ub,
+                               1, False)
     if cols.size == 0:
         return
     diag = {"rows": [], "cols": [], "coefs": []}

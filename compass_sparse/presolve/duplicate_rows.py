@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._kernels import duplicate_row_keys, linear_rows_with
 from .postsolve import FixVariables
 
 NAME = "duplicate_rows"
@@ -62,20 +63,15 @@ def _weights(n):
 
 def run(ws) -> None:
     n = ws.n
-    cand = ws.linear & (ws.row_nnz >= 1) & ~ws.touched_row
-    if np.count_nonzero(cand) < 2:
+    rows = linear_rows_with(ws.linear, ws.row_nnz, ws.touched_row, 1, n)
+    if rows.size < 2:
         return
     w1, w2 = _weights(n)
-    pos = ws.row_order
-    pos = pos[ws.nz[pos] & cand[ws.er[pos]]]  # entries of candidate rows, row-major
-    r, cidx, v = ws.er[pos], ws.ec[pos], ws.ev[pos]
-    first = np.ones(r.size, dtype=bool)
-    first[1:] = r[1:] != r[:-1]
-    lead = np.zeros(n)
-    lead[r[first]] = v[first]
-    h1 = np.bincount(r, weights=w1[cidx], minlength=n)
-    h2 = np.bincount(r, weights=w2[cidx] * (v / lead[r]), minlength=n)
-    rows = np.flatnonzero(cand)
+    cand = np.zeros(n, dtype=bool)
+    cand[rows] = True
+    h1 = np.zeros(n)
+    h2 = np.zeros(n)
+    duplicate_row_keys(ws.row_order, ws.nz, ws.er, ws.ec, ws.ev, cand, w1, w2, h1, h2)
     order = np.lexsort((h2[rows], h1[rows], ws.row_nnz[rows]))
     rows = rows[order]
     hb, ha = h2[rows[1:]], h2[rows[:-1]]

@@ -12,14 +12,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._kernels import linear_columns_with
 from .postsolve import EmptyColumns
 
 NAME = "empty_columns"
 
 
 def run(ws) -> None:
-    cols = np.flatnonzero(ws.col_active & (ws.col_nnz == 0) & (ws.col_nl == 0)
-                          & np.isfinite(ws.lb) & np.isfinite(ws.ub) & ~ws.touched_col)
+    cols = linear_columns_with(ws.col_active, ws.col_nnz, ws.col_nl, ws.touched_col, ws.lb,
+                               ws.ub, 0, True)
     if cols.size == 0:
         return
     rows = ws.partner_row[cols]

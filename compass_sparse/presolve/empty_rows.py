@@ -16,11 +16,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._kernels import linear_rows_with
+
 NAME = "empty_rows"
 
 
 def run(ws) -> None:
-    rows = np.flatnonzero(ws.linear & (ws.row_nnz == 0) & ~ws.touched_row)
+    rows = linear_rows_with(ws.linear, ws.row_nnz, ws.touched_row, 0, 0)
     if rows.size == 0:
         return
     p = ws.partner_var[rows]

@@ -6,12 +6,12 @@ information.  F_j is still reported after postsolve (evaluated at the full point
 """
 from __future__ import annotations
 
-import numpy as np
+from ._kernels import fixed_columns
 
 NAME = "fixed_variables"
 
 
 def run(ws) -> None:
-    cols = np.flatnonzero(ws.col_active & (ws.lb == ws.ub) & ~ws.touched_col)
+    cols = fixed_columns(ws.col_active, ws.lb, ws.ub, ws.touched_col)
     if cols.size:
         ws.fix(cols, ws.lb[cols], reason="l = u")

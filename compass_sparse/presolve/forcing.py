@@ -26,18 +26,19 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._kernels import forcing_candidates
 from .postsolve import ForcingRows
 
 NAME = "forcing_rows"
 
 
 def run(ws) -> None:
-    cand = ws.linear & (ws.row_nnz >= 1) & ~ws.touched_row
-    t = ws.opts.feasibility_tolerance * ws.scale
-    p_all = ws.partner_var
-    up = cand & (ws.ub[p_all] == np.inf) & np.isfinite(ws.fmax) & (np.abs(ws.fmax) <= t)
-    dn = cand & (ws.lb[p_all] == -np.inf) & np.isfinite(ws.fmin) & (np.abs(ws.fmin) <= t)
-    rows = np.flatnonzero(up | dn)
+    # candidates: linear rows with an entry whose activity reaches 0 only at the box's
+    # corner, on the side their partner's infinite bound leaves open (up: F <= 0 side)
+    up = np.empty(ws.n, dtype=bool)
+    rows = forcing_candidates(ws.linear, ws.row_nnz, ws.touched_row, ws.partner_var, ws.lb,
+                              ws.ub, ws.fmin, ws.fmax, ws.scale,
+                              float(ws.opts.feasibility_tolerance), up)
     if rows.size == 0:
         return
     acc = {"rows": [], "cols": [], "values": [], "seg": [], "dual_cols": [], "dual_rows": [],

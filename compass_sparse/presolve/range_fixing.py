@@ -13,15 +13,15 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._kernels import range_candidates
+
 NAME = "range_fixing"
 
 
 def run(ws) -> None:
-    cand = ws.linear & ~ws.touched_row
-    t = ws.opts.feasibility_tolerance * ws.scale
-    pos = cand & (ws.fmin > t)
-    neg = cand & (ws.fmax < -t)
-    rows = np.flatnonzero(pos | neg)
+    pos = np.empty(ws.n, dtype=bool)  # F > 0 on the whole box (else F < 0 there)
+    rows = range_candidates(ws.linear, ws.touched_row, ws.fmin, ws.fmax, ws.scale,
+                            float(ws.opts.feasibility_tolerance), pos)
     if rows.size == 0:
         return
     p = ws.partner_var[rows]

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._kernels import linear_rows_with
 from ._onedim import solve_1d
 from .postsolve import FixByEquation, FixVariables
 
@@ -30,7 +31,7 @@ NAME = "singleton_rows"
 
 
 def run(ws) -> None:
-    rows = np.flatnonzero(ws.linear & (ws.row_nnz == 1) & ~ws.touched_row)
+    rows = linear_rows_with(ws.linear, ws.row_nnz, ws.touched_row, 1, 1)
     if rows.size == 0:
         return
     # Fast path, vectorized: j = p with a > 0 has the unique solution clip(-c/a, l, u).

@@ -1,0 +1,118 @@
+"""The compiled candidate scans of the passes give the indices of the mask expressions
+they replace (written out here as the reference), on random workspaces with infinite
+bounds, infinite and NaN activity bounds, touched marks and inactive rows and columns."""
+import numpy as np
+import pytest
+
+from compass_sparse.presolve import _kernels as K
+
+
+def _state(seed, n=60):
+    rng = np.random.default_rng(seed)
+    lb = rng.choice([-np.inf, 0.0, -1.0, 2.0], n)
+    ub = np.where(rng.random(n) < 0.3, lb, rng.choice([np.inf, 1.0, 3.0], n))
+    ub = np.maximum(ub, lb)
+    fmin = rng.choice([-np.inf, -1e-9, 0.0, 1e-9, 0.5, -2.0, np.nan], n)
+    fmax = rng.choice([np.inf, 1e-9, 0.0, -1e-9, -0.5, 2.0, np.nan], n)
+    return dict(
+        n=n, lb=lb, ub=ub, fmin=fmin, fmax=fmax,
+        scale=rng.choice([1.0, 10.0, 1e3], n),
+        linear=rng.random(n) < 0.7, col_active=rng.random(n) < 0.8,
+        touched_row=rng.random(n) < 0.2, touched_col=rng.random(n) < 0.2,
+        row_nnz=rng.integers(0, 4, n), col_nnz=rng.integers(0, 3, n),
+        col_nl=rng.integers(0, 2, n) * (rng.random(n) < 0.3),
+        partner_var=rng.permutation(n))
+
+
+@pytest.mark.parametrize("seed", range(20))
+def test_candidate_scans_select_the_rows_and_columns_of_the_mask_expressions(seed):
+    s = _state(seed)
+    lb, ub, fmin, fmax = s["lb"], s["ub"], s["fmin"], s["fmax"]
+    linear, tr, tc = s["linear"], s["touched_row"], s["touched_col"]
+    act, rnnz, cnnz, cnl = s["col_active"], s["row_nnz"], s["col_nnz"], s["col_nl"]
+    np.testing.assert_array_equal(K.fixed_columns(act, lb, ub, tc),
+                                  np.flatnonzero(act & (lb == ub) & ~tc))
+    for lo, hi in ((0, 0), (1, 1), (1, s["n"])):
+        np.testing.assert_array_equal(K.linear_rows_with(linear, rnnz, tr, lo, hi),
+                                      np.flatnonzero(linear & (rnnz >= lo) & (rnnz <= hi) & ~tr))
+    np.testing.assert_array_equal(
+        K.linear_columns_with(act, cnnz, cnl, tc, lb, ub, 0, True),
+        np.flatnonzero(act & (cnnz == 0) & (cnl == 0) & np.isfinite(lb) & np.isfinite(ub)
+                       & ~tc))
+    np.testing.assert_array_equal(
+        K.linear_columns_with(act, cnnz, cnl, tc, lb, ub, 1, False),
+        np.flatnonzero(act & (cnnz == 1) & (cnl == 0) & ~tc))
+    ftol = 1e-8
+    t = ftol * s["scale"]
+    p = s["partner_var"]
+    cand = linear & (rnnz >= 1) & ~tr
+    with np.errstate(invalid="ignore"):
+        up = cand & (ub[p] == np.inf) & np.isfinite(fmax) & (np.abs(fmax) <= t)
+        dn = cand & (lb[p] == -np.inf) & np.isfinite(fmin) & (np.abs(fmin) <= t)
+        up_k = np.empty(s["n"], dtype=bool)
+        np.testing.assert_array_equal(
+            K.forcing_candidates(linear, rnnz, tr, p, lb, ub, fmin, fmax, s["scale"], ftol,
+                                 up_k), np.flatnonzero(up | dn))
+        np.testing.assert_array_equal(up_k, up)
+        pos = linear & ~tr & (fmin > t)
+        neg = linear & ~tr & (fmax < -t)
+        low_k = np.empty(s["n"], dtype=bool)
+        np.testing.assert_array_equal(
+            K.range_candidates(linear, tr, fmin, fmax, s["scale"], ftol, low_k),
+            np.flatnonzero(pos | neg))
+        np.testing.assert_array_equal(low_k, pos)
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_touch_and_masks_and_duplicate_keys_give_the_array_formulas_bits(seed):
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(100 + seed)
+    n = 40
+    J = sp.random(n, n, density=0.15, random_state=rng, format="csc")
+    J.data[rng.random(J.nnz) < 0.1] = 0.0  # stored zeros (below any tolerance)
+    J.sum_duplicates()
+    ec = np.repeat(np.arange(n), np.diff(J.indptr)).astype(np.intp)
+    er = J.indices.astype(np.intp)
+    col_ptr = J.indptr.astype(np.intp)
+    row_order = np.argsort(er, kind="stable")
+    row_ptr = np.zeros(n + 1, dtype=np.intp)
+    np.cumsum(np.bincount(er, minlength=n), out=row_ptr[1:])
+    ev = J.data.copy()
+
+    # touch: rows of the columns' entries and columns of the rows' entries
+    cols = rng.choice(n, 3, replace=False).astype(np.intp)
+    rows = rng.choice(n, 2, replace=False).astype(np.intp)
+    tc, tr = np.zeros(n, bool), np.zeros(n, bool)
+    K.touch(cols, rows, col_ptr, er, row_ptr, row_order, ec, tc, tr)
+    rc, rr = np.zeros(n, bool), np.zeros(n, bool)
+    rc[cols] = rr[rows] = True
+    for j in cols:
+        rr[er[col_ptr[j]:col_ptr[j + 1]]] = True
+    for i in rows:
+        rc[ec[er == i]] = True
+    np.testing.assert_array_equal(tc, rc)
+    np.testing.assert_array_equal(tr, rr)
+
+    live = rng.random(ev.size) < 0.8
+    const = rng.random(ev.size) < 0.7
+    nz, nl = np.empty(ev.size, bool), np.empty(ev.size, bool)
+    K.refresh_masks(live, const, ev, 1e-3, nz, nl)
+    np.testing.assert_array_equal(nz, live & const & (np.abs(ev) > 1e-3))
+    np.testing.assert_array_equal(nl, live & ~const)
+
+    # the duplicate-rows keys: bincount over the entries of the candidate rows
+    cand = rng.random(n) < 0.6
+    w1, w2 = rng.random(n) + 0.5, rng.random(n) + 0.5
+    pos = row_order[nz[row_order] & cand[er[row_order]]]
+    r, c, v = er[pos], ec[pos], ev[pos]
+    first = np.ones(r.size, dtype=bool)
+    first[1:] = r[1:] != r[:-1]
+    lead = np.zeros(n)
+    lead[r[first]] = v[first]
+    h1_ref = np.bincount(r, weights=w1[c], minlength=n)
+    h2_ref = np.bincount(r, weights=w2[c] * (v / lead[r]), minlength=n)
+    h1, h2 = np.zeros(n), np.zeros(n)
+    K.duplicate_row_keys(row_order, nz, er, ec, ev, cand, w1, w2, h1, h2)
+    assert h1.tobytes() == h1_ref.tobytes()
+    assert h2.tobytes() == h2_ref.tobytes()
