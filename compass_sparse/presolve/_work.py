@@ -30,9 +30,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._jit import njit
 from .._eval_kernels import csc_same_pattern
 from . import _kernels
+from ._kernels import recount as _recount
 from .postsolve import FixVariables, PostsolveStack, Record
 
 logger = logging.getLogger("compass_sparse.presolve")
@@ -57,53 +57,6 @@ class InfeasibilityDiagnostic:
 
     def __str__(self):
         return self.message
-
-
-@njit(cache=True)
-def _recount(er, ec, ev, nz, nl, base, lb, ub, f, counts, vals):
-    """The recount of :meth:`Workspace.refresh` in one pass over the entries, replacing
-    seven bincounts and a dozen array operations (a small model's recount was their
-    overhead: ~130 us at n = 102).  Entries are visited in storage order and summed into
-    their row as ``np.bincount(rows, weights=w)`` sums them, and every term is formed as
-    the array formulas formed it, so the results are the same bits:
-
-    counts = (row_nnz, row_nl, col_nnz, col_nl): entries in ``nz`` (live, declared
-    constant, above the zero tolerance) and in ``nl`` (live, not constant);
-    vals = (c, fmin, fmax, scale): c = f - sum a_ij base_j, fmin/fmax = c + sum of
-    min/max of a_ij z_j over [l_j, u_j], scale = 1 + |c| + sum of the finite |bounds|."""
-    n = f.shape[0]
-    acc = np.zeros(n)
-    amin = np.zeros(n)
-    amax = np.zeros(n)
-    amag = np.zeros(n)
-    for k in range(er.shape[0]):
-        i = er[k]
-        j = ec[k]
-        if nl[k]:
-            counts[1, i] += 1
-            counts[3, j] += 1
-        elif nz[k]:
-            counts[0, i] += 1
-            counts[2, j] += 1
-            a = ev[k]
-            acc[i] += a * base[j]
-            if a > 0:
-                tmin = a * lb[j]
-                tmax = a * ub[j]
-            else:
-                tmin = a * ub[j]
-                tmax = a * lb[j]
-            amin[i] += tmin
-            amax[i] += tmax
-            m1 = abs(tmin) if np.isfinite(tmin) else 0.0
-            m2 = abs(tmax) if np.isfinite(tmax) else 0.0
-            amag[i] += m1 + m2
-    for i in range(n):
-        c = f[i] - acc[i]
-        vals[0, i] = c
-        vals[1, i] = c + amin[i]
-        vals[2, i] = c + amax[i]
-        vals[3, i] = 1.0 + abs(c) + amag[i]
 
 
 def _index_arrays(J0):

@@ -116,3 +116,113 @@ def test_touch_and_masks_and_duplicate_keys_give_the_array_formulas_bits(seed):
     K.duplicate_row_keys(row_order, nz, er, ec, ev, cand, w1, w2, h1, h2)
     assert h1.tobytes() == h1_ref.tobytes()
     assert h2.tobytes() == h2_ref.tobytes()
+
+
+def _screen_and_passes(problem):
+    """(the screen's (fixed, singletons, rounds) or None, presolve result of the passes)."""
+    from compass_sparse.presolve import core, presolve
+
+    f0 = problem.F(problem.x0)
+    J0 = problem.J(problem.x0)
+    opts = core.PresolveOptions.coerce(None)
+    const = core.declared_constant_mask(problem, J0, f0, opts, [], samples=[])
+    simple = core._simple_reductions_only(problem, opts, J0, const)
+    saved = core._simple_reductions_only
+    core._simple_reductions_only = lambda *a: None  # the passes themselves
+    try:
+        full = presolve(problem, f0=f0, J0=J0, leave_simple_to_solver=True)
+    finally:
+        core._simple_reductions_only = saved
+    return simple, full
+
+
+def _feature_problems():
+    from presolve._problems import ALL_FEATS, build
+
+    for seed in range(12):
+        yield build(seed, 40, ("fixed",))[0]          # fixing l = u is all there is
+        yield build(seed, 40, ("fixed", "cubic"))[0]
+        for feat in ALL_FEATS:                          # one reduction beside the fixed ones
+            yield build(seed, 40, ("fixed", feat))[0]
+        yield build(seed, 40)[0]
+
+
+def _random_problems(count):
+    """Sparse affine-plus-cubic problems with a few declared-constant entries (so a few
+    linear rows), random bounds with some l = u, and a start point in the box: most of
+    them give the passes nothing but the fixed variables, some a reduction."""
+    from compass_sparse.problem import MCP
+    import scipy.sparse as sp
+
+    for seed in range(count):
+        rng = np.random.default_rng(500 + seed)
+        n = int(rng.integers(5, 40))
+        A = sp.random(n, n, density=0.15, random_state=rng, format="csc") + sp.eye(n) * 3
+        A = sp.csc_matrix(A)
+        A.sum_duplicates()
+        const = sp.csc_matrix((rng.random(A.nnz) < rng.choice([0.1, 0.5, 0.9]),
+                               A.indices.copy(), A.indptr.copy()), shape=(n, n))
+        cub = np.where(rng.random(n) < 0.5, 1.0, 0.0)
+        q = rng.normal(size=n)
+        lb = rng.choice([-np.inf, 0.0, -1.0], n)
+        ub = rng.choice([np.inf, 2.0, 5.0], n)
+        fix = rng.random(n) < 0.15
+        ub[fix] = lb[fix] = np.where(np.isfinite(lb[fix]), lb[fix], 0.5)
+        x0 = np.clip(rng.normal(size=n), lb, ub)
+        # cubic terms on diagonal entries that are not declared constant
+        dmask = np.asarray(const.diagonal(), dtype=bool)
+        cub[dmask] = 0.0
+
+        def F(x, A=A, q=q, cub=cub):
+            return A @ x + q + cub * x ** 3
+
+        def J(x, A=A, cub=cub):
+            return sp.csc_matrix(A + sp.diags(3 * cub * x ** 2))
+
+        yield MCP(F, J, lb, ub, x0, jac_sparsity=A, constant_jac=const)
+
+
+def test_screen_of_simple_reductions_is_exact_against_the_passes():
+    """The screen's answer "only fixed variables and diagonal column singletons" is exact:
+    the passes find those (as many, in as many rounds) and nothing else -- checked on
+    the preprocessor's feature problems (each with one reduction beside its fixed
+    variables), random problems with a few linear rows, and CGE models; and it does
+    answer on the Ramsey models (fixed numeraire) and the static ones (numeraire and a
+    diagonal column singleton, two rounds)."""
+    from compass_sparse.generators.cge import ramsey_cge, size_for, static_cge
+
+    problems = list(_feature_problems()) + list(_random_problems(150))
+    cge = [ramsey_cge(periods=T, sectors=s).with_shock(capital_tax=0.25).problem
+           for T in (5, 11, 40) for s in (1, 2)]
+    cge += [static_cge(**size_for(n)).problem for n in (91, 247, 759)]
+    answered = 0
+    for p in problems + cge:
+        simple, full = _screen_and_passes(p)
+        if simple is not None:
+            answered += 1
+            assert full.infeasible is None and full.reduced is p and full.warnings == []
+            assert simple == (full.stats.kept_fixed, full.stats.kept_singletons,
+                              full.stats.rounds)
+        elif p in cge:
+            pytest.fail(f"no answer on a CGE model: {full.summary_line()}")
+    assert answered >= 20
+
+
+def test_screened_presolve_returns_the_result_of_the_passes():
+    """presolve with the screen returns what the passes return: the problem itself, the
+    same kept counts, rounds and evaluations; the solve around it succeeds."""
+    from compass_sparse import solve_mcp
+    from compass_sparse.generators.cge import ramsey_cge, size_for, static_cge
+    from compass_sparse.presolve import presolve
+
+    for p in (ramsey_cge(periods=11, sectors=1).with_shock(capital_tax=0.25).problem,
+              static_cge(**size_for(91)).with_shock(output_tax=0.25).problem):
+        simple, full = _screen_and_passes(p)
+        fast = presolve(p, f0=p.F(p.x0), J0=p.J(p.x0), leave_simple_to_solver=True)
+        assert simple is not None and fast.reduced is p and full.reduced is p
+        for k in ("kept_fixed", "kept_singletons", "rounds", "f_evals", "n_reduced",
+                  "nnz_reduced", "n_original", "nnz_original"):
+            assert getattr(fast.stats, k) == getattr(full.stats, k), k
+        assert fast.summary_line().split(" in ")[0] == full.summary_line().split(" in ")[0]
+        r = solve_mcp(p)
+        assert r.success and r.passes["presolve"].ran
