@@ -12,6 +12,14 @@ from __future__ import annotations
 
 import contextlib
 
+BLAS_LIMIT_MIN_N = 16
+"""Below this dimension the BLAS thread count is left alone: the dense kernels of such a
+problem have at most 256 entries, and OpenBLAS runs every LU or matrix-vector product of
+fewer than 10^4 entries on one thread by itself (setting and restoring the count cost
+~10 us, a few percent of a whole solve of a 2-variable problem; the crash's block around
+its dense solves, set and restored at every crash, was 2% of the solver's time over the
+problems of n <= 10, sampled)."""
+
 _CONTROLLER = []
 """The one threadpoolctl controller of the process (empty until first needed)."""
 

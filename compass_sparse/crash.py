@@ -37,7 +37,7 @@ import scipy.sparse as sp
 
 from ._crash_kernels import dense_perturbed_solve, structurally_singular
 from ._merit_kernels import crash_active_set, csc_diagonal, csc_to_dense
-from ._blas import single_threaded_blas
+from ._blas import BLAS_LIMIT_MIN_N, single_threaded_blas
 from .basis.backends import DENSE_SOLVE_MAX_N, SingularFactorError, solve_sparse
 from .direct_step import (DIRECT_MAX_N, KLU_FILL_LIMIT, REUSE_BEATS_REFACTOR_NNZ,
                           DirectFactors, automatic_lu, klu_available, reduced_system)
@@ -231,9 +231,10 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
     crash at a solution."""
     kw = dict(f0=f0, J0=J0, tol=tol, deadline=deadline, log=log, on_point=on_point,
               stats=stats)
-    if np.size(z0) <= DENSE_SOLVE_MAX_N:
+    if BLAS_LIMIT_MIN_N <= np.size(z0) <= DENSE_SOLVE_MAX_N:
         # Its reduced systems are factored densely, each in a single-threaded BLAS block;
         # one block around the whole crash makes those free (see compass_sparse._blas).
+        # (Below BLAS_LIMIT_MIN_N OpenBLAS keeps such small kernels on one thread itself.)
         with single_threaded_blas():
             return _crash(evalr, z0, lb, ub, options, **kw)
     return _crash(evalr, z0, lb, ub, options, **kw)

@@ -26,7 +26,7 @@ from .exceptions import ShapeError
 from .path import LinearCode, WarmBasis, default_basis, solve_linear_mcp
 from .problem import MCP
 from .result import Iteration, PassStats, PointStatus, Result, Status
-from ._blas import single_threaded_blas
+from ._blas import BLAS_LIMIT_MIN_N, single_threaded_blas
 from ._eval_kernels import csc_scaled_all_finite
 from .scaling import SPREAD_TRIGGER, equilibrate, scale_problem, spread
 
@@ -66,13 +66,6 @@ def _manager_factory(opt: Options, deadline=None):
                                                     reuse_factors=opt.factor_reuse))
 
     return make
-
-
-BLAS_LIMIT_MIN_N = 16
-"""Below this dimension the BLAS thread count is left alone: the dense kernels of such a
-problem have at most 256 entries, and OpenBLAS runs every LU or matrix-vector product of
-fewer than 10^4 entries on one thread by itself (setting and restoring the count cost
-~10 us, a few percent of a whole solve of a 2-variable problem)."""
 
 
 def _blas_threads(n: int):

@@ -663,3 +663,25 @@ def test_csc_same_pattern_compares_pointers_and_the_stored_indices():
     longer = np.concatenate([P.indices, np.array([7, 7], np.int32)])
     assert csc_same_pattern(P.indptr, longer, P.indptr, P.indices)
     assert not csc_same_pattern(P.indptr[:-1], P.indices, P.indptr, P.indices)
+
+
+@pytest.mark.parametrize("n, blocks", [(4, 0), (20, 1)])
+def test_crash_limits_blas_threads_only_from_the_size_where_blas_could_use_threads(
+        monkeypatch, n, blocks):
+    """Below BLAS_LIMIT_MIN_N the crash leaves the BLAS thread count alone (OpenBLAS keeps
+    kernels that small on one thread itself); from there on one block spans the crash."""
+    import numpy as np
+
+    from compass_sparse import crash as C
+    from compass_sparse import solve_mcp
+
+    opened = []
+    real = C.single_threaded_blas
+    monkeypatch.setattr(C, "single_threaded_blas", lambda: opened.append(1) or real())
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(n, n)) * 0.1 + 3 * np.eye(n)
+    b = rng.normal(size=n)
+    r = solve_mcp(lambda x: A @ x + b, lambda x: A, np.zeros(n), np.full(n, np.inf),
+                  np.ones(n), options={"crash_minimum_dimension": 1})
+    assert r.success and r.passes["crash"].ran
+    assert len(opened) == blocks
