@@ -43,7 +43,7 @@ from .direct_step import (DIRECT_MAX_N, KLU_FILL_LIMIT, REUSE_BEATS_REFACTOR_NNZ
                           DirectFactors, automatic_lu, klu_available, reduced_system)
 from .evaluation import all_finite
 from .exceptions import FactorBudgetError
-from .merit import fb_phi, max_abs, normal_map_at, project
+from .merit import _solver_vectors, fb_phi, max_abs, normal_map_at, project
 
 __all__ = ["CrashResult", "crash"]
 
@@ -302,15 +302,18 @@ def _crash(evalr, z0, lb, ub, options, *, f0, J0, tol, deadline, log, on_point,
         # ones solve F_I(z) + J_II d_I + J_IA d_A = 0 for the step d = z - z_new.
         free = np.empty(z.size, dtype=np.bool_)
         d = np.empty(z.size)
-        crash_active_set(*(np.ascontiguousarray(a, dtype=float) for a in (z, f, lb, ub)),
-                         dg, free, d)
+        if _solver_vectors(z, f, lb, ub):  # (every crash of the solver: no conversions)
+            crash_active_set(z, f, lb, ub, dg, free, d)
+        else:
+            crash_active_set(*(np.ascontiguousarray(a, dtype=float) for a in (z, f, lb, ub)),
+                             dg, free, d)
         changes = z.size if prev_free is None else int(np.count_nonzero(free != prev_free))
         if prev_free is not None and changes < opt.crash_nbchange_limit:
             reason = "no basis change"
             it -= 1
             break
         prev_free = free
-        inact = np.flatnonzero(free)
+        inact = free.nonzero()[0]
         if inact.size:
             # J_II and f_I - J_IA d_A (d is 0 on I), in one compiled pass
             Jii, rhs = reduced_system(J, free, d, -f)

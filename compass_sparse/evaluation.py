@@ -83,6 +83,17 @@ def _keys(A: sp.csc_matrix) -> np.ndarray:
     return np.repeat(np.arange(A.shape[1], dtype=np.int64), np.diff(A.indptr)) * n + A.indices
 
 
+def _dense_csc(A, n: int) -> sp.csc_matrix:
+    """A real dense n x n array as a CSC matrix holding every entry (zeros included)."""
+    if A.shape != (n, n):
+        raise ShapeError(f"the Jacobian has shape {A.shape}, expected ({n}, {n})")
+    # The full pattern, built once per n (a small problem with a dense Jacobian evaluates
+    # it every major iteration); copies of the index arrays, since scipy may sort or
+    # prune them in place.
+    indptr, indices = _full_pattern(n)
+    return trusted_csc(A.T.flatten(), indices.copy(), indptr.copy(), (n, n))
+
+
 def canonical_csc(J, n: int) -> sp.csc_matrix:
     """J as a canonical (sorted, duplicate-free) float CSC copy; a dense array keeps its
     full pattern (its zeros stay stored)."""
@@ -104,14 +115,7 @@ def canonical_csc(J, n: int) -> sp.csc_matrix:
                                    J.indptr.copy(), (n, n))
         C = sp.csc_matrix(J, dtype=float, copy=True)
     else:
-        A = J.astype(float, copy=False)
-        if A.shape != (n, n):
-            raise ShapeError(f"the Jacobian has shape {A.shape}, expected ({n}, {n})")
-        # The full pattern, built once per n (a small problem with a dense Jacobian
-        # evaluates it every major iteration); copies of the index arrays, since scipy
-        # may sort or prune them in place.
-        indptr, indices = _full_pattern(n)
-        return trusted_csc(A.T.flatten(), indices.copy(), indptr.copy(), (n, n))
+        return _dense_csc(J.astype(float, copy=False), n)
     if not C.has_canonical_format:
         C.sum_duplicates()  # sorts indices too
     C.sort_indices()
@@ -341,6 +345,9 @@ class Evaluator:
         which are J's own."""
         P = self._pattern
         n = self.n
+        if J.__class__ is np.ndarray and J.dtype == np.float64:
+            # a dense float array (small problems): no sparse tests, no complex check
+            return self._fix_pattern(_dense_csc(J, n))
         if (P is not None and sp.issparse(J) and J.format == "csc" and J.shape == (n, n)
                 and J.data.dtype == np.float64 and J.indices.dtype == np.int32
                 and J.indptr.dtype == np.int32 and P.indices.dtype == np.int32
