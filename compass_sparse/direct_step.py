@@ -56,9 +56,12 @@ __all__ = ["DIRECT_MAX_DENSITY", "DIRECT_MAX_N", "DIRECT_MIN_N", "KLU_FILL_LIMIT
            "REUSE_BEATS_REFACTOR_NNZ", "DirectFactors", "direct_step", "direct_step_applies",
            "reduced_system"]
 
-DIRECT_MIN_N = 50
+DIRECT_MIN_N = 150
 """Below this order the compiled engine's dense factorization costs less than a sparse
-LU's set-up."""
+LU's set-up and the Python around it.  (Measured in one process, the dense step against
+KLU, whole solves: 0.80-0.90 at n = 50-102 -- a thesis family at n = 50, a static CGE model
+at n = 91, a Ramsey model at n = 102 -- 0.92 at n = 151; 0.97-1.05 at n = 170-183, and
+1.15-1.30 at n = 200-273; the bound was 50.)"""
 
 DIRECT_MAX_N = 2000
 """Above this order the direct step is not tried: the basis manager's own set-up is small

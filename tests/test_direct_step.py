@@ -145,10 +145,13 @@ def test_singular_block_is_left_to_the_path():
 def test_direct_step_applies_only_to_sparse_moderate_orders(monkeypatch):
     monkeypatch.delenv("COMPASS_SPARSE_LU", raising=False)
     o = Options()
-    sparse = sp.csc_matrix(sp.identity(100) + sp.eye(100, k=1))
+    n = ds.DIRECT_MIN_N + 50
+    sparse = sp.csc_matrix(sp.identity(n) + sp.eye(n, k=1))
     assert ds.direct_step_applies(sparse, o)
-    assert not ds.direct_step_applies(sp.csc_matrix(np.ones((100, 100))), o)  # dense
-    assert not ds.direct_step_applies(sp.csc_matrix(sp.identity(20)), o)  # tiny
+    assert not ds.direct_step_applies(sp.csc_matrix(np.ones((n, n))), o)  # dense
+    small = ds.DIRECT_MIN_N - 1  # the compiled engine's dense step instead
+    assert not ds.direct_step_applies(sp.csc_matrix(sp.identity(small) + sp.eye(small, k=1)),
+                                      o)
     assert not ds.direct_step_applies(sparse, Options(lu_backend="superlu"))
     assert not ds.direct_step_applies(sparse, Options(lu_ordering="amd"))
     monkeypatch.setenv("COMPASS_SPARSE_LU", "umfpack")
