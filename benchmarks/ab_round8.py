@@ -10,6 +10,8 @@ of the solver's time per solve without the user's F and J:
   dense      the direct step's dense route below order 150 (DIRECT_MIN_N) against 50
   overheads  the descent gradient, dense-J and crash-argument changes against the
              functions of an older worktree (``--old``, e.g. a checkout of f4094d3)
+  frame      the result's residual report, the spread test and the flat test's canonical
+             check against the functions of an older worktree (``--old``, e.g. 65e1fc3)
   idle       kojshin's solves right after a PATH run, a 0.4 s sleep, an unrelated Python
              subprocess, or nothing (what the side-by-side runs' alternation costs us)
 
@@ -84,7 +86,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("experiments", nargs="+",
-                    choices=("presolve", "blas", "dense", "overheads", "idle"))
+                    choices=("presolve", "blas", "dense", "overheads", "frame", "idle"))
     ap.add_argument("--rounds", type=int, default=20)
     ap.add_argument("--old", help="worktree of the older revision (overheads)")
     a = ap.parse_args(argv)
@@ -115,19 +117,20 @@ def main(argv=None):
         rows = ab(cases, {"50": (bound(50), None), "150": (bound(150), None)}, a.rounds)
         _print("The dense direct step below order 150 (against 50)", rows, "50", "150",
                a.rounds)
-    if "overheads" in a.experiments:
+    def load(name):
+        """The module ``name`` of the worktree --old, loaded beside the current one."""
         if not a.old:
-            ap.error("overheads needs --old <worktree>")
+            ap.error("this experiment needs --old <worktree>")
+        spec = importlib.util.spec_from_file_location(
+            f"compass_sparse.{name}_old", os.path.join(a.old, "compass_sparse", f"{name}.py"))
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules[spec.name] = mod
+        spec.loader.exec_module(mod)
+        return mod
+
+    if "overheads" in a.experiments:
         import compass_sparse.evaluation as E
         import compass_sparse.nms as N
-
-        def load(name):
-            spec = importlib.util.spec_from_file_location(
-                f"compass_sparse.{name}_old", os.path.join(a.old, "compass_sparse", f"{name}.py"))
-            mod = importlib.util.module_from_spec(spec)
-            sys.modules[spec.name] = mod
-            spec.loader.exec_module(mod)
-            return mod
 
         old_crash, old_merit, old_eval = load("crash"), load("merit"), load("evaluation")
         new = (N.crash, N.fb_gradient, E.Evaluator._user_J_on_pattern)
@@ -141,6 +144,23 @@ def main(argv=None):
         rows = ab(_small_cases(), {"old": (use(old), None), "new": (use(new), None)},
                   a.rounds)
         _print("Small-problem overheads (descent gradient, dense J, crash arguments)", rows,
+               "old", "new", a.rounds)
+    if "frame" in a.experiments:
+        import compass_sparse.acceptance as A
+        import compass_sparse.solve as S
+
+        old_merit, old_scaling, old_acc = load("merit"), load("scaling"), load("acceptance")
+        new = (S.residual_report, S.spread, A._scale_test)
+        old = (old_merit.residual_report, old_scaling.spread, old_acc._scale_test)
+
+        def frame(v):
+            def setup():
+                S.residual_report, S.spread, A._scale_test = v
+            return setup
+
+        rows = ab(_small_cases(), {"old": (frame(old), None), "new": (frame(new), None)},
+                  a.rounds)
+        _print("A solve's frame (residual report, spread test, canonical check)", rows,
                "old", "new", a.rounds)
     if "idle" in a.experiments:
         idle(a.rounds)

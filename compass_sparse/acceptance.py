@@ -32,7 +32,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ._merit_kernels import (csc_is_canonical, flat_step_kernel, min_map_within,
+from ._csc import without_duplicates
+from ._merit_kernels import (flat_step_kernel, min_map_within,
                              scale_test_kernel)
 from .merit import fb_jacobian_diagonals, fb_phi, min_map
 from .path import _floats
@@ -106,17 +107,7 @@ def _scale_test(z, f, lb, ub, phi, J) -> Verdict:
     """Test (2) at a point that passed test (1), with J = J(z): ||H_i||_inf over the row
     is max(|db_i| max_j |J_ij|, |da_i + db_i J_ii|), read off the stored entries of the
     canonical CSC in one compiled pass (no sparse matrix built per solve)."""
-    if not (sp.issparse(J) and J.format == "csc"):
-        J = sp.csc_matrix(J)
-    # canonical (the evaluator's J always is) by one compiled scan, where scipy's own
-    # test costs ~10 us on a matrix that does not carry its flag; a matrix it does not
-    # find canonical is asked the flag as before (a canonical one summed is unchanged)
-    if not ((J.indices.dtype == np.int32 or J.indices.dtype == np.int64)
-            and J.indptr.dtype == J.indices.dtype
-            and csc_is_canonical(J.indptr, J.indices, J.shape[0], J.indptr[-1])) \
-            and not J.has_canonical_format:
-        J = J.copy()
-        J.sum_duplicates()
+    J = without_duplicates(J)  # (the evaluator's J already is: then J itself)
     if _floats(np.size(z), z, f, lb, ub, phi) and J.data.dtype == np.float64:
         # the solver's points: diagonals and test in one compiled call
         row, d, ratio = scale_test_kernel(z, f, lb, ub, phi, J.indptr, J.indices, J.data)

@@ -27,6 +27,7 @@ a + b > 0, so that Phi keeps full relative accuracy near a solution with a, b > 
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -317,14 +318,14 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5,
         fb_inf, natural, nm_inf = (float(np.max(aphi)), float(np.max(mm)),
                                    float(np.max(np.abs(nm)))) if z.size else (0.0, 0.0, 0.0)
     k = min(k_worst, z.size)
-    if k == z.size:
-        # every row is listed (small problems): one sort, no partition first
-        idx = np.argsort(-aphi, kind="stable")  # ties: the lower row first
-    else:
-        idx = np.empty(k, dtype=np.int64)
-        # the k largest in one compiled pass when they are distinct (then the answer is
-        # unique, the partition and sort below give it too); ties keep numpy's order
-        if not (k > 0 and float_vector(phi) and top_abs_distinct(phi, idx)):
+    idx = np.empty(k, dtype=np.int64)
+    # the k largest in one compiled pass when they are distinct (then the answer is
+    # unique: the sorts below give it too); ties keep numpy's order
+    if not (k > 0 and float_vector(phi) and top_abs_distinct(phi, idx)):
+        if k == z.size:
+            # every row is listed (small problems): one sort, no partition first
+            idx = np.argsort(-aphi, kind="stable")  # ties: the lower row first
+        else:
             idx = np.argpartition(-aphi, k - 1)[:k] if k > 0 else np.array([], dtype=int)
             idx = idx[np.argsort(-aphi[idx])]
     if names is None:
@@ -352,10 +353,10 @@ def _norm2(v, inf_norm=None) -> float:
         m = float(inf_norm)
     else:
         m = float(np.abs(v).max()) if v.size else 0.0
-    if m == 0.0 or not np.isfinite(m):
+    if m == 0.0 or not math.isfinite(m):
         return m
     s = v / m
-    return m * float(np.sqrt(np.dot(s, s)))
+    return m * math.sqrt(float(np.dot(s, s)))  # (the correctly rounded root, as np.sqrt)
 
 
 def normal_map_at(z, f, lb, ub):

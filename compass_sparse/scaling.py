@@ -33,9 +33,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ._csc import trusted_csc
+from ._csc import trusted_csc, without_duplicates
 from ._jit import njit
-from ._merit_kernels import csc_scaled_abs_maxima
+from ._merit_kernels import csc_max_norm_spread, csc_scaled_abs_maxima
 from .evaluation import Evaluator
 from .problem import MCP
 
@@ -82,15 +82,6 @@ def scale_entries(J, row, col) -> sp.csc_matrix:
     return trusted_csc(data, J.indices.copy(), J.indptr.copy(), J.shape)
 
 
-def _canonical(A) -> sp.csc_matrix:
-    """A as CSC without duplicate entries (a duplicate's |sum| is what a max-norm sees)."""
-    A = A if sp.issparse(A) and A.format == "csc" else sp.csc_matrix(A)
-    if not A.has_canonical_format:
-        A = A.copy()
-        A.sum_duplicates()
-    return A
-
-
 def _maxnorms(A: sp.csc_matrix, row=None, col=None):
     """Row and column max-norms of diag(row) A diag(col) (A canonical CSC; no factors:
     A itself), read off the stored entries in one compiled pass (every solve asks)."""
@@ -110,10 +101,8 @@ def _spread(v) -> float:
 
 def spread(J) -> float:
     """max / min of the non-zero row and column max-norms of J (1 for a well-scaled J)."""
-    A = _canonical(J)
+    A = without_duplicates(J)  # (a duplicate's |sum| is what a max-norm sees)
     if A.shape[0] == A.shape[1]:
-        from ._merit_kernels import csc_max_norm_spread
-
         return float(csc_max_norm_spread(A.indptr, A.indices, A.data, A.shape[0]))
     r, c = _maxnorms(A)
     return max(_spread(r), _spread(c))
@@ -146,7 +135,7 @@ def equilibrate(J, before: float | None = None) -> Scaling:
     """Power-of-two factors with R J C equilibrated (see the module docstring).
     ``before``: ``spread(J)`` when the caller has it (the scaling pass computes it to
     decide whether to scale), not computed again."""
-    A = _canonical(J)
+    A = without_duplicates(J)  # (a duplicate's |sum| is what a max-norm sees)
     n = A.shape[0]
     row = np.ones(n)
     col = np.ones(n)

@@ -12,7 +12,8 @@ import scipy.sparse as sp
 from compass_sparse import MCP, solve_mcp
 from compass_sparse.evaluation import _Memo
 from compass_sparse.merit import fb_phi, residual_report
-from compass_sparse.scaling import _canonical, _maxnorms, _spread, spread
+from compass_sparse._csc import without_duplicates as _canonical
+from compass_sparse.scaling import _maxnorms, _spread, spread
 
 
 def _cournot():

@@ -329,3 +329,13 @@ def test_residual_report_worst_rows_compiled_pass_is_numpys(seed):
     ref = ref[np.argsort(-phi[ref])]
     assert [w[0] for w in rep.worst] == [f"F[{i}]" for i in ref]
     assert rep.worst_index == ref[0]
+    # every row listed (n <= k): the stable sort's order, ties by the lower row first
+    for trial in range(200):
+        n = int(rng.integers(1, 6))
+        z = rng.uniform(0.0, 2.0, n)
+        f = np.round(rng.standard_normal(n), 1 if trial % 2 else 12)
+        lb, ub = np.zeros(n), np.full(n, np.inf)
+        rep = residual_report(z, f, lb, ub, k_worst=5)
+        phi = np.abs(fb_phi(z, f, lb, ub))
+        assert [w[0] for w in rep.worst] == [f"F[{i}]" for i in np.argsort(-phi,
+                                                                           kind="stable")]
