@@ -12,6 +12,8 @@ of the solver's time per solve without the user's F and J:
              functions of an older worktree (``--old``, e.g. a checkout of f4094d3)
   frame      the result's residual report, the spread test and the flat test's canonical
              check against the functions of an older worktree (``--old``, e.g. 65e1fc3)
+  crashstep  the crash step of problems of order <= 200 in one compiled call against the
+             crash of an older worktree (``--old``, e.g. 77901a7)
   idle       kojshin's solves right after a PATH run, a 0.4 s sleep, an unrelated Python
              subprocess, or nothing (what the side-by-side runs' alternation costs us)
 
@@ -86,7 +88,8 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("experiments", nargs="+",
-                    choices=("presolve", "blas", "dense", "overheads", "frame", "idle"))
+                    choices=("presolve", "blas", "dense", "overheads", "frame", "crashstep",
+                             "idle"))
     ap.add_argument("--rounds", type=int, default=20)
     ap.add_argument("--old", help="worktree of the older revision (overheads)")
     a = ap.parse_args(argv)
@@ -162,6 +165,19 @@ def main(argv=None):
                   a.rounds)
         _print("A solve's frame (residual report, spread test, canonical check)", rows,
                "old", "new", a.rounds)
+    if "crashstep" in a.experiments:
+        import compass_sparse.nms as N
+
+        new, old = N.crash, load("crash").crash
+
+        def use_crash(v):
+            return lambda: setattr(N, "crash", v)
+
+        cases = _small_cases() + bs._cge_cases([11], [91])
+        rows = ab(cases, {"old": (use_crash(old), None), "new": (use_crash(new), None)},
+                  a.rounds)
+        _print("The crash step in one compiled call (orders <= 200)", rows, "old", "new",
+               a.rounds)
     if "idle" in a.experiments:
         idle(a.rounds)
 

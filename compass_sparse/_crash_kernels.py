@@ -17,10 +17,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._eval_kernels import free_block
 from ._jit import njit
 from ._matching import _augmenting_matching
+from ._merit_kernels import crash_active_set, csc_diagonal, csc_to_dense
 
-__all__ = ["dense_perturbed_solve", "dense_solve_or_none", "structurally_singular"]
+__all__ = ["dense_crash_step", "dense_perturbed_solve", "dense_solve_or_none",
+           "structurally_singular"]
 
 
 @njit(cache=True)
@@ -94,3 +97,64 @@ def dense_perturbed_solve(dense, rhs, eps, eps0, perturb, attempts, step_limit):
             break
         eps = eps0 if eps == 0.0 else eps * 10.0
     return rhs, eps, nf, False
+
+
+NO_BASIS_CHANGE = 1
+"""Code of :func:`dense_crash_step`: the active set moved by fewer indices than the limit."""
+
+
+@njit(cache=True)
+def dense_crash_step(indptr, indices, data, z, f, lb, ub, prev_free, has_prev,
+                     nbchange_limit, perturb, eps0, attempts, step_limit):
+    """One crash step's direction on a problem of order <= 200 (its reduced blocks are
+    dense), in one call: the kernels the Python step called one by one, in its order and
+    on its arrays -- the diagonal of J, the active set and Newton target
+    (``crash_active_set``), the count of changes against ``prev_free`` (a stop when fewer
+    than ``nbchange_limit`` and ``has_prev``), the reduced system (``free_block`` with
+    q = -F), the test that tries eps = 0 only on a block that may be regular, and the
+    perturbed dense attempts (``dense_perturbed_solve``).  So the same bits.
+
+    Returns (code, free, d, changes, inactive count, eps, factorizations, found): code
+    ``NO_BASIS_CHANGE`` or 0; ``d`` is the full step (its inactive entries solved when
+    ``found``)."""
+    n = z.shape[0]
+    dg = np.empty(n)
+    csc_diagonal(indptr, indices, data, dg)
+    free = np.empty(n, dtype=np.bool_)
+    d = np.empty(n)
+    crash_active_set(z, f, lb, ub, dg, free, d)
+    changes = n
+    if has_prev:
+        changes = 0
+        for i in range(n):
+            if free[i] != prev_free[i]:
+                changes += 1
+        if changes < nbchange_limit:
+            return NO_BASIS_CHANGE, free, d, changes, 0, 0.0, 0, False
+    q = np.empty(n)
+    for i in range(n):
+        q[i] = -f[i]
+    Kp, Ki, Kx, rhs, k = free_block(indptr, indices, data, free, d, q)
+    m = rhs.shape[0]
+    if m == 0:
+        return 0, free, d, changes, 0, 0.0, 0, True
+    eps = 0.0
+    full = k == m * m
+    if full:
+        for e in range(k):
+            if Kx[e] == 0.0:
+                full = False
+                break
+    if perturb and not full and structurally_singular(Kp, Ki[:k], Kx[:k], m):
+        eps = eps0
+    dense = np.empty((m, m), dtype=np.float64).T  # Fortran order, as LAPACK's
+    csc_to_dense(Kp, Ki, Kx, dense)
+    di, eps, nf, found = dense_perturbed_solve(dense, rhs, eps, eps0, perturb, attempts,
+                                               step_limit)
+    if found:
+        p = 0
+        for i in range(n):
+            if free[i]:
+                d[i] = di[p]
+                p += 1
+    return 0, free, d, changes, m, eps, nf, found

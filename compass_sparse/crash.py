@@ -35,7 +35,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ._crash_kernels import dense_perturbed_solve, structurally_singular
+from ._crash_kernels import (NO_BASIS_CHANGE, dense_crash_step, dense_perturbed_solve,
+                             structurally_singular)
 from ._merit_kernels import crash_active_set, csc_diagonal, csc_to_dense
 from ._blas import BLAS_LIMIT_MIN_N, single_threaded_blas
 from .basis.backends import DENSE_SOLVE_MAX_N, SingularFactorError, solve_sparse
@@ -50,6 +51,7 @@ __all__ = ["CrashResult", "crash"]
 logger = logging.getLogger(__name__)
 
 CRASH_MEMORY = 4
+_NO_PREVIOUS = np.zeros(0, dtype=np.bool_)  # (dense_crash_step's prev_free at the first step)
 CRASH_START_FACTOR = 2.0
 
 
@@ -293,54 +295,81 @@ def _crash(evalr, z0, lb, ub, options, *, f0, J0, tol, deadline, log, on_point,
         # whole front at once.)
         # Rows are scaled by |J_ii| so that F and z are compared in the same units (the
         # minimum map of the row-scaled problem has the same solutions).
-        if sp.issparse(J) and J.format == "csc" and J.shape[0] == z.size:
-            dg = np.empty(z.size)
-            csc_diagonal(J.indptr, J.indices, J.data, dg)
+        if (z.size <= DENSE_SOLVE_MAX_N and sp.issparse(J) and J.format == "csc"
+                and J.shape[0] == z.size and _solver_vectors(z, f, lb, ub)
+                and (deadline is None or time.perf_counter() <= deadline)):
+            # Every block of this problem is factored densely: the direction in one
+            # compiled call of the kernels below, in their order on the same arrays (the
+            # same bits; a Python step made a dozen calls: see dense_crash_step).  Past the
+            # deadline the general route stops the crash as it does.
+            code, free, d, changes, ninact, eps, nf, found = dense_crash_step(
+                J.indptr, J.indices, J.data, z, f, lb, ub,
+                _NO_PREVIOUS if prev_free is None else prev_free, prev_free is not None,
+                opt.crash_nbchange_limit, bool(opt.crash_perturb),
+                float(eps_scale * max(1.0, nm_norm)), PERTURB_ATTEMPTS,
+                float(CRASH_STEP_LIMIT * (1.0 + max_abs(z))))
+            if code == NO_BASIS_CHANGE:
+                reason = "no basis change"
+                it -= 1
+                break
+            prev_free = free
+            nfact += nf
+            if stats is not None:
+                stats.factorizations += nf
+            if not found:
+                reason = "singular reduced Jacobian"
+                it -= 1
+                break
         else:
-            dg = np.asarray(J.diagonal(), dtype=float)
-        # Newton target: active indices go to their bound (d = z - bound); the inactive
-        # ones solve F_I(z) + J_II d_I + J_IA d_A = 0 for the step d = z - z_new.
-        free = np.empty(z.size, dtype=np.bool_)
-        d = np.empty(z.size)
-        if _solver_vectors(z, f, lb, ub):  # (every crash of the solver: no conversions)
-            crash_active_set(z, f, lb, ub, dg, free, d)
-        else:
-            crash_active_set(*(np.ascontiguousarray(a, dtype=float) for a in (z, f, lb, ub)),
-                             dg, free, d)
-        changes = z.size if prev_free is None else int(np.count_nonzero(free != prev_free))
-        if prev_free is not None and changes < opt.crash_nbchange_limit:
-            reason = "no basis change"
-            it -= 1
-            break
-        prev_free = free
-        inact = free.nonzero()[0]
-        if inact.size:
-            # J_II and f_I - J_IA d_A (d is 0 on I), in one compiled pass
-            Jii, rhs = reduced_system(J, free, d, -f)
-            di = None
-            if (factors is not None and not aged
-                    and np.setxor1d(factors[0], inact).size <= REUSE_MAX_CHANGES):
-                di, steps = _reuse_solve(J, inact, rhs, factors, nm_norm)
-                logger.debug("crash step %d on the previous factors: %d GMRES steps, %s",
-                             it, steps, "converged" if di is not None else "factoring")
-                reused += di is not None
-                # a slow convergence says the factors have aged: factor at the next step
-                aged = di is None or steps > REUSE_ITERATIONS // 2
-            if di is None:
-                di, eps, nf, why, held = _solve_reduced(
-                    Jii, rhs, opt.crash_perturb, eps_scale * max(1.0, nm_norm),
-                    deadline, labels=inact, lu=(opt.lu_backend, opt.lu_ordering),
-                    step_limit=CRASH_STEP_LIMIT * (1.0 + max_abs(z)))
-                nfact += nf
-                if stats is not None:
-                    stats.factorizations += nf
+            if sp.issparse(J) and J.format == "csc" and J.shape[0] == z.size:
+                dg = np.empty(z.size)
+                csc_diagonal(J.indptr, J.indices, J.data, dg)
+            else:
+                dg = np.asarray(J.diagonal(), dtype=float)
+            # Newton target: active indices go to their bound (d = z - bound); the inactive
+            # ones solve F_I(z) + J_II d_I + J_IA d_A = 0 for the step d = z - z_new.
+            free = np.empty(z.size, dtype=np.bool_)
+            d = np.empty(z.size)
+            if _solver_vectors(z, f, lb, ub):  # (every crash of the solver: no conversions)
+                crash_active_set(z, f, lb, ub, dg, free, d)
+            else:
+                crash_active_set(*(np.ascontiguousarray(a, dtype=float) for a in (z, f, lb, ub)),
+                                 dg, free, d)
+            changes = z.size if prev_free is None else int(np.count_nonzero(free != prev_free))
+            if prev_free is not None and changes < opt.crash_nbchange_limit:
+                reason = "no basis change"
+                it -= 1
+                break
+            prev_free = free
+            inact = free.nonzero()[0]
+            ninact = inact.size
+            if inact.size:
+                # J_II and f_I - J_IA d_A (d is 0 on I), in one compiled pass
+                Jii, rhs = reduced_system(J, free, d, -f)
+                di = None
+                if (factors is not None and not aged
+                        and np.setxor1d(factors[0], inact).size <= REUSE_MAX_CHANGES):
+                    di, steps = _reuse_solve(J, inact, rhs, factors, nm_norm)
+                    logger.debug("crash step %d on the previous factors: %d GMRES steps, %s",
+                                 it, steps, "converged" if di is not None else "factoring")
+                    reused += di is not None
+                    # a slow convergence says the factors have aged: factor at the next step
+                    aged = di is None or steps > REUSE_ITERATIONS // 2
                 if di is None:
-                    reason = why
-                    it -= 1
-                    break
-                factors = (inact, held) if held is not None else None
-                aged = False
-            d[inact] = di
+                    di, eps, nf, why, held = _solve_reduced(
+                        Jii, rhs, opt.crash_perturb, eps_scale * max(1.0, nm_norm),
+                        deadline, labels=inact, lu=(opt.lu_backend, opt.lu_ordering),
+                        step_limit=CRASH_STEP_LIMIT * (1.0 + max_abs(z)))
+                    nfact += nf
+                    if stats is not None:
+                        stats.factorizations += nf
+                    if di is None:
+                        reason = why
+                        it -= 1
+                        break
+                    factors = (inact, held) if held is not None else None
+                    aged = False
+                d[inact] = di
         # Search on ||F_B||: along the projected path (arc) or the segment to its end (line).
         alpha = 1.0
         accepted = False
@@ -368,11 +397,11 @@ def _crash(evalr, z0, lb, ub, options, *, f0, J0, tol, deadline, log, on_point,
             reason = "no progress"
             it -= 1
             break
-        rows.append((it, changes, inact.size, nmt_norm, alpha))
+        rows.append((it, changes, ninact, nmt_norm, alpha))
         if stats is not None:
             stats.iterations += 1
         if log is not None:
-            log(f"{it:5d} {changes:8d} {inact.size:9d} {nmt_norm:12.4e} {alpha:9.2e}")
+            log(f"{it:5d} {changes:8d} {ninact:9d} {nmt_norm:12.4e} {alpha:9.2e}")
         z, f, x, nm_norm = zt, ft, xt, nmt_norm
         recent = (recent + [nm_norm])[-CRASH_MEMORY:]
         if nm_norm < best[0]:

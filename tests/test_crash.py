@@ -375,3 +375,66 @@ def test_crash_factors_small_sparse_blocks_by_klu_and_large_ones_by_superlu(monk
         np.testing.assert_allclose(d, d_s, rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose((M + eps * sp.identity(n)) @ d, b, atol=1e-9)
         assert held_s is not None and (held is None) == klu_available()
+
+
+def _crash_both_ways(p, opt, monkeypatch):
+    """The crash with its one-call dense step, and with the general route (the same
+    kernels called one by one from Python)."""
+    import compass_sparse.crash as C
+
+    real = C.dense_crash_step
+    used = []
+    with monkeypatch.context() as m:
+        m.setattr(C, "dense_crash_step", lambda *a: used.append(1) or real(*a))
+        fast = crash(p.evaluator, p.x0, p.lb, p.ub, opt)
+    fast.one_call_steps = len(used)
+    with monkeypatch.context() as m:
+        calls = []
+        m.setattr(C, "dense_crash_step", lambda *a: calls.append(1) or 1 / 0)
+        m.setattr(C, "_solver_vectors", lambda *a: False)  # the general route
+        p.evaluator.forget()
+        slow = crash(p.evaluator, p.x0, p.lb, p.ub, opt)
+        assert not calls
+    return fast, slow
+
+
+def test_one_call_dense_crash_step_gives_the_general_routes_steps_bit_for_bit(monkeypatch):
+    """The crash step of a problem of order <= 200 runs in one compiled call; on random
+    problems -- singular and structurally singular reduced blocks, points at bounds,
+    box constraints, a runaway-step limit -- it gives the steps, points, factorizations
+    and stop reasons of the route that calls its kernels one by one."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    import known_problems as kp
+
+    problems = [cs.MCP(q.F, q.J, q.lb, q.ub, q.x0) for q in (
+        kp.kojima_shindo(), kp.josephy(), kp.mathiesen(), kp.nash_cournot_mss(),
+        kp.separable_box_vi())]
+    rng = np.random.default_rng(7)
+    for trial in range(40):
+        n = int(rng.integers(1, 60))
+        A = sp.random(n, n, density=rng.choice([0.1, 0.4]), random_state=rng, format="csc")
+        if trial % 3:
+            A = A + sp.eye(n) * rng.choice([0.0, 1.0, 3.0])
+        A = sp.csc_matrix(A)
+        A.sum_duplicates()
+        b = rng.normal(size=n)
+        lb = rng.choice([-np.inf, 0.0, -1.0], n)
+        ub = np.where((rng.random(n) < 0.3) & np.isfinite(lb), lb + 2.0, np.inf)
+        x0 = np.clip(rng.normal(size=n), lb, ub)
+        problems.append(cs.MCP(lambda x, A=A, b=b: A @ x + b + 0.1 * x ** 3,
+                               lambda x, A=A: sp.csc_matrix(A + sp.diags(0.3 * x ** 2)),
+                               lb, ub, x0))
+    steps = factored = 0
+    for p in problems:
+        for opt in (cs.Options(), cs.Options(crash_nbchange_limit=3, crash_perturb=False)):
+            fast, slow = _crash_both_ways(p, opt, monkeypatch)
+            steps += fast.one_call_steps
+            factored += fast.factorizations > fast.iterations  # perturbed attempts
+            assert fast.z.tobytes() == slow.z.tobytes()
+            assert fast.f.tobytes() == slow.f.tobytes()
+            assert (fast.iterations, fast.factorizations, fast.stop_reason, fast.log) == \
+                (slow.iterations, slow.factorizations, slow.stop_reason, slow.log)
+    assert steps > 50 and factored > 3
