@@ -120,64 +120,66 @@ def main(argv=None):
         rows = ab(cases, {"50": (bound(50), None), "150": (bound(150), None)}, a.rounds)
         _print("The dense direct step below order 150 (against 50)", rows, "50", "150",
                a.rounds)
+    modules = {}
+
     def load(name):
         """The module ``name`` of the worktree --old, loaded beside the current one."""
         if not a.old:
             ap.error("this experiment needs --old <worktree>")
-        spec = importlib.util.spec_from_file_location(
-            f"compass_sparse.{name}_old", os.path.join(a.old, "compass_sparse", f"{name}.py"))
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules[spec.name] = mod
-        spec.loader.exec_module(mod)
-        return mod
+        if name not in modules:
+            spec = importlib.util.spec_from_file_location(
+                f"compass_sparse.{name}_old",
+                os.path.join(a.old, "compass_sparse", f"{name}.py"))
+            mod = importlib.util.module_from_spec(spec)
+            sys.modules[spec.name] = mod
+            spec.loader.exec_module(mod)
+            modules[name] = mod
+        return modules[name]
+
+    def against_old(title, swaps, cases):
+        """The current objects against those of --old: ``swaps`` lists (owner, attribute,
+        module of the old worktree, attribute path in it); each variant sets them all."""
+        def old_value(module, path):
+            value = load(module)
+            for part in path.split("."):
+                value = getattr(value, part)
+            return value
+
+        new = [getattr(owner, name) for owner, name, _, _ in swaps]
+        old = [old_value(module, path) for _, _, module, path in swaps]
+
+        def use(values):
+            def setup():
+                for (owner, name, _, _), value in zip(swaps, values):
+                    setattr(owner, name, value)
+            return setup
+
+        rows = ab(cases, {"old": (use(old), None), "new": (use(new), None)}, a.rounds)
+        _print(title, rows, "old", "new", a.rounds)
 
     if "overheads" in a.experiments:
         import compass_sparse.evaluation as E
         import compass_sparse.nms as N
 
-        old_crash, old_merit, old_eval = load("crash"), load("merit"), load("evaluation")
-        new = (N.crash, N.fb_gradient, E.Evaluator._user_J_on_pattern)
-        old = (old_crash.crash, old_merit.fb_gradient, old_eval.Evaluator._user_J_on_pattern)
-
-        def use(v):
-            def setup():
-                N.crash, N.fb_gradient, E.Evaluator._user_J_on_pattern = v
-            return setup
-
-        rows = ab(_small_cases(), {"old": (use(old), None), "new": (use(new), None)},
-                  a.rounds)
-        _print("Small-problem overheads (descent gradient, dense J, crash arguments)", rows,
-               "old", "new", a.rounds)
+        against_old("Small-problem overheads (descent gradient, dense J, crash arguments)",
+                    [(N, "crash", "crash", "crash"),
+                     (N, "fb_gradient", "merit", "fb_gradient"),
+                     (E.Evaluator, "_user_J_on_pattern", "evaluation",
+                      "Evaluator._user_J_on_pattern")], _small_cases())
     if "frame" in a.experiments:
         import compass_sparse.acceptance as A
         import compass_sparse.solve as S
 
-        old_merit, old_scaling, old_acc = load("merit"), load("scaling"), load("acceptance")
-        new = (S.residual_report, S.spread, A._scale_test)
-        old = (old_merit.residual_report, old_scaling.spread, old_acc._scale_test)
-
-        def frame(v):
-            def setup():
-                S.residual_report, S.spread, A._scale_test = v
-            return setup
-
-        rows = ab(_small_cases(), {"old": (frame(old), None), "new": (frame(new), None)},
-                  a.rounds)
-        _print("A solve's frame (residual report, spread test, canonical check)", rows,
-               "old", "new", a.rounds)
+        against_old("A solve's frame (residual report, spread test, canonical check)",
+                    [(S, "residual_report", "merit", "residual_report"),
+                     (S, "spread", "scaling", "spread"),
+                     (A, "_scale_test", "acceptance", "_scale_test")], _small_cases())
     if "crashstep" in a.experiments:
         import compass_sparse.nms as N
 
-        new, old = N.crash, load("crash").crash
-
-        def use_crash(v):
-            return lambda: setattr(N, "crash", v)
-
-        cases = _small_cases() + bs._cge_cases([11], [91])
-        rows = ab(cases, {"old": (use_crash(old), None), "new": (use_crash(new), None)},
-                  a.rounds)
-        _print("The crash step in one compiled call (orders <= 200)", rows, "old", "new",
-               a.rounds)
+        against_old("The crash step in one compiled call (orders <= 200)",
+                    [(N, "crash", "crash", "crash")],
+                    _small_cases() + bs._cge_cases([11], [91]))
     if "idle" in a.experiments:
         idle(a.rounds)
 

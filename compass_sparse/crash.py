@@ -36,7 +36,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._crash_kernels import (NO_BASIS_CHANGE, dense_crash_step, dense_perturbed_solve,
-                             structurally_singular)
+                             initial_shift)
 from ._merit_kernels import crash_active_set, csc_diagonal, csc_to_dense
 from ._blas import BLAS_LIMIT_MIN_N, single_threaded_blas
 from .basis.backends import DENSE_SOLVE_MAX_N, SingularFactorError, solve_sparse
@@ -121,17 +121,10 @@ def _solve_reduced(Jii, rhs, perturb, eps0, deadline=None, labels=None, lu=("aut
     factorization is atomic, so the deadline is checked before every attempt and handed to
     the factorization's budget (one whose estimate does not fit in the time left is not
     started)."""
-    eps = 0.0
     nf = 0
     held = None
     n = Jii.shape[0]
-    full = Jii.nnz == n * n and np.count_nonzero(Jii.data) == n * n  # (regular)
-    if perturb and n and not full and structurally_singular(Jii.indptr, Jii.indices,
-                                                            Jii.data, n):
-        # Structurally singular: no value of its entries makes it regular, so the
-        # unperturbed factorization can only fail -- and without a zero-free diagonal it
-        # runs in the slow fallback ordering (40 s at n = 3e4 on the dynamic CGE model).
-        eps = eps0
+    eps = initial_shift(Jii.indptr, Jii.indices, Jii.data, n, bool(perturb), float(eps0))
     if 0 < n <= DENSE_SOLVE_MAX_N:
         # A block that solve_sparse factors densely: all attempts in one compiled call
         # (the same LAPACK routines, so the same steps; see compass_sparse._crash_kernels).

@@ -221,14 +221,15 @@ def fb_gradient(z, f, J, lb, ub, phi=None):
     """grad Psi(z) = H^T Phi with H = diag(da) + diag(db) J."""
     if phi is None:
         phi = fb_phi(z, f, lb, ub)
-    if (_solver_vectors(z, f, lb, ub) and float_vector(phi) and phi.shape == z.shape
+    vectors = _solver_vectors(z, f, lb, ub)
+    if (vectors and float_vector(phi) and phi.shape == z.shape
             and sp.issparse(J) and J.format == "csc" and J.shape == (z.shape[0],) * 2
             and J.data.dtype == np.float64):
         # the solver's own vectors and J (the descent test of every major iteration)
         g = np.empty(z.shape[0])
         fb_gradient_kernel(z, f, lb, ub, phi, J.indptr, J.indices, J.data, g)
         return g
-    if _solver_vectors(z, f, lb, ub):
+    if vectors:
         da = np.empty(z.shape[0])
         db = np.empty(z.shape[0])
         fb_diagonals_kernel(z, f, lb, ub, da, db)

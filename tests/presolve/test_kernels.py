@@ -67,17 +67,14 @@ def test_candidate_scans_select_the_rows_and_columns_of_the_mask_expressions(see
 def test_touch_and_masks_and_duplicate_keys_give_the_array_formulas_bits(seed):
     import scipy.sparse as sp
 
+    from compass_sparse.presolve._work import _index_arrays
+
     rng = np.random.default_rng(100 + seed)
     n = 40
     J = sp.random(n, n, density=0.15, random_state=rng, format="csc")
     J.data[rng.random(J.nnz) < 0.1] = 0.0  # stored zeros (below any tolerance)
     J.sum_duplicates()
-    ec = np.repeat(np.arange(n), np.diff(J.indptr)).astype(np.intp)
-    er = J.indices.astype(np.intp)
-    col_ptr = J.indptr.astype(np.intp)
-    row_order = np.argsort(er, kind="stable")
-    row_ptr = np.zeros(n + 1, dtype=np.intp)
-    np.cumsum(np.bincount(er, minlength=n), out=row_ptr[1:])
+    ec, er, col_ptr, row_order, row_ptr = _index_arrays(J)  # the workspace's index arrays
     ev = J.data.copy()
 
     # touch: rows of the columns' entries and columns of the rows' entries
