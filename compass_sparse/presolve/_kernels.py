@@ -196,7 +196,7 @@ def recount(er, ec, ev, nz, nl, base, lb, ub, f, counts, vals):
 @njit(cache=True)
 def simple_reductions_screen(er, ec, ev, const, col_ptr, row_ptr, row_order, lb, ub, base,
                              f, zero_tolerance, feasibility_tolerance, pattern_declared, w1,
-                             max_rounds):
+                             w2, max_rounds):
     """Whether the passes of :func:`~compass_sparse.presolve.core.presolve` would reduce
     nothing but what the solver does as well itself -- the fixed variables (l = u) and
     diagonal column singletons -- replayed round by round on the counts of the workspace
@@ -208,11 +208,12 @@ def simple_reductions_screen(er, ec, ev, const, col_ptr, row_ptr, row_order, lb,
     empty rows, 2-3 singleton rows, 4 forcing rows, 5 range fixing, 6 empty columns, 8
     column singletons, 9 duplicate rows).
 
-    Each pass's candidate selection is replayed; where the pass goes on to read values,
-    the screen is conservative: a singleton row on its own variable or with a free
-    variable, every forcing or range candidate and every pair of candidate rows with
-    equal column hash (the duplicate-rows pass compares only such pairs: the keys h1
-    are summed here in its order, so they have its bits) count as "may act".  Column
+    Each pass's candidates are selected by its own scan (the kernels above); where the
+    pass goes on to read values, the screen is conservative: a singleton row on its own
+    variable or with a free variable, every forcing or range candidate and every pair of
+    candidate rows with equal column hash (the duplicate-rows pass compares only such
+    pairs, by the keys of :func:`duplicate_row_keys`, computed here too) count as "may
+    act".  Column
     singletons are replayed exactly (their order, the marks their removals leave for the
     passes after them in the round), since they are removed.  A 0 is therefore exact."""
     n = f.shape[0]
@@ -227,7 +228,8 @@ def simple_reductions_screen(er, ec, ev, const, col_ptr, row_ptr, row_order, lb,
     linear = np.empty(n, dtype=np.bool_)
     touched_row = np.zeros(n, dtype=np.bool_)
     touched_col = np.zeros(n, dtype=np.bool_)
-    h1 = np.zeros(n)
+    partner = np.arange(n)  # (the pairs are the identity: see gone_row)
+    side = np.empty(n, dtype=np.bool_)  # (the forcing and range scans' side flags)
     singletons = 0
     for rnd in range(max_rounds):
         # the refresh at the start of the round
@@ -245,29 +247,26 @@ def simple_reductions_screen(er, ec, ev, const, col_ptr, row_ptr, row_order, lb,
             no_entry = row_ptr[i + 1] == row_ptr[i]
             linear[i] = (not gone_row[i] and row_nl[i] == 0
                          and not (no_entry and not pattern_declared))
-        # empty rows and singleton rows (nothing is touched before them)
-        for i in range(n):
-            if not linear[i]:
-                continue
-            if row_nnz[i] == 0:
-                return 1, rnd + 1, singletons
-            if row_nnz[i] == 1:
-                for q in range(row_ptr[i], row_ptr[i + 1]):
-                    k = row_order[q]
-                    if nz[k]:
-                        if ec[k] == i:
-                            return 2, rnd + 1, singletons
-                        if lb[i] == -np.inf and ub[i] == np.inf:
-                            return 3, rnd + 1, singletons
-        # empty columns
-        for j in range(n):
-            if (not gone_col[j] and col_nnz[j] == 0 and col_nl[j] == 0
-                    and np.isfinite(lb[j]) and np.isfinite(ub[j])):
-                return 6, rnd + 1, singletons
+        # the passes' own candidate scans (nothing is touched before column singletons)
+        if linear_rows_with(linear, row_nnz, touched_row, 0, 0).size:
+            return 1, rnd + 1, singletons
+        for i in linear_rows_with(linear, row_nnz, touched_row, 1, 1):
+            for q in range(row_ptr[i], row_ptr[i + 1]):
+                k = row_order[q]
+                if nz[k]:
+                    if ec[k] == i:
+                        return 2, rnd + 1, singletons
+                    if lb[i] == -np.inf and ub[i] == np.inf:
+                        return 3, rnd + 1, singletons
+        col_active = ~gone_col
+        if linear_columns_with(col_active, col_nnz, col_nl, touched_col, lb, ub, 0,
+                               True).size:
+            return 6, rnd + 1, singletons
         # column singletons, replayed in the pass's order with its marks
         changed = 0
-        for j in range(n):
-            if gone_col[j] or col_nnz[j] != 1 or col_nl[j] != 0 or touched_col[j]:
+        for j in linear_columns_with(col_active, col_nnz, col_nl, touched_col, lb, ub, 1,
+                                     False):
+            if touched_col[j]:
                 continue
             i = -1
             b = 0.0
@@ -292,40 +291,25 @@ def simple_reductions_screen(er, ec, ev, const, col_ptr, row_ptr, row_order, lb,
                     and ub[i] == np.inf and not touched_col[i]):
                 return 8, rnd + 1, singletons
         # forcing rows, then duplicate rows, on the rows left untouched
-        ncand = 0
-        for i in range(n):
-            if not linear[i] or row_nnz[i] < 1 or touched_row[i]:
-                continue
-            t = feasibility_tolerance * scale[i]
-            if ((ub[i] == np.inf and np.isfinite(fmax[i]) and abs(fmax[i]) <= t)
-                    or (lb[i] == -np.inf and np.isfinite(fmin[i]) and abs(fmin[i]) <= t)):
-                return 4, rnd + 1, singletons
-            ncand += 1
-        if ncand >= 2:
-            h1[:] = 0.0
-            for q in range(row_order.shape[0]):
-                k = row_order[q]
-                i = er[k]
-                if nz[k] and linear[i] and row_nnz[i] >= 1 and not touched_row[i]:
-                    h1[i] += w1[ec[k]]
-            keys = np.empty(ncand)
-            m = 0
-            for i in range(n):
-                if linear[i] and row_nnz[i] >= 1 and not touched_row[i]:
-                    keys[m] = h1[i]
-                    m += 1
-            keys.sort()
-            for m in range(1, ncand):
+        if forcing_candidates(linear, row_nnz, touched_row, partner, lb, ub, fmin, fmax,
+                              scale, feasibility_tolerance, side).size:
+            return 4, rnd + 1, singletons
+        rows = linear_rows_with(linear, row_nnz, touched_row, 1, n)
+        if rows.size >= 2:
+            cand = np.zeros(n, dtype=np.bool_)
+            cand[rows] = True
+            h1 = np.zeros(n)
+            h2 = np.zeros(n)
+            duplicate_row_keys(row_order, nz, er, ec, ev, cand, w1, w2, h1, h2)
+            keys = np.sort(h1[rows])
+            for m in range(1, keys.shape[0]):
                 if keys[m] == keys[m - 1]:
                     return 9, rnd + 1, singletons
         if changed:
             continue
         # phase two (range fixing) runs only on a round that changed nothing
-        for i in range(n):
-            if not linear[i]:
-                continue
-            t = feasibility_tolerance * scale[i]
-            if fmin[i] > t or fmax[i] < -t:
-                return 5, rnd + 1, singletons
+        if range_candidates(linear, touched_row, fmin, fmax, scale, feasibility_tolerance,
+                            side).size:
+            return 5, rnd + 1, singletons
         return 0, rnd + 1, singletons
     return 0, max_rounds, singletons

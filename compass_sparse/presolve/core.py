@@ -269,11 +269,11 @@ def _simple_reductions_only(problem, opts, J0, const):
     if not all_finite(f):
         return None
     ec, er, col_ptr, row_order, row_ptr = _index(problem, J0)
-    w1, _ = duplicate_rows._weights(problem.n)
+    w1, w2 = duplicate_rows._weights(problem.n)
     code, rounds, singletons = simple_reductions_screen(
         er, ec, J0.data[:er.size].astype(np.float64), const, col_ptr, row_ptr, row_order, lb,
         ub, base, f, float(opts.zero_tolerance), float(opts.feasibility_tolerance),
-        bool(problem.pattern_declared), w1, int(opts.max_rounds))
+        bool(problem.pattern_declared), w1, w2, int(opts.max_rounds))
     if code != 0 or (singletons and not opts.column_singletons):
         return None
     return int(np.count_nonzero(fixed)), int(singletons), int(rounds)
