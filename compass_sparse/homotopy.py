@@ -84,7 +84,10 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ._blas import single_threaded_blas
+from ._homotopy_kernels import smoothed_projection
+from ._merit_kernels import csc_matvec, csc_to_dense
 from .merit import fb_phi, fb_psi, project
+from .path import _floats
 from .restarts import random_point
 from .result import PassStats
 
@@ -182,7 +185,16 @@ class SmoothedNormalMap:
         self.u0 = np.where(self.has_u, self.ub, 0.0)
 
     def project(self, x, mu):
-        """(p, dp/dx, dp/dmu) at x."""
+        """(p, dp/dx, dp/dmu) at x (one compiled pass for a float vector)."""
+        n = self.lb.size
+        if _floats(n, x, self.lb, self.ub):
+            p, dx, dmu = np.empty(n), np.empty(n), np.empty(n)
+            smoothed_projection(x, float(mu), self.lb, self.ub, p, dx, dmu)
+            return p, dx, dmu
+        return self.project_arrays(x, mu)
+
+    def project_arrays(self, x, mu):
+        """:meth:`project` by array operations (the compiled pass's reference)."""
         sl, dl, ml = _splus(x - self.l0, mu)
         su, du, mu_u = _splus(x - self.u0, mu)
         p = np.where(self.has_l, self.l0, x) + self.cl * sl - self.cu * su
@@ -205,8 +217,13 @@ class _Bordered:
             B[:n, n] = c[:n]
             B[n, :] = v
             B[n, n] = v[n]
-            self.lu = sla.lu_factor(B, check_finite=False)
-            d = np.abs(np.diag(self.lu[0]))
+            # LAPACK's getrf and getrs directly: what scipy.linalg.lu_factor and lu_solve
+            # call, without their checks and dispatch (~35 us a step at n = 1)
+            lu, piv, info = _getrf(B, overwrite_a=True)
+            if info < 0:
+                raise ValueError(f"illegal argument {-info} of getrf")
+            self.lu = (lu, piv)
+            d = np.abs(np.diag(lu))
             if not np.all(np.isfinite(d)) or d.min() <= 1e-14 * max(d.max(), 1e-300):
                 raise np.linalg.LinAlgError("singular bordered matrix")
         else:
@@ -216,7 +233,12 @@ class _Bordered:
             self.lu = spla.splu(B, permc_spec="COLAMD")
 
     def solve(self, b):
-        x = sla.lu_solve(self.lu, b, check_finite=False) if self.dense else self.lu.solve(b)
+        if self.dense:
+            x, info = _getrs(*self.lu, b)
+            if info != 0:
+                raise ValueError(f"illegal argument {-info} of getrs")
+        else:
+            x = self.lu.solve(b)
         if not np.all(np.isfinite(x)):
             raise np.linalg.LinAlgError("non-finite solution of the bordered system")
         return x
@@ -227,6 +249,31 @@ def _solve_square(A, b, dense: bool):
         M = A.toarray() if sp.issparse(A) else A
         return sla.lu_solve(sla.lu_factor(M, check_finite=False), b, check_finite=False)
     return spla.splu(sp.csc_matrix(A), permc_spec="COLAMD").solve(b)
+
+
+_getrf, _getrs = sla.lapack.get_lapack_funcs(("getrf", "getrs"), (np.empty(1),))
+
+
+def _float_csc(J):
+    """J as a CSC matrix of floats (the evaluator's J already is: then J itself)."""
+    if sp.issparse(J) and J.format == "csc" and J.data.dtype == np.float64:
+        return J
+    return sp.csc_matrix(J, dtype=np.float64)
+
+
+def _dense(J):
+    """J (float CSC) as a new dense array, in one compiled pass (J.toarray() costs ~80 us
+    at n = 1)."""
+    out = np.empty(J.shape)
+    csc_to_dense(J.indptr, J.indices, J.data, out)
+    return out
+
+
+def _times(J, v):
+    """J v for J float CSC, in scipy's order (the same bits), without its dispatch."""
+    out = np.empty(J.shape[0])
+    csc_matvec(J.indptr, J.indices, J.data, v, out)
+    return out
 
 
 # ------------------------------------------------------------------ the tracker
@@ -296,18 +343,18 @@ class _Tracker:
             return H, None, None
         if J is None:
             return None
-        J = sp.csc_matrix(J)
+        J = _float_csc(J)
         if self.dense is None:
             self.dense = self.n <= DENSE_MAX_N or J.nnz >= DENSE_DENSITY * self.n * self.n
         # H_x = lam (J D + I - D) + (1 - lam) I = lam J D + I - lam D
         if self.dense:
-            Hx = J.toarray()
+            Hx = _dense(J)
             Hx *= lam * dx  # scales column j by lam dx_j
             Hx[np.diag_indices(self.n)] += 1.0 - lam * dx
         else:
             Hx = (lam * (J @ sp.diags(dx)) + sp.diags(1.0 - lam * dx)).tocsc()
         # dH/dlam = G - (x - a) + lam (J - I) dp/dmu * dmu/dlam,  dmu/dlam = -mu0
-        dGdmu = J @ dmu - dmu
+        dGdmu = _times(J, dmu) - dmu
         Hlam = G - (x - a) - lam * self.mu0 * dGdmu
         return H, Hx, Hlam
 
@@ -451,7 +498,13 @@ class _Tracker:
             if J is None:
                 break
             d = ((x > lb) & (x < ub)).astype(float)
-            A = sp.csc_matrix(J) @ sp.diags(d) + sp.diags(1.0 - d)
+            J = _float_csc(J)
+            if self.dense:
+                A = _dense(J)
+                A *= d  # J D + I - D, entry by entry as the sparse sum
+                A[np.diag_indices(self.n)] += 1.0 - d
+            else:
+                A = J @ sp.diags(d) + sp.diags(1.0 - d)
             try:
                 self.factorizations += 1
                 dx = _solve_square(A, -fb, self.dense)

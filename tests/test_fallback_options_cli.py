@@ -74,6 +74,64 @@ def test_lm_and_gradient_steps_decrease_psi(seed):
     assert g_out is not None and g_out[3] < psi0
 
 
+class _CountingEvaluator:
+    """The two calls the fallback steps make of an evaluator, counted."""
+
+    def __init__(self, F, J):
+        self.F, self.J, self.f_calls = F, J, 0
+
+    def f(self, z):
+        self.f_calls += 1
+        return self.F(z)
+
+    def jac(self, z, f=None):
+        return sp.csc_matrix(self.J(z))
+
+
+def test_fallback_search_stops_when_the_trial_point_rounds_to_the_start():
+    """billups from x0 = 0 stalls at x = 0, a stationary point of Psi on the box where
+    -grad Psi points out of it: every trial of every search is z itself.  The LM step
+    (4 values of mu) and the gradient step evaluated z there ~100 times per fallback (memo
+    hits, each with an acceptance test); now each search ends at its first trial."""
+    F = lambda x: np.array([(x[0] - 1.0) ** 2 - 1.01])  # noqa: E731
+    J = lambda x: np.array([[2.0 * (x[0] - 1.0)]])  # noqa: E731
+    lb, ub, z = np.zeros(1), np.full(1, np.inf), np.zeros(1)
+    ev = _CountingEvaluator(F, J)
+    opt = cs.Options()
+    seen = []
+    on_point = lambda *a: seen.append(a[0].copy())  # noqa: E731
+    assert lm_step(ev, z, F(z), None, lb, ub, opt, on_point=on_point) is None
+    assert gradient_steps(ev, z, F(z), None, lb, ub, opt, on_point=on_point) is None
+    assert ev.f_calls == 0 and seen == []
+    # A search whose trials move still evaluates them: from x = 0.5 Psi decreases
+    # towards x = 0, and both steps find that descent.
+    z = np.array([0.5])
+    psi0 = fb_psi(fb_phi(z, F(z), lb, ub))
+    out = lm_step(ev, z, F(z), None, lb, ub, opt)
+    assert out is not None and out[3] < psi0 and ev.f_calls >= 1
+    g = gradient_steps(ev, z, F(z), None, lb, ub, opt)
+    assert g is not None and g[3] < psi0
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_dense_lm_step_agrees_with_the_sparse_route(monkeypatch, seed):
+    import compass_sparse.fallback as fb
+
+    g = structured_quadratic(60, seed=seed)
+    p = g.problem
+    rng = np.random.default_rng(seed)
+    z = np.clip(g.solution + rng.normal(scale=0.5, size=p.n), p.lb, p.ub)
+    opt = cs.Options()
+    f = p.evaluator.f(z)
+    dense = lm_step(p.evaluator, z, f, None, p.lb, p.ub, opt)
+    monkeypatch.setattr(fb, "DENSE_SOLVE_MAX_N", 0)
+    sparse = lm_step(p.evaluator, z, f, None, p.lb, p.ub, opt)
+    assert dense is not None and sparse is not None
+    assert dense[0] == pytest.approx(sparse[0], rel=1e-9, abs=1e-12)
+    assert dense[3] == pytest.approx(sparse[3], rel=1e-8)
+    assert dense[4] == pytest.approx(sparse[4], rel=1e-12)  # the same search outcome
+
+
 def test_options_validation_and_dict():
     o = cs.Options.from_dict({"convergence_tolerance": 1e-8, "crash_method": "none"})
     assert o.convergence_tolerance == 1e-8 and o.crash_method == "none"

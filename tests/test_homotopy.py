@@ -181,6 +181,33 @@ def test_smoothed_projection_derivatives_match_finite_differences():
     assert dmu == pytest.approx(fd_mu, rel=1e-6, abs=1e-8)
 
 
+@pytest.mark.parametrize("mu", [1.0, 1e-3, 1e-8, 0.0, 1e-200, 1e200])
+def test_compiled_smoothed_projection_gives_the_array_formulas_bits(mu):
+    lb = np.array([-1.0, -1.0, -np.inf, -np.inf, 0.0, 2.0])
+    ub = np.array([2.0, np.inf, 3.0, np.inf, 0.0, 2.0])
+    sm = SmoothedNormalMap(lb, ub)
+    rng = np.random.default_rng(1)
+    xs = list(rng.uniform(-5, 5, (100, 6))) + [np.array([-1e12, 1e12, 1e12, -1e12, 1.0, 2.0]),
+                                                np.array([-1.0, -1.0, 3.0, 0.0, 0.0, 2.0])]
+    for x in xs:
+        for got, ref in zip(sm.project(x, mu), sm.project_arrays(x, mu)):
+            assert np.array_equal(got, ref)
+
+
+def test_dense_end_game_and_bordered_factors_match_the_sparse_route(monkeypatch):
+    """The dense route (compiled dense copy of J, LAPACK's getrf/getrs called directly)
+    follows the same path as the sparse one on a problem that needs the homotopy."""
+    F, J, lb, ub, x0 = _stationary_problem()
+    dense = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"})
+    monkeypatch.setattr(hom, "DENSE_MAX_N", 0)
+    monkeypatch.setattr(hom, "DENSE_DENSITY", 2.0)
+    sparse = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"})
+    assert dense.success and sparse.success
+    assert dense.residual.natural <= 1e-6
+    assert dense.x == pytest.approx(sparse.x, abs=1e-8)
+    assert dense.passes["homotopy"].iterations == sparse.passes["homotopy"].iterations
+
+
 def test_sparse_bordered_solve_follows_the_same_path_as_the_dense_one(monkeypatch):
     g = thesis_family(15, 1, seed=2)
     dense = solve_mcp(g.problem, options={"homotopy": "only"})
