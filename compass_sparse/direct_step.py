@@ -47,9 +47,10 @@ from ._eval_kernels import csc_same_pattern, free_block
 from ._jit import njit
 from ._merit_kernels import csc_is_canonical
 from ._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
+from ._slot_kernels import start_basis
 from .basis.types import BasisOptions
 from .evaluation import all_finite
-from .merit import max_abs
+from .merit import float_vector, max_abs
 
 __all__ = ["DIRECT_MAX_DENSITY", "DIRECT_MAX_N", "DIRECT_MIN_N", "KLU_FILL_LIMIT",
            "automatic_lu", "klu_available",
@@ -227,6 +228,95 @@ def _dense_direct(indptr, indices, data, q, lb, ub, basic, z, w, v, tol, rank_to
             z[i] = b[pos[i]]
     res, mz = _end_point(indptr, indices, data, q, lb, ub, basic, z, w, v, tol)
     return res, mz, nf
+
+
+@njit(cache=True, inline="always")
+def _np_max(a, b):
+    """numpy.maximum of two floats: NaN from either, b on ties (so -0.0 and 0.0 come out
+    as numpy's do)."""
+    if a != a:
+        return a
+    if b != b:
+        return b
+    return a if a > b else b
+
+
+@njit(cache=True, inline="always")
+def _np_min(a, b):
+    """numpy.minimum of two floats (NaN from either, b on ties)."""
+    if a != a:
+        return a
+    if b != b:
+        return b
+    return a if a < b else b
+
+
+@njit(cache=True)
+def _dense_direct_from(indptr, indices, data, q, lb, ub, x, r, previous, use_previous,
+                       z, w, v, basic, zt, wt, vt, tol, rank_tol):
+    """The start of a pivotal path from x and its direct step, in one compiled call (what
+    PivotalPath.run does before its first factorization, for a dense direct step):
+    (z, w, v) = the components of x, ``basic`` = the start basis (path.default_basis,
+    with the inward guess when there is no warm basis ``previous``), then the end point
+    (zt, wt, vt) of :func:`_dense_direct`.  Returns (code, residual, max|M z|, |F|): code
+    0 when r = 0 (the start solves the linear problem), 1 after a direct step."""
+    n = x.shape[0]
+    for i in range(n):
+        zi = _np_min(_np_max(x[i], lb[i]), ub[i])
+        z[i] = zi
+        w[i] = _np_max(zi - x[i], 0.0)
+        v[i] = _np_max(x[i] - zi, 0.0)
+    start_basis(z, lb, ub, previous, use_previous, basic)
+    if not use_previous:
+        # the inward guess of PivotalPath._run: z basic at a bound with no slack value
+        # where the residual pushes it inwards
+        for i in range(n):
+            if lb[i] < ub[i] and ((z[i] <= lb[i] and w[i] == 0.0 and r[i] < 0.0)
+                                  or (z[i] >= ub[i] and v[i] == 0.0 and r[i] > 0.0)):
+                basic[i] = VAR_Z
+    solved = True
+    for i in range(n):
+        if r[i] != 0.0:  # (NaN too: the path meets it)
+            solved = False
+            break
+    if solved:
+        return 0, 0.0, 0.0, 0
+    for i in range(n):
+        zt[i] = z[i]
+    res, mz, nf = _dense_direct(indptr, indices, data, q, lb, ub, basic.astype(np.int64), zt,
+                                wt, vt, tol, rank_tol)
+    return 1, res, mz, nf
+
+
+def dense_direct_path(M, q, lb, ub, x, r, previous, factors: DirectFactors):
+    """The outcome of a pivotal path from x (covering vector r, warm basis ``previous`` or
+    None) when its dense direct step decides it, computed in one compiled call:
+    ``("start", (z, w, v), basic, 0)`` when r = 0, ``("direct", (z, w, v), basic, nnz of
+    the LU)`` for the direct step's end point, ``("path", None, basic, nnz)`` when the
+    path must run (the step failed), or None when the arguments are not the compiled
+    call's (the path then does everything itself).  The same values, bit for bit, as
+    PivotalPath.run's own start and :func:`direct_step` (``test_direct_step.py``)."""
+    if not (factors.dense and float_vector(x) and M.data.dtype == np.float64):
+        return None
+    n = x.shape[0]
+    for a in (q, lb, ub, r):
+        if not (float_vector(a) and a.shape[0] == n):
+            return None
+    if previous is not None and previous.basic.shape != (n,):
+        return None  # (the path raises its ShapeError)
+    z, w, v, zt, wt, vt = (np.empty(n) for _ in range(6))
+    basic = np.empty(n, dtype=np.int8)
+    use_previous = previous is not None
+    code, res, mz, nf = _dense_direct_from(
+        M.indptr, M.indices, M.data, q, lb, ub, x, r,
+        previous.basic if use_previous else basic, use_previous, z, w, v, basic, zt, wt, vt,
+        FEASIBILITY_TOLERANCE, factors.rank_tolerance)
+    if code == 0:
+        return "start", (z, w, v), basic, 0
+    factors.method = ("dense", "partial pivoting")
+    factors.lu_nnz = nnz_lu = nf * nf
+    end, _ = _accepted(res, mz, q, zt, wt, vt, nnz_lu)
+    return ("direct" if end is not None else "path"), end, basic, nnz_lu
 
 
 def reduced_system(M, free, z, q):

@@ -82,7 +82,7 @@ from ._merit_kernels import csc_matvec
 from ._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
 from ._slot_kernels import slot_basis, slot_point, slot_table, start_basis
 from .basis import KIND_DENSE, KIND_M, KIND_UNIT, FactorReuseFailed, UpdateStatus
-from .direct_step import DirectFactors, direct_step
+from .direct_step import DirectFactors, dense_direct_path, direct_step
 from .exceptions import ShapeError, SingularBasisError
 from .merit import float_vector, max_abs
 
@@ -194,8 +194,16 @@ def solve_linear_mcp(M, q, lb, ub, basis, options, x, *, warm: WarmBasis | None 
     (:mod:`compass_sparse.direct_step`; the first path only, not the ray-start retry).
     """
     kw = dict(minor_limit=minor_limit, deadline=deadline, log=log)
-    res = PivotalPath(M, q, lb, ub, basis, options, direct=direct, **kw).run(
-        x, warm=warm, ray_start=ray_start, r=r)
+    res = None
+    if (direct is not None and direct.dense and not ray_start and log is None
+            and r is not None):
+        # A small problem's start and dense direct step in one compiled call (the
+        # Python of a path's set-up cost more than the step); the path runs only when
+        # the step fails, then without trying it again.
+        res = _dense_direct_result(M, q, lb, ub, basis, options, x, r, warm, direct, kw)
+    if res is None:
+        res = PivotalPath(M, q, lb, ub, basis, options, direct=direct, **kw).run(
+            x, warm=warm, ray_start=ray_start, r=r)
     if (res.code is LinearCode.SOLVED or ray_start or options.lemke_start != "automatic"
             or res.t >= retry_below
             or (deadline is not None and time.perf_counter() > deadline)):
@@ -207,6 +215,36 @@ def solve_linear_mcp(M, q, lb, ub, basis, options, x, *, warm: WarmBasis | None 
             or (keep_ray and res2.code is LinearCode.RAY and res2.unbounded)):
         res = res2
     res.pivots, res.factorizations = pivots, factorizations
+    return res
+
+
+def _dense_direct_result(M, q, lb, ub, manager, options, x, r, warm, direct, kw):
+    """What ``PivotalPath(..., direct=direct).run(x, warm=warm, r=r)`` returns, the same
+    values and counts, with its start and direct step computed by
+    :func:`~compass_sparse.direct_step.dense_direct_path`; None when that call does not
+    apply."""
+    t0 = time.perf_counter()
+    M = M if (sp.issparse(M) and M.format == "csc") else sp.csc_matrix(M)
+    out = dense_direct_path(M, np.asarray(q, dtype=float), lb, ub, x, r, warm, direct)
+    if out is None:
+        return None
+    kind, end, basic, nnz_lu = out
+    if kind == "start":
+        res = PathResult(LinearCode.SOLVED, *end, 1.0, basis=WarmBasis(basic),
+                         ray_start=False)
+        res.time = time.perf_counter() - t0
+        return res
+    if nnz_lu:
+        manager.stats.record_direct_lu(nnz_lu, time.perf_counter() - t0, direct.method)
+    if kind == "direct":
+        res = PathResult(LinearCode.SOLVED, *end, 1.0, factorizations=1,
+                         basis=WarmBasis(basic), ray_start=False, direct_lu_nnz=nnz_lu)
+    else:
+        res = PivotalPath(M, q, lb, ub, manager, options, **kw).run(x, warm=warm, r=r)
+        # the failed step's factorization counts in the path's, as inside run()
+        res.factorizations += 1 if nnz_lu else 0
+        res.direct_lu_nnz = nnz_lu
+    res.time = time.perf_counter() - t0
     return res
 
 

@@ -271,6 +271,9 @@ def test_time_limit_holds_through_the_levenberg_marquardt_factorizations(clock, 
         raise RuntimeError("not positive definite (simulated)")
 
     monkeypatch.setattr(fallback_module, "spd_solve", slow_failing)
+    # the sparse route (CHOLMOD), whose factorizations are the long ones: this order
+    # would be solved densely
+    monkeypatch.setattr(fallback_module, "DENSE_SOLVE_MAX_N", 0)
     p = MCP(lambda x: x - 1.0 + 0.01 * (_B @ x), lambda x: sp.csc_matrix(np.eye(N) + 0.01 * _B),
             -np.inf, np.inf, np.zeros(N))
     z = p.x0
