@@ -603,7 +603,7 @@ def test_warm_basis_survives_presolve():
     """Result.basis is in the user's index space after presolve removed variables, and a
     re-solve from it (presolve runs again) needs no pivots; a basis of the wrong size is
     an input error, not a silent cold start."""
-    import compass_sparse.path as path_mod
+    import compass_sparse.nms as nms_mod
     from compass_sparse import ShapeError
 
     n = 40
@@ -617,20 +617,22 @@ def test_warm_basis_survives_presolve():
         "Preprocessor removed 9 rows/cols")
     assert r.basis.basic.shape == (n + 1,)
     warm_seen = []
-    run = path_mod.PivotalPath.run
+    # the linear MCP of each major iteration (a small problem's direct step may end it
+    # without running a PivotalPath), with the warm basis it is handed
+    solve_linear = nms_mod.solve_linear_mcp
 
-    def spy(self, x, *, warm=None, **kw):
+    def spy(*args, warm=None, **kw):
         warm_seen.append(None if warm is None else warm.basic.copy())
-        return run(self, x, warm=warm, **kw)
+        return solve_linear(*args, warm=warm, **kw)
 
-    path_mod.PivotalPath.run = spy
+    nms_mod.solve_linear_mcp = spy
     try:
         # A tighter tolerance makes the re-solve take a Newton step from the solution.
         again = solve_mcp(problem, x0=r.x, basis=r.basis,
                           options={"convergence_tolerance": 1e-13, "major_iteration_limit": 1,
                                    "crash_method": "none"})
     finally:
-        path_mod.PivotalPath.run = run
+        nms_mod.solve_linear_mcp = solve_linear
     keep = np.setdiff1d(np.arange(n), fix)
     assert warm_seen and warm_seen[0] is not None
     np.testing.assert_array_equal(warm_seen[0], r.basis.basic[keep])
