@@ -87,6 +87,7 @@ from ._blas import single_threaded_blas
 from ._homotopy_kernels import smoothed_projection
 from ._merit_kernels import csc_matvec, csc_to_dense
 from .merit import fb_phi, fb_psi, project
+from .options import HOMOTOPY_DENSE_DENSITY, HOMOTOPY_DENSE_MAX_N
 from .path import _floats
 from .restarts import random_point
 from .result import PassStats
@@ -113,10 +114,10 @@ CORRECTOR_TOLERANCE = 1e-4
 path only has to be followed closely enough not to jump to another branch; the end game
 gets the solution's accuracy.  On the thesis families 1e-4 took half the steps and a
 quarter of the evaluations of 1e-8 and found the same solutions."""
-DENSE_DENSITY = 0.1
+DENSE_DENSITY = HOMOTOPY_DENSE_DENSITY
 """Bordered systems whose Jacobian is at least this dense, or small (n <= DENSE_MAX_N),
-are factorized densely."""
-DENSE_MAX_N = 300
+are factorized densely (the option ``homotopy_after_restarts`` reads the same rule)."""
+DENSE_MAX_N = HOMOTOPY_DENSE_MAX_N
 NEWTON_ITERATIONS = 20
 """Iterations of the normal-map Newton end game per attempt."""
 END_GAP = 1e-10

@@ -655,6 +655,9 @@ class NMSSolver:
             # in every solve); a Jacobian off that pattern makes its own (_newton_point).
             self.linearizer = self.ev.for_pattern("linearizer", lambda: _linearizer_for(
                 start.J, self.ev.pattern_ref))
+        pattern = start.J if start.J is not None else self.ev.pattern_ref
+        homotopy_after = self.opt0.restarts_before_homotopy(
+            self.n, pattern.nnz if pattern is not None else self.n * self.n)
         try:
             if self.opt0.homotopy == "only":
                 self._consider(start.z, start.f, start.phi, start.psi)
@@ -662,8 +665,7 @@ class NMSSolver:
             while True:
                 why = self._run(start, opt)
                 if (self.opt0.homotopy == "auto" and "homotopy" not in self.passes and
-                        self.restarts >= min(self.opt0.homotopy_after_restarts,
-                                             self.opt0.restart_limit)):
+                        self.restarts >= min(homotopy_after, self.opt0.restart_limit)):
                     why = self._homotopy(z0)
                 if self.restarts >= self.opt0.restart_limit:
                     status, message = Status.NO_PROGRESS, f"{why}; restart limit reached"

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from ._options_base import OptionsMixin, keyword_checked, normalized
 from .exceptions import OptionError
 
-__all__ = ["Options", "PATH_NAMES"]
+__all__ = ["Options", "PATH_NAMES", "HOMOTOPY_DENSE_MAX_N", "HOMOTOPY_DENSE_DENSITY"]
 
 # PATH 5.2's name of every option whose name is not PATH's own (None: PATH has no such
 # option).  Every other field carries PATH's name; the option table in the docs and
@@ -45,6 +45,12 @@ PATH_NAMES: dict[str, str | None] = {
     "lu_backend": "factorization_method",  # PATH's basis package (lusol, umfpack, ...)
     "lu_ordering": None,  # PATH's packages order by themselves
 }
+
+
+HOMOTOPY_DENSE_MAX_N = 300
+"""Up to this order the homotopy factors its bordered systems densely (and so above it
+when J holds at least ``HOMOTOPY_DENSE_DENSITY * n^2`` entries)."""
+HOMOTOPY_DENSE_DENSITY = 0.1
 
 
 def _opt(default, doc: str, *, lo=None, hi=None, choices=None, lo_open=False, nullable=False,
@@ -214,9 +220,13 @@ class Options(OptionsMixin):
         "NMS and its restarts stall, see homotopy_after_restarts), 'off', or 'only' (the "
         "homotopy alone, with its Newton end game, instead of NMS)",
         choices=("auto", "off", "only"))
-    homotopy_after_restarts: int = _opt(
-        3, "'auto' enters the homotopy after this many restarts failed (3: after PATH's "
-        "three restart configurations); later restarts continue if it fails", lo=0)
+    homotopy_after_restarts: int | None = _opt(
+        None, "'auto' enters the homotopy after this many restarts failed; later restarts "
+        "continue if it fails.  None = 0 where the homotopy's linear systems are dense "
+        "(order <= 300 or nnz(J) >= 0.1 n^2: on the thesis families n = 10 ... 500 the "
+        "restarts before it never solved an instance it then could not, and cost ~40% of "
+        "the time), 3 otherwise (after PATH's three restart configurations)", lo=0,
+        nullable=True)
     homotopy_path_limit: int = _opt(
         3, "paths followed per homotopy pass: the first from the start point, the others "
         "from random points of the box", lo=1)
@@ -292,6 +302,14 @@ class Options(OptionsMixin):
 
     def cumulative_limit(self, n: int) -> int:
         return self.cumulative_iteration_limit or max(100000, 100 * n)
+
+    def restarts_before_homotopy(self, n: int, nnz: int) -> int:
+        """``homotopy_after_restarts`` for a problem of order n whose Jacobian holds nnz
+        entries (see the option)."""
+        if self.homotopy_after_restarts is not None:
+            return self.homotopy_after_restarts
+        dense = n <= HOMOTOPY_DENSE_MAX_N or nnz >= HOMOTOPY_DENSE_DENSITY * n * n
+        return 0 if dense else 3
 
     @classmethod
     def path_name(cls, name: str) -> str | None:

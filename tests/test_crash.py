@@ -238,7 +238,9 @@ def test_crash_report_of_a_solve_whose_restart_ran_it_is_not_a_skip_reason():
     import known_problems as kp
 
     p = kp.billups()
-    r = cs.solve_mcp(p.F, p.J, p.lb, p.ub, p.x0, options={"crash_method": "none"})
+    # (the restarts first: by default a problem this small goes to the homotopy at once)
+    r = cs.solve_mcp(p.F, p.J, p.lb, p.ub, p.x0,
+                     options={"crash_method": "none", "homotopy_after_restarts": 3})
     st = r.passes["crash"]
     assert r.restarts > 0 and st.ran and st.iterations > 0
     assert st.reason and "none" not in st.reason and "dimension" not in st.reason

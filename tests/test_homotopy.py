@@ -356,3 +356,41 @@ def test_extreme_homotopy_smoothing_does_not_turn_the_smoothed_projection_into_n
     assert np.all((lb <= p) & (p <= ub))
     if mu < 1:  # the smoothing vanishes: the projection itself
         np.testing.assert_allclose(p, np.clip(x, lb, ub), atol=1e-12)
+
+
+# ------------------------------------------------------------------ when the pass is entered
+def test_homotopy_after_restarts_default_depends_on_whether_its_systems_are_dense():
+    """None (the default): 0 where the homotopy factors densely (n <= 300, or nnz(J) >=
+    0.1 n^2), 3 -- after PATH's three restart configurations -- on larger sparse
+    problems; an explicit value is kept.  Both sides of both bounds."""
+    from compass_sparse.options import HOMOTOPY_DENSE_DENSITY, HOMOTOPY_DENSE_MAX_N
+
+    assert (HOMOTOPY_DENSE_MAX_N, HOMOTOPY_DENSE_DENSITY) == (hom.DENSE_MAX_N,
+                                                              hom.DENSE_DENSITY)
+    o = Options()
+    assert o.homotopy_after_restarts is None
+    n = HOMOTOPY_DENSE_MAX_N
+    assert o.restarts_before_homotopy(n, 3 * n) == 0
+    assert o.restarts_before_homotopy(n + 1, 3 * (n + 1)) == 3
+    m = 1000
+    dense_nnz = int(np.ceil(HOMOTOPY_DENSE_DENSITY * m * m))
+    assert o.restarts_before_homotopy(m, dense_nnz) == 0
+    assert o.restarts_before_homotopy(m, dense_nnz - 1) == 3
+    assert Options(homotopy_after_restarts=2).restarts_before_homotopy(10, 10) == 2
+    assert Options(homotopy_after_restarts=0).restarts_before_homotopy(10**5, 10**5) == 0
+
+
+def test_small_problem_enters_the_homotopy_at_its_first_stall():
+    """billups from 0: NMS stalls at a local minimizer of the merit function.  By default
+    the homotopy follows at once (no restart, each of which stalled at the same point);
+    with homotopy_after_restarts = 3, PATH's three restarts come first.  Both solve it."""
+    F = lambda x: np.array([(x[0] - 1.0) ** 2 - 1.01])  # noqa: E731
+    J = lambda x: np.array([[2.0 * (x[0] - 1.0)]])  # noqa: E731
+    first = solve_mcp(F, J, 0.0, np.inf, np.zeros(1))
+    late = solve_mcp(F, J, 0.0, np.inf, np.zeros(1),
+                     options={"homotopy_after_restarts": 3})
+    for r in (first, late):
+        assert r.success and abs(r.x[0] - (1.0 + np.sqrt(1.01))) <= 1e-6
+        assert r.passes["homotopy"].ran
+    assert first.restarts == 0 and late.restarts == 3
+    assert first.nit < late.nit  # (the restarts repeat points: F evaluations are memo hits)
