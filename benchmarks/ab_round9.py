@@ -8,7 +8,8 @@ solver's time per solve without the user's F and J):
   failure   the fallback steps (the search's stop at a trial that rounds to z, the dense
             LM step) and the homotopy's compiled projection and dense linear algebra,
             against the fallback module and the homotopy tracker of an older worktree
-            (``--old``, e.g. a checkout of 449a101)
+            (``--old``, e.g. a checkout of 449a101); on billups and two thesis
+            instances that need the homotopy
 
 Usage:  PYTHONPATH=. python3 benchmarks/ab_round9.py onecall [failure --old <worktree>]
             [--rounds 20]
@@ -71,7 +72,8 @@ def main(argv=None):
                             setattr(N, "gradient_steps", values[1]),
                             setattr(H, "_Tracker", values[2]))
 
-        cases = [c for c in bs._known_cases() if c.name == "billups"]
+        cases = ([c for c in bs._known_cases() if c.name == "billups"]
+                 + bs._thesis_cases([10], [2], [1]) + bs._thesis_cases([20], [1], [12]))
         rows = ab(cases, {"old": (use(old), None), "new": (use(new), None)}, a.rounds)
         _print("Fallback steps and the homotopy of a small problem", rows, "old", "new",
                a.rounds)

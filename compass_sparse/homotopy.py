@@ -75,6 +75,7 @@ from __future__ import annotations
 
 import enum
 import logging
+import math
 import time
 from dataclasses import dataclass, field
 
@@ -255,6 +256,12 @@ def _solve_square(A, b, dense: bool):
 _getrf, _getrs = sla.lapack.get_lapack_funcs(("getrf", "getrs"), (np.empty(1),))
 
 
+def _norm2(x) -> float:
+    """np.linalg.norm(x) of a float vector, the same bits (numpy computes sqrt(x . x)),
+    without its dispatch (~3 us; the corrector asks several per step)."""
+    return math.sqrt(float(x.dot(x)))
+
+
 def _float_csc(J):
     """J as a CSC matrix of floats (the evaluator's J already is: then J itself)."""
     if sp.issparse(J) and J.format == "csc" and J.data.dtype == np.float64:
@@ -391,7 +398,7 @@ class _Tracker:
             except (np.linalg.LinAlgError, RuntimeError):
                 return (HomotopyStatus.SINGULAR,
                         f"singular augmented Jacobian at lam = {y[-1]:.6f}", y)
-            tau = w / np.linalg.norm(w)
+            tau = w / _norm2(w)
             if tau @ v < 0:  # keep the orientation
                 tau = -tau
             if tau[-1] * v[-1] < 0:  # lam changed direction: a turning point was passed
@@ -417,7 +424,7 @@ class _Tracker:
             if retried:  # do not grow right after a rejection (avoids oscillating)
                 factor = max(factor, 1.0)
             self.steps += 1
-            h = min(max(h, float(np.linalg.norm(yn - y))) / factor,
+            h = min(max(h, _norm2(yn - y)) / factor,
                     opt.homotopy_maximum_step * (1.0 + np.linalg.norm(yn[:-1], np.inf)))
             y, v = yn, tau
             self._y = y
@@ -450,20 +457,22 @@ class _Tracker:
         factor by which the next step is divided, from the contraction ratio kappa and the
         first correction delta relative to the step h (both grow like h)."""
         y = yp.copy()
-        h = max(float(np.linalg.norm(yp - self._y)), 1e-300)
+        h = max(_norm2(yp - self._y), 1e-300)
         first = prev = None
         kappa = 0.0
-        tol_y = CORRECTOR_TOLERANCE * (1.0 + float(np.linalg.norm(yp)))
+        tol_y = CORRECTOR_TOLERANCE * (1.0 + _norm2(yp))
+        rhs = np.empty(yp.size)
         for _ in range(CORRECTOR_ITERATIONS):
             r = self.residual(y, a, False)
             if r is None:
                 return None, False
-            rhs = np.append(-r[0], -(v @ (y - yp)))
+            np.negative(r[0], out=rhs[:-1])
+            rhs[-1] = -(v @ (y - yp))
             try:
                 d = Bf.solve(rhs)
             except np.linalg.LinAlgError:  # a non-finite correction: a shorter step
                 return None, False
-            dn = float(np.linalg.norm(d))
+            dn = _norm2(d)
             if prev is not None:
                 kappa = max(kappa, dn / max(prev, 1e-300))
                 if kappa > CONTRACTION_MAX:
