@@ -87,7 +87,8 @@ import scipy.sparse.linalg as spla
 from ._blas import single_threaded_blas
 from ._homotopy_kernels import smoothed_projection
 from ._merit_kernels import csc_matvec, csc_to_dense
-from .merit import fb_phi, fb_psi, project
+from .evaluation import all_finite
+from .merit import fb_phi, fb_psi, max_abs, project
 from .options import HOMOTOPY_DENSE_DENSITY, HOMOTOPY_DENSE_MAX_N
 from .path import _floats
 from .restarts import random_point
@@ -226,7 +227,7 @@ class _Bordered:
                 raise ValueError(f"illegal argument {-info} of getrf")
             self.lu = (lu, piv)
             d = np.abs(np.diag(lu))
-            if not np.all(np.isfinite(d)) or d.min() <= 1e-14 * max(d.max(), 1e-300):
+            if not all_finite(d) or d.min() <= 1e-14 * max(d.max(), 1e-300):
                 raise np.linalg.LinAlgError("singular bordered matrix")
         else:
             col = sp.csc_matrix(c[:n].reshape(-1, 1))
@@ -241,7 +242,7 @@ class _Bordered:
                 raise ValueError(f"illegal argument {-info} of getrs")
         else:
             x = self.lu.solve(b)
-        if not np.all(np.isfinite(x)):
+        if not all_finite(x):
             raise np.linalg.LinAlgError("non-finite solution of the bordered system")
         return x
 
@@ -358,7 +359,7 @@ class _Tracker:
         if self.dense:
             Hx = _dense(J)
             Hx *= lam * dx  # scales column j by lam dx_j
-            Hx[np.diag_indices(self.n)] += 1.0 - lam * dx
+            Hx.flat[::self.n + 1] += 1.0 - lam * dx  # the diagonal
         else:
             Hx = (lam * (J @ sp.diags(dx)) + sp.diags(1.0 - lam * dx)).tocsc()
         # dH/dlam = G - (x - a) + lam (J - I) dp/dmu * dmu/dlam,  dmu/dlam = -mu0
@@ -425,14 +426,14 @@ class _Tracker:
                 factor = max(factor, 1.0)
             self.steps += 1
             h = min(max(h, _norm2(yn - y)) / factor,
-                    opt.homotopy_maximum_step * (1.0 + np.linalg.norm(yn[:-1], np.inf)))
+                    opt.homotopy_maximum_step * (1.0 + max_abs(yn[:-1])))
             y, v = yn, tau
             self._y = y
             lam = y[-1]
             if self.log is not None and self.steps % 20 == 0:
                 self.log(f"homotopy step {self.steps:5d} lam {lam:.6f} h {h:9.2e} "
                          f"|x| {np.linalg.norm(y[:-1], np.inf):9.2e}")
-            if not np.all(np.isfinite(y)) or np.linalg.norm(y[:-1], np.inf) > bound:
+            if not all_finite(y) or max_abs(y[:-1]) > bound:
                 return (HomotopyStatus.DIVERGED,
                         f"||x|| exceeded {bound:.3g} at lam = {lam:.6f}", y)
             if lam < -0.5:
@@ -486,7 +487,7 @@ class _Tracker:
             y = y + d
             if dn <= tol_y:
                 factor = max(kappa / KAPPA_NOMINAL, first / (DISTANCE_NOMINAL * h))
-                return (y, float(np.clip(factor, 0.5, 2.0))), True
+                return (y, min(max(float(factor), 0.5), 2.0)), True
             prev = dn
         return None, False
 
@@ -512,7 +513,7 @@ class _Tracker:
             if self.dense:
                 A = _dense(J)
                 A *= d  # J D + I - D, entry by entry as the sparse sum
-                A[np.diag_indices(self.n)] += 1.0 - d
+                A.flat[::self.n + 1] += 1.0 - d  # the diagonal
             else:
                 A = J @ sp.diags(d) + sp.diags(1.0 - d)
             try:
@@ -520,7 +521,7 @@ class _Tracker:
                 dx = _solve_square(A, -fb, self.dense)
             except (np.linalg.LinAlgError, RuntimeError, ValueError):
                 break
-            if not np.all(np.isfinite(dx)):
+            if not all_finite(dx):
                 break
             # The end game is local: a step much longer than the point is a singular
             # Jacobian's, not Newton's convergence (it once jumped from 1 to 1e7).
