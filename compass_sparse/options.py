@@ -217,8 +217,8 @@ class Options(OptionsMixin):
     # --- homotopy fallback (Billups & Watson 2002; module compass_sparse.homotopy) --------
     homotopy: str = _opt(
         "auto", "probability-one homotopy on the smoothed normal map: 'auto' (entered when "
-        "NMS and its restarts stall, see homotopy_after_restarts), 'off', or 'only' (the "
-        "homotopy alone, with its Newton end game, instead of NMS)",
+        "NMS stalls, before or after restarts: see homotopy_after_restarts), 'off', or "
+        "'only' (the homotopy alone, with its Newton end game, instead of NMS)",
         choices=("auto", "off", "only"))
     homotopy_after_restarts: int | None = _opt(
         None, "'auto' enters the homotopy after this many restarts failed; later restarts "
