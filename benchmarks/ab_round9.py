@@ -5,13 +5,15 @@ solver's time per solve without the user's F and J):
 
   onecall   a small problem's path start and dense direct step in one compiled call
             against the PivotalPath route (the call switched off)
+  lemke     the Lemke start of a path in one compiled pass against its array version
+            (problems whose paths restart from the Lemke ray)
   failure   the fallback steps (the search's stop at a trial that rounds to z, the dense
             LM step) and the homotopy's compiled projection and dense linear algebra,
             against the fallback module and the homotopy tracker of an older worktree
             (``--old``, e.g. a checkout of 449a101); on billups and two thesis
             instances that need the homotopy
 
-Usage:  PYTHONPATH=. python3 benchmarks/ab_round9.py onecall [failure --old <worktree>]
+Usage:  PYTHONPATH=. python3 benchmarks/ab_round9.py onecall lemke [failure --old <worktree>]
             [--rounds 20]
 """
 from __future__ import annotations
@@ -40,7 +42,7 @@ def _old_module(worktree, name):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("experiments", nargs="+", choices=("onecall", "failure"))
+    ap.add_argument("experiments", nargs="+", choices=("onecall", "lemke", "failure"))
     ap.add_argument("--rounds", type=int, default=20)
     ap.add_argument("--old", help="worktree of the older revision (failure)")
     a = ap.parse_args(argv)
@@ -57,6 +59,19 @@ def main(argv=None):
                   a.rounds)
         _print("A path's start and dense direct step in one compiled call", rows, "path",
                "one call", a.rounds)
+    if "lemke" in a.experiments:
+        from compass_sparse.path import PivotalPath
+
+        compiled = PivotalPath._lemke_start
+
+        def start(fn):
+            return lambda: setattr(PivotalPath, "_lemke_start", fn)
+
+        cases = ([c for c in bs._known_cases() if c.name in ("billups", "log_ncp")]
+                 + bs._thesis_cases([10], [2], [1, 2]))
+        rows = ab(cases, {"arrays": (start(PivotalPath._lemke_start_arrays), None),
+                          "compiled": (start(compiled), None)}, a.rounds)
+        _print("The Lemke start in one compiled pass", rows, "arrays", "compiled", a.rounds)
     if "failure" in a.experiments:
         if not a.old:
             ap.error("failure needs --old <worktree>")

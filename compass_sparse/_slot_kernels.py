@@ -11,7 +11,10 @@ where several slots name the same index, the assignment order of the array versi
 (kinds in the order z, w, v, fixed slack; slots in order within a kind).
 """
 
+import numpy as np
+
 from ._jit import njit
+from ._merit_kernels import csc_matvec
 from ._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
 
 
@@ -104,3 +107,34 @@ def start_basis(z, lb, ub, previous, use_previous, basic):
                 basic[i] = VAR_V
         else:
             basic[i] = VAR_Z
+
+
+@njit(cache=True)
+def lemke_start(indptr, indices, data, q, lb, ub, z, w, v, r, basic):
+    """PivotalPath._lemke_start into z, w, v, r, basic: z at a finite bound (the lower
+    one first; 0 when free), f = M z + q (M in CSC form, scipy's order), every bounded
+    variable's slack basic at delta = max(1, |f_i|) (the free slack of a fixed one), and
+    the covering vector r = f - delta at lower bounds, f + delta at upper-only ones, f
+    on free rows."""
+    n = z.shape[0]
+    for i in range(n):
+        if np.isfinite(lb[i]):
+            z[i] = lb[i]
+        elif np.isfinite(ub[i]):
+            z[i] = ub[i]
+        else:
+            z[i] = 0.0
+    csc_matvec(indptr, indices, data, z, r)
+    for i in range(n):
+        f = r[i] + q[i]
+        has_l = np.isfinite(lb[i])
+        has_u = np.isfinite(ub[i]) and not has_l
+        b = VAR_W if has_l else (VAR_V if has_u else VAR_Z)
+        if lb[i] == ub[i]:
+            b = VAR_S
+        basic[i] = b
+        af = abs(f)
+        d = af if (af > 1.0 or af != af) else 1.0  # np.maximum(1.0, |f|)
+        r[i] = f - d if has_l else (f + d if has_u else f)
+        w[i] = d if b == VAR_W else 0.0
+        v[i] = d if b == VAR_V else 0.0

@@ -80,7 +80,7 @@ import scipy.sparse as sp
 from . import _path_kernels as _PK
 from ._merit_kernels import csc_matvec
 from ._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
-from ._slot_kernels import slot_basis, slot_point, slot_table, start_basis
+from ._slot_kernels import lemke_start, slot_basis, slot_point, slot_table, start_basis
 from .basis import KIND_DENSE, KIND_M, KIND_UNIT, FactorReuseFailed, UpdateStatus
 from .direct_step import DirectFactors, dense_direct_path, direct_step
 from .exceptions import ShapeError, SingularBasisError
@@ -472,6 +472,19 @@ class PivotalPath:
         return (s.factorizations, s.updates)
 
     def _lemke_start(self):
+        """(z, w, v, r, basic) of the Lemke start: every bounded variable at a bound with
+        its slack basic, the covering vector making them feasible at t = 0 (one compiled
+        pass for float data; :meth:`_lemke_start_arrays` otherwise, and its reference)."""
+        n, M = self.n, self.M
+        if M.data.dtype == np.float64 and _floats(n, self.q, self.lb, self.ub):
+            z, w, v, r = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
+            basic = np.empty(n, dtype=np.int8)
+            lemke_start(M.indptr, M.indices, M.data, self.q, self.lb, self.ub, z, w, v, r,
+                        basic)
+            return z, w, v, r, basic
+        return self._lemke_start_arrays()
+
+    def _lemke_start_arrays(self):
         n, lb, ub = self.n, self.lb, self.ub
         z = np.where(np.isfinite(lb), lb, np.where(np.isfinite(ub), ub, 0.0))
         f = self._times_M(z) + self.q

@@ -577,3 +577,29 @@ def test_path_starts_again_when_a_solve_repairs_the_basis(monkeypatch):
     res = PivotalPath(M, q, lb, ub, BasisManager(M), Options()).run(start_of(lb, ub))
     assert res.code is LinearCode.SINGULAR
     assert calls["n"] == PATH_ATTEMPTS
+
+
+def test_compiled_lemke_start_gives_the_array_versions_bits():
+    """PivotalPath._lemke_start in one compiled pass: the same z, w, v, r and basis, bit
+    for bit and dtype for dtype, as the array version, over random boxes with free,
+    lower-, upper-bounded, boxed and fixed variables, f of every size around 1 and a NaN
+    in q."""
+    from compass_sparse.dense_path import DensePathEngine
+
+    rng = np.random.default_rng(0)
+    for trial in range(200):
+        n = int(rng.integers(1, 12))
+        M = (sp.random(n, n, density=0.5, random_state=int(rng.integers(1 << 30)),
+                       format="csc") + sp.identity(n)).tocsc()
+        q = rng.normal(size=n) * rng.choice([0.1, 1.0, 10.0], size=n)
+        if trial % 7 == 0:
+            q[0] = np.nan
+        kind = rng.integers(0, 5, size=n)  # free, upper only, boxed, fixed, lower only
+        base = rng.normal(size=n)
+        lb = np.select([kind == 0, kind == 1], [-np.inf, -np.inf], base)
+        ub = np.select([kind == 0, kind == 2, kind == 3, kind == 4],
+                       [np.inf, base + rng.uniform(0.0, 3.0, n), base, np.inf], base)
+        p = PivotalPath(M, q, lb, ub, DensePathEngine(M), Options())
+        for got, ref in zip(p._lemke_start(), p._lemke_start_arrays()):
+            assert got.dtype == ref.dtype
+            assert np.array_equal(got, ref, equal_nan=True)
