@@ -85,7 +85,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ._blas import single_threaded_blas
-from ._homotopy_kernels import smoothed_projection
+from ._homotopy_kernels import dense_bordered, homotopy_values, smoothed_projection
 from ._merit_kernels import csc_matvec, csc_to_dense
 from .evaluation import all_finite
 from .merit import fb_phi, fb_psi, max_abs, project
@@ -214,12 +214,16 @@ class _Bordered:
     def __init__(self, A, c, v, dense: bool):
         n = A.shape[0]
         self.dense = dense
-        if dense:
+        if dense and c is None:
+            B = A  # the whole bordered matrix already (Fortran order: factored in place)
+            n -= 1
+        elif dense:
             B = np.empty((n + 1, n + 1))
             B[:n, :n] = A
             B[:n, n] = c[:n]
             B[n, :] = v
             B[n, n] = v[n]
+        if dense:
             # LAPACK's getrf and getrs directly: what scipy.linalg.lu_factor and lu_solve
             # call, without their checks and dispatch (~35 us a step at n = 1)
             lu, piv, info = _getrf(B, overwrite_a=True)
@@ -346,29 +350,49 @@ class _Tracker:
             return None
         if want_jac:
             self._offer(p, f)
-        G = f + x - p
-        H = lam * G + (1.0 - lam) * (x - a)
+        lam = float(lam)
+        if _floats(self.n, f, x, p, a):
+            G, H = np.empty(self.n), np.empty(self.n)
+            homotopy_values(f, x, p, a, lam, G, H)
+        else:
+            G = f + x - p
+            H = lam * G + (1.0 - lam) * (x - a)
         if not want_jac:
             return H, None, None
         if J is None:
             return None
         J = _float_csc(J)
+        n = self.n
         if self.dense is None:
-            self.dense = self.n <= DENSE_MAX_N or J.nnz >= DENSE_DENSITY * self.n * self.n
+            self.dense = n <= DENSE_MAX_N or J.nnz >= DENSE_DENSITY * n * n
         # H_x = lam (J D + I - D) + (1 - lam) I = lam J D + I - lam D
+        # dH/dlam = G - (x - a) + lam (J - I) dp/dmu * dmu/dlam,  dmu/dlam = -mu0
+        if self.dense and _floats(n, dx, dmu, G, x, a):
+            # Hx and Hlam in one pass, as views of the bordered matrix that factor() will
+            # complete with the tangent's row and factor in place (column-major for getrf)
+            B = np.empty((n + 1, n + 1), order="F")
+            dense_bordered(J.indptr, J.indices, J.data, dx, dmu, lam, self.mu0, G, x, a, B,
+                           np.empty(n))
+            return H, B[:n, :n], B[:n, n]
         if self.dense:
             Hx = _dense(J)
             Hx *= lam * dx  # scales column j by lam dx_j
-            Hx.flat[::self.n + 1] += 1.0 - lam * dx  # the diagonal
+            Hx.flat[::n + 1] += 1.0 - lam * dx  # the diagonal
         else:
             Hx = (lam * (J @ sp.diags(dx)) + sp.diags(1.0 - lam * dx)).tocsc()
-        # dH/dlam = G - (x - a) + lam (J - I) dp/dmu * dmu/dlam,  dmu/dlam = -mu0
         dGdmu = _times(J, dmu) - dmu
         Hlam = G - (x - a) - lam * self.mu0 * dGdmu
         return H, Hx, Hlam
 
     def factor(self, Hx, Hlam, v):
+        """The factors of [[Hx, Hlam], [v^T]] (dense Hx and Hlam from :meth:`residual` are
+        views of that matrix, which the factorization overwrites)."""
         self.factorizations += 1
+        B = Hx.base if isinstance(Hx, np.ndarray) else None
+        if (self.dense and B is not None and Hlam.base is B and B.flags.f_contiguous
+                and B.shape == (self.n + 1, self.n + 1)):
+            B[-1, :] = v  # residual()'s bordered matrix: its last row, then factored
+            return _Bordered(B, None, None, True)
         return _Bordered(Hx, np.append(Hlam, 0.0), v, self.dense)
 
     # -------------------------------------------------------------- one path
