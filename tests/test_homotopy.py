@@ -394,3 +394,38 @@ def test_small_problem_enters_the_homotopy_at_its_first_stall():
         assert r.passes["homotopy"].ran
     assert first.restarts == 0 and late.restarts == 3
     assert first.nit < late.nit  # (the restarts repeat points: F evaluations are memo hits)
+
+
+@pytest.mark.parametrize("n,family,seed", [(1, 1, 0), (7, 2, 1), (30, 1, 2)])
+def test_compiled_homotopy_values_and_bordered_matrix_give_the_array_expressions_bits(
+        monkeypatch, n, family, seed):
+    """_Tracker.residual's dense route (the map's values and the bordered matrix in one
+    compiled pass each) against its array expressions, at points along lam in [0, 1]:
+    H, H_x and H_lam bit for bit, and the factors of the bordered matrix too."""
+    g = thesis_family(n, family, seed=seed)
+    p = g.problem
+    rng = np.random.default_rng(seed)
+    a = np.clip(rng.normal(size=n), p.lb, p.ub)
+
+    def pieces(arrays):
+        with monkeypatch.context() as m:
+            if arrays:
+                m.setattr(hom, "_floats", lambda *args: False)
+            tr = hom._Tracker(p.evaluator, p.lb, p.ub, Options(), deadline=None,
+                              on_point=None, tol=1e-12, log=None)
+            out = []
+            for lam in (0.0, 0.3, 0.999, 1.0):
+                y = np.append(a + rng.normal(scale=0.1, size=n), lam)
+                H, Hx, Hlam = tr.residual(y, a, True)
+                v = rng.normal(size=n + 1)
+                out.append((H.copy(), np.array(Hx), np.array(Hlam)))
+                out.append(tr.factor(Hx, Hlam, v).lu)
+            return out
+
+    state = rng.bit_generator.state
+    compiled = pieces(False)
+    rng.bit_generator.state = state
+    reference = pieces(True)
+    for got, ref in zip(compiled, reference):
+        for u, w in zip(got, ref):
+            assert np.array_equal(u, w)
