@@ -72,7 +72,7 @@ def _armijo(evalr, z, psi, g, trial, lb, ub, sigma, shrink, alpha_min, alpha0=1.
     A trial that rounds to z itself ends the search: in each component, rounding and the
     projection are monotone in alpha, so every shorter step rounds to z as well and cannot
     decrease Psi.  At a stationary point of Psi on the box, where -grad Psi points out of
-    the box at its bounds, this is the first trial (billups: 200 trials of z per
+    the box at its bounds, this is the first trial (billups: ~100 trials of z per
     fallback before, each a memo hit and an acceptance test)."""
     alpha = alpha0
     while alpha >= alpha_min:
