@@ -79,6 +79,19 @@ def _print(title, rows, la, lb, rounds):
               f"{w}/{rounds} |")
 
 
+def old_module(worktree, name):
+    """The module ``name`` of the package in an older worktree, loaded beside the current
+    one (as ``compass_sparse.<name>_old``, once per process)."""
+    key = f"compass_sparse.{name}_old"
+    if key not in sys.modules:
+        spec = importlib.util.spec_from_file_location(
+            key, os.path.join(worktree, "compass_sparse", f"{name}.py"))
+        mod = importlib.util.module_from_spec(spec)
+        sys.modules[key] = mod
+        spec.loader.exec_module(mod)
+    return sys.modules[key]
+
+
 def _small_cases():
     return [c for c in bs._known_cases() if c.name != "billups"] + bs._thesis_cases(
         [10], [1, 2], [1, 2])
@@ -120,21 +133,11 @@ def main(argv=None):
         rows = ab(cases, {"50": (bound(50), None), "150": (bound(150), None)}, a.rounds)
         _print("The dense direct step below order 150 (against 50)", rows, "50", "150",
                a.rounds)
-    modules = {}
-
     def load(name):
         """The module ``name`` of the worktree --old, loaded beside the current one."""
         if not a.old:
             ap.error("this experiment needs --old <worktree>")
-        if name not in modules:
-            spec = importlib.util.spec_from_file_location(
-                f"compass_sparse.{name}_old",
-                os.path.join(a.old, "compass_sparse", f"{name}.py"))
-            mod = importlib.util.module_from_spec(spec)
-            sys.modules[spec.name] = mod
-            spec.loader.exec_module(mod)
-            modules[name] = mod
-        return modules[name]
+        return old_module(a.old, name)
 
     def against_old(title, swaps, cases):
         """The current objects against those of --old: ``swaps`` lists (owner, attribute,

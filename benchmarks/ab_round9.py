@@ -19,24 +19,13 @@ Usage:  PYTHONPATH=. python3 benchmarks/ab_round9.py onecall lemke [failure --ol
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import os
 import sys
 
 sys.path[:0] = [os.path.dirname(__file__), os.path.join(os.path.dirname(__file__), "..", "tests")]
 
 import bench_small as bs
-from ab_round8 import _print, _small_cases, ab
-
-
-def _old_module(worktree, name):
-    """The module ``name`` of an older worktree, loaded beside the current one."""
-    spec = importlib.util.spec_from_file_location(
-        f"compass_sparse.{name}_old", os.path.join(worktree, "compass_sparse", f"{name}.py"))
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = mod
-    spec.loader.exec_module(mod)
-    return mod
+from ab_round8 import _print, _small_cases, ab, old_module
 
 
 def main(argv=None):
@@ -78,7 +67,7 @@ def main(argv=None):
         import compass_sparse.homotopy as H
         import compass_sparse.nms as N
 
-        old_fb, old_h = _old_module(a.old, "fallback"), _old_module(a.old, "homotopy")
+        old_fb, old_h = old_module(a.old, "fallback"), old_module(a.old, "homotopy")
         new = (N.lm_step, N.gradient_steps, H._Tracker)
         old = (old_fb.lm_step, old_fb.gradient_steps, old_h._Tracker)
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from ._merit_kernels import csc_is_canonical
+from ._merit_kernels import csc_is_canonical, csc_matvec
 
 _KNOWN = {"_shape", "maxprint", "indices", "indptr", "data"}
 _STATE = []  # [usable: bool, maxprint] after the probe
@@ -59,3 +59,15 @@ def without_duplicates(A) -> sp.csc_matrix:
         A.sum_duplicates()
     return A
 
+
+
+def csc_times(A, x):
+    """A x: one compiled pass in scipy's order (the same bits) for a float64 CSC matrix and
+    a float vector, without scipy's dispatch (~8 us per product on a small model); A @ x
+    otherwise."""
+    if (A.data.dtype == np.float64 and isinstance(x, np.ndarray) and x.dtype == np.float64
+            and x.shape == (A.shape[1],)):
+        out = np.empty(A.shape[0])
+        csc_matvec(A.indptr, A.indices, A.data, x, out)
+        return out
+    return A @ x

@@ -24,6 +24,24 @@ def _max0(a):
     return a if (a > 0.0 or a != a) else 0.0
 
 
+@njit(cache=True, inline="always")
+def _clip(a, lb, ub):
+    """np.minimum(np.maximum(a, lb), ub) for bounds without NaN (a NaN a stays NaN; on a
+    tie the bound, as numpy's second argument)."""
+    a = a if (a > lb or a != a) else lb
+    return a if (a < ub or a != a) else ub
+
+
+@njit(cache=True)
+def components(x, lb, ub, z, w, v):
+    """path.components into z, w, v: z = pi(x), w = (z - x)+, v = (x - z)+."""
+    for i in range(x.shape[0]):
+        zi = _clip(x[i], lb[i], ub[i])
+        z[i] = zi
+        w[i] = _max0(zi - x[i])
+        v[i] = _max0(x[i] - zi)
+
+
 @njit(cache=True)
 def slot_point(sk, si, xb, zval, lb, ub, z, w, v):
     """PivotalPath._current_point into z, w, v: z from zval with the basic z's from the
@@ -48,9 +66,7 @@ def slot_point(sk, si, xb, zval, lb, ub, z, w, v):
             w[si[k]] = _max0(xb[k])
             v[si[k]] = _max0(-xb[k])
     for i in range(n):
-        a = z[i]
-        a = a if (a > lb[i] or a != a) else lb[i]  # np.maximum(z, lb)
-        z[i] = a if (a < ub[i] or a != a) else ub[i]  # np.minimum(., ub)
+        z[i] = _clip(z[i], lb[i], ub[i])
 
 
 @njit(cache=True)

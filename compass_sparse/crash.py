@@ -28,7 +28,6 @@ large CGE models a factorization costs as much as tens of solves with old factor
 from __future__ import annotations
 
 import logging
-import math
 import time
 from dataclasses import dataclass
 
@@ -44,7 +43,7 @@ from .direct_step import (DIRECT_MAX_N, KLU_FILL_LIMIT, REUSE_BEATS_REFACTOR_NNZ
                           DirectFactors, automatic_lu, klu_available, reduced_system)
 from .evaluation import all_finite
 from .exceptions import FactorBudgetError
-from .merit import _solver_vectors, fb_phi, max_abs, normal_map_at, project
+from .merit import _solver_vectors, dot_norm, fb_phi, max_abs, normal_map_at, project
 
 __all__ = ["CrashResult", "crash"]
 
@@ -70,13 +69,6 @@ class CrashResult:
     #: (None if not kept), for the first Newton step's basis (a preconditioner)
     factors: tuple | None = None
     reused: int = 0  #: steps solved on the previous step's factors (no factorization)
-
-
-def _norm(v) -> float:
-    """||v||_2 of a float vector: the square root of v.v, which is what np.linalg.norm
-    computes for a real vector (the same bits), without its dispatch (~4 us; the crash asks
-    three per step)."""
-    return math.sqrt(float(v.dot(v)))
 
 
 CRASH_STEP_LIMIT = 10.0
@@ -246,7 +238,7 @@ def _crash(evalr, z0, lb, ub, options, *, f0, J0, tol, deadline, log, on_point,
         return CrashResult(z, np.full(z.size, np.nan), z, 0, np.inf, "domain error at start",
                            time.perf_counter() - t0, 0, [])
     x, nm = normal_map_at(z, f, lb, ub)
-    nm_norm = _norm(nm)
+    nm_norm = dot_norm(nm)
     rows = []
     nfact = 0
     prev_free = None
@@ -268,7 +260,7 @@ def _crash(evalr, z0, lb, ub, options, *, f0, J0, tol, deadline, log, on_point,
             reason = "time limit"
             it -= 1
             break
-        fb = _norm(fb_phi(z, f, lb, ub))
+        fb = dot_norm(fb_phi(z, f, lb, ub))
         fb_at = (z, f, fb)
         if fb <= tol:
             reason = "converged"
@@ -381,7 +373,7 @@ def _crash(evalr, z0, lb, ub, options, *, f0, J0, tol, deadline, log, on_point,
                             stats.iterations += 1
                         raise
                 xt, nmt = normal_map_at(zt, ft, lb, ub)
-                nmt_norm = _norm(nmt)
+                nmt_norm = dot_norm(nmt)
                 if nmt_norm <= (1.0 - opt.crash_sigma * alpha) * max(recent):
                     accepted = True
                     break
@@ -408,6 +400,6 @@ def _crash(evalr, z0, lb, ub, options, *, f0, J0, tol, deadline, log, on_point,
     if fb_at is not None and fb_at[0] is z and fb_at[1] is f:
         fb = fb_at[2]  # the loop stopped at the start of a step: ||Phi|| of this point
     else:
-        fb = _norm(fb_phi(z, f, lb, ub))
+        fb = dot_norm(fb_phi(z, f, lb, ub))
     return CrashResult(z, f, x, max(it, 0), fb, reason, time.perf_counter() - t0, nfact, rows,
                        factors, reused)

@@ -47,7 +47,7 @@ from ._eval_kernels import csc_same_pattern, free_block
 from ._jit import njit
 from ._merit_kernels import csc_is_canonical
 from ._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
-from ._slot_kernels import start_basis
+from ._slot_kernels import components, start_basis
 from .basis.types import BasisOptions
 from .evaluation import all_finite
 from .merit import float_vector, max_abs
@@ -230,27 +230,6 @@ def _dense_direct(indptr, indices, data, q, lb, ub, basic, z, w, v, tol, rank_to
     return res, mz, nf
 
 
-@njit(cache=True, inline="always")
-def _np_max(a, b):
-    """numpy.maximum of two floats: NaN from either, b on ties (so -0.0 and 0.0 come out
-    as numpy's do)."""
-    if a != a:
-        return a
-    if b != b:
-        return b
-    return a if a > b else b
-
-
-@njit(cache=True, inline="always")
-def _np_min(a, b):
-    """numpy.minimum of two floats (NaN from either, b on ties)."""
-    if a != a:
-        return a
-    if b != b:
-        return b
-    return a if a < b else b
-
-
 @njit(cache=True)
 def _dense_direct_from(indptr, indices, data, q, lb, ub, x, r, previous, use_previous,
                        z, w, v, basic, zt, wt, vt, tol, rank_tol):
@@ -261,11 +240,7 @@ def _dense_direct_from(indptr, indices, data, q, lb, ub, x, r, previous, use_pre
     (zt, wt, vt) of :func:`_dense_direct`.  Returns (code, residual, max|M z|, |F|): code
     0 when r = 0 (the start solves the linear problem), 1 after a direct step."""
     n = x.shape[0]
-    for i in range(n):
-        zi = _np_min(_np_max(x[i], lb[i]), ub[i])
-        z[i] = zi
-        w[i] = _np_max(zi - x[i], 0.0)
-        v[i] = _np_max(x[i] - zi, 0.0)
+    components(x, lb, ub, z, w, v)
     start_basis(z, lb, ub, previous, use_previous, basic)
     if not use_previous:
         # the inward guess of PivotalPath._run: z basic at a bound with no slack value

@@ -75,7 +75,6 @@ from __future__ import annotations
 
 import enum
 import logging
-import math
 import time
 from dataclasses import dataclass, field
 
@@ -86,9 +85,10 @@ import scipy.sparse.linalg as spla
 
 from ._blas import single_threaded_blas
 from ._homotopy_kernels import dense_bordered, homotopy_values, smoothed_projection
-from ._merit_kernels import csc_matvec, csc_to_dense
+from ._csc import csc_times
+from ._merit_kernels import csc_to_dense
 from .evaluation import all_finite
-from .merit import fb_phi, fb_psi, max_abs, project
+from .merit import dot_norm, fb_phi, fb_psi, max_abs, project
 from .options import HOMOTOPY_DENSE_DENSITY, HOMOTOPY_DENSE_MAX_N
 from .path import _floats
 from .restarts import random_point
@@ -214,16 +214,15 @@ class _Bordered:
     def __init__(self, A, c, v, dense: bool):
         n = A.shape[0]
         self.dense = dense
-        if dense and c is None:
-            B = A  # the whole bordered matrix already (Fortran order: factored in place)
-            n -= 1
-        elif dense:
-            B = np.empty((n + 1, n + 1))
-            B[:n, :n] = A
-            B[:n, n] = c[:n]
-            B[n, :] = v
-            B[n, n] = v[n]
         if dense:
+            if c is None:
+                B = A  # the whole bordered matrix already (Fortran order: factored in place)
+            else:
+                B = np.empty((n + 1, n + 1))
+                B[:n, :n] = A
+                B[:n, n] = c[:n]
+                B[n, :] = v
+                B[n, n] = v[n]
             # LAPACK's getrf and getrs directly: what scipy.linalg.lu_factor and lu_solve
             # call, without their checks and dispatch (~35 us a step at n = 1)
             lu, piv, info = _getrf(B, overwrite_a=True)
@@ -261,12 +260,6 @@ def _solve_square(A, b, dense: bool):
 _getrf, _getrs = sla.lapack.get_lapack_funcs(("getrf", "getrs"), (np.empty(1),))
 
 
-def _norm2(x) -> float:
-    """np.linalg.norm(x) of a float vector, the same bits (numpy computes sqrt(x . x)),
-    without its dispatch (~3 us; the corrector asks several per step)."""
-    return math.sqrt(float(x.dot(x)))
-
-
 def _float_csc(J):
     """J as a CSC matrix of floats (the evaluator's J already is: then J itself)."""
     if sp.issparse(J) and J.format == "csc" and J.data.dtype == np.float64:
@@ -279,13 +272,6 @@ def _dense(J):
     at n = 1)."""
     out = np.empty(J.shape)
     csc_to_dense(J.indptr, J.indices, J.data, out)
-    return out
-
-
-def _times(J, v):
-    """J v for J float CSC, in scipy's order (the same bits), without its dispatch."""
-    out = np.empty(J.shape[0])
-    csc_matvec(J.indptr, J.indices, J.data, v, out)
     return out
 
 
@@ -380,7 +366,7 @@ class _Tracker:
             Hx.flat[::n + 1] += 1.0 - lam * dx  # the diagonal
         else:
             Hx = (lam * (J @ sp.diags(dx)) + sp.diags(1.0 - lam * dx)).tocsc()
-        dGdmu = _times(J, dmu) - dmu
+        dGdmu = csc_times(J, dmu) - dmu
         Hlam = G - (x - a) - lam * self.mu0 * dGdmu
         return H, Hx, Hlam
 
@@ -389,8 +375,7 @@ class _Tracker:
         views of that matrix, which the factorization overwrites)."""
         self.factorizations += 1
         B = Hx.base if isinstance(Hx, np.ndarray) else None
-        if (self.dense and B is not None and Hlam.base is B and B.flags.f_contiguous
-                and B.shape == (self.n + 1, self.n + 1)):
+        if B is not None and Hlam.base is B:
             B[-1, :] = v  # residual()'s bordered matrix: its last row, then factored
             return _Bordered(B, None, None, True)
         return _Bordered(Hx, np.append(Hlam, 0.0), v, self.dense)
@@ -423,7 +408,7 @@ class _Tracker:
             except (np.linalg.LinAlgError, RuntimeError):
                 return (HomotopyStatus.SINGULAR,
                         f"singular augmented Jacobian at lam = {y[-1]:.6f}", y)
-            tau = w / _norm2(w)
+            tau = w / dot_norm(w)
             if tau @ v < 0:  # keep the orientation
                 tau = -tau
             if tau[-1] * v[-1] < 0:  # lam changed direction: a turning point was passed
@@ -449,7 +434,7 @@ class _Tracker:
             if retried:  # do not grow right after a rejection (avoids oscillating)
                 factor = max(factor, 1.0)
             self.steps += 1
-            h = min(max(h, _norm2(yn - y)) / factor,
+            h = min(max(h, dot_norm(yn - y)) / factor,
                     opt.homotopy_maximum_step * (1.0 + max_abs(yn[:-1])))
             y, v = yn, tau
             self._y = y
@@ -482,10 +467,10 @@ class _Tracker:
         factor by which the next step is divided, from the contraction ratio kappa and the
         first correction delta relative to the step h (both grow like h)."""
         y = yp.copy()
-        h = max(_norm2(yp - self._y), 1e-300)
+        h = max(dot_norm(yp - self._y), 1e-300)
         first = prev = None
         kappa = 0.0
-        tol_y = CORRECTOR_TOLERANCE * (1.0 + _norm2(yp))
+        tol_y = CORRECTOR_TOLERANCE * (1.0 + dot_norm(yp))
         rhs = np.empty(yp.size)
         for _ in range(CORRECTOR_ITERATIONS):
             r = self.residual(y, a, False)
@@ -497,7 +482,7 @@ class _Tracker:
                 d = Bf.solve(rhs)
             except np.linalg.LinAlgError:  # a non-finite correction: a shorter step
                 return None, False
-            dn = _norm2(d)
+            dn = dot_norm(d)
             if prev is not None:
                 kappa = max(kappa, dn / max(prev, 1e-300))
                 if kappa > CONTRACTION_MAX:

@@ -347,6 +347,14 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5,
     )
 
 
+def dot_norm(v) -> float:
+    """||v||_2 of a float vector as the square root of v . v, which is what np.linalg.norm
+    computes for a real vector (the same bits), without its dispatch (~4 us; the crash and
+    the homotopy's corrector ask several per step).  (:func:`_norm2` scales against
+    overflow instead.)"""
+    return math.sqrt(float(v.dot(v)))
+
+
 def _norm2(v, inf_norm=None) -> float:
     """||v||_2 without underflow or overflow of the squares (``inf_norm``: ||v||_inf when
     known)."""

@@ -78,13 +78,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _path_kernels as _PK
-from ._merit_kernels import csc_matvec
+from ._csc import csc_times
 from ._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
 from ._slot_kernels import lemke_start, slot_basis, slot_point, slot_table, start_basis
 from .basis import KIND_DENSE, KIND_M, KIND_UNIT, FactorReuseFailed, UpdateStatus
 from .direct_step import DirectFactors, dense_direct_path, direct_step
 from .exceptions import ShapeError, SingularBasisError
-from .merit import float_vector, max_abs
+from .merit import max_abs
 
 _VAR_NAMES = "zwvatS"
 
@@ -302,15 +302,8 @@ class PivotalPath:
 
     # ------------------------------------------------------------------ set-up
     def _times_M(self, z):
-        """M z: one compiled pass in scipy's order (the same bits) for float64 data and
-        a float vector, without scipy's dispatch (~8 us per product on a small model;
-        every path asks one or two)."""
-        M = self.M
-        if M.data.dtype == np.float64 and float_vector(z) and z.shape[0] == M.shape[1]:
-            out = np.empty(M.shape[0])
-            csc_matvec(M.indptr, M.indices, M.data, z, out)
-            return out
-        return M @ z
+        """M z (every path asks one or two)."""
+        return csc_times(self.M, z)
 
     def _columns_for(self, kinds, idx):
         """Basis-manager column specs of slot variables."""

@@ -215,9 +215,10 @@ def test_dense_solve_of_the_crash_gives_the_bits_of_scipy_lu_factor_and_lu_solve
 
 
 def test_crash_norm_is_numpys_two_norm_bit_for_bit():
-    """The crash's ||v||_2 (the square root of v.v) gives np.linalg.norm's bits, from
-    underflowing to overflowing magnitudes."""
-    from compass_sparse.crash import _norm
+    """The crash's ||v||_2 (the square root of v.v, merit.dot_norm, which the homotopy's
+    corrector uses too) gives np.linalg.norm's bits, from underflowing to overflowing
+    magnitudes."""
+    from compass_sparse.merit import dot_norm as _norm
 
     rng = np.random.default_rng(0)
     for n in (0, 1, 2, 5, 17, 1000):
