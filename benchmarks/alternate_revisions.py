@@ -6,10 +6,15 @@ processes, several times, and comparing the medians separates the change from th
 
     git worktree add /tmp/old <revision>
     python3 benchmarks/alternate_revisions.py /tmp/old . kojshin cournot2 ramsey40 --rounds 4
+    python3 benchmarks/alternate_revisions.py /tmp/old . cournot2 kojshin --one-shot
 
 Each round runs one process per revision (old first); each process solves every problem
 ``--solves`` times per repeat after a warm-up (numba kernels loaded), ``--repeats`` times,
-and reports the median CPU time per solve, F and J included.  Problems: the names of
+and reports the median CPU time per solve, F and J included.  By default each solve gets a
+copy of one built problem (``MCP.with_start``: the Jacobian pattern is known); with
+``--one-shot`` each solve is ``solve_mcp(F, J, lb, ub, x0)`` from the user's functions, as
+a script calls it once: the problem's construction, its bounds' checks, the start check and
+the first Jacobian's pattern are timed too (known problems only).  Problems: the names of
 ``bench_fixed_cost.py`` (known problems) and ``ramseyT`` (one-sector Ramsey CGE model with
 T periods, 25% capital tax) or ``staticN`` (static CGE model of about N variables).
 """
@@ -25,6 +30,7 @@ import sys
 CHILD = r"""
 import json, statistics, sys, time
 root, names, solves, repeats = sys.argv[1], sys.argv[2].split(","), int(sys.argv[3]), int(sys.argv[4])
+one_shot = sys.argv[5] == "1"
 sys.path[:0] = [root, root + "/tests", root + "/benchmarks"]
 from compass_sparse import solve_mcp
 
@@ -41,8 +47,28 @@ def problem(name):
     from bench_fixed_cost import _problem
     return _problem(name)
 
+def user_problem(name):
+    import known_problems as kp
+    makers = dict(kp.ALL_SOLVABLE)
+    makers.update(double_root=kp.degenerate_root, billups=kp.billups, sqrt_ncp=kp.sqrt_ncp,
+                  log_ncp=lambda: kp.log_ncp(raise_errors=False))
+    return makers[name]()
+
 out = {}
 for name in names:
+    if one_shot:
+        k = user_problem(name)
+        run = lambda k=k: solve_mcp(k.F, k.J, k.lb, k.ub, k.x0)
+        for _ in range(max(10, solves // 10)):
+            r = run()
+        times = []
+        for _ in range(repeats):
+            t = time.process_time()
+            for _ in range(solves):
+                run()
+            times.append((time.process_time() - t) / solves)
+        out[name] = dict(time=statistics.median(times), nit=r.nit, status=r.status.name)
+        continue
     prob, x0 = problem(name)
     for _ in range(max(10, solves // 10)):
         r = solve_mcp(prob.with_start(x0))
@@ -58,9 +84,10 @@ print(json.dumps(out))
 """
 
 
-def run(root, names, solves, repeats):
+def run(root, names, solves, repeats, one_shot=False):
     out = subprocess.run([sys.executable, "-c", CHILD, os.path.abspath(root), ",".join(names),
-                          str(solves), str(repeats)], capture_output=True, text=True, check=True)
+                          str(solves), str(repeats), "1" if one_shot else "0"],
+                         capture_output=True, text=True, check=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
@@ -72,11 +99,14 @@ def main(argv=None):
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--solves", type=int, default=100)
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--one-shot", action="store_true",
+                    help="every solve from the user's functions (see the module docstring)")
     a = ap.parse_args(argv)
     got = {"old": [], "new": []}
     for k in range(a.rounds):
         for side in ("old", "new"):
-            got[side].append(run(getattr(a, side), a.problems, a.solves, a.repeats))
+            got[side].append(run(getattr(a, side), a.problems, a.solves, a.repeats,
+                                 a.one_shot))
             print(f"round {k + 1} {side}: " + ", ".join(
                 f"{n} {v['time'] * 1e3:.3f} ms" for n, v in got[side][-1].items()), flush=True)
     print("\n| problem | old (median over rounds) | new | new / old | majors old / new |")

@@ -666,7 +666,8 @@ class NMSSolver:
                 why = self._run(start, opt)
                 if (self.opt0.homotopy == "auto" and "homotopy" not in self.passes and
                         self.restarts >= min(homotopy_after, self.opt0.restart_limit)):
-                    why = self._homotopy(z0)
+                    why = self._homotopy(self.best.z if self.opt0.homotopy_start == "best"
+                                         else z0)
                 if self.restarts >= self.opt0.restart_limit:
                     status, message = Status.NO_PROGRESS, f"{why}; restart limit reached"
                     break

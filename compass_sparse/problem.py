@@ -37,7 +37,8 @@ from typing import Callable, Sequence
 import numpy as np
 import scipy.sparse as sp
 
-from .evaluation import EvalCounters, Evaluator
+from ._eval_kernels import clean_bounds
+from .evaluation import EvalCounters, Evaluator, all_finite
 from .exceptions import BoundsError, EvaluationError, ProblemError, ShapeError, StartPointError
 
 _SIZE_WORDS = ("shape", "dimension", "size", "broadcast", "index", "mismatch", "aligned")
@@ -55,7 +56,11 @@ def as_bounds(lb, ub, n: int, names: Sequence[str] | None = None):
     Raises BoundsError naming the first offending variable."""
     lo = _broadcast_bound(lb, n, "lb")
     hi = _broadcast_bound(ub, n, "ub")
-    # |b| >= INFINITY is infinite on either side: lb >= 1e20 is lb = +inf (an error below)
+    # |b| >= INFINITY is infinite on either side: lb >= 1e20 is lb = +inf (an error below).
+    # Valid bounds (every solve's) are mapped and checked in one compiled pass; the
+    # array operations below name the first offending variable otherwise.
+    if clean_bounds(lo, hi, INFINITY):
+        return lo, hi
     lo[lo <= -INFINITY] = -np.inf
     lo[lo >= INFINITY] = np.inf
     hi[hi >= INFINITY] = np.inf
@@ -106,6 +111,10 @@ def _as_start(x0, n) -> np.ndarray:
 
 
 def _broadcast_bound(b, n, what):
+    if b.__class__ is np.ndarray and b.dtype == np.float64 and b.shape == (n,):
+        return b.copy()  # the common cases, without the general route's ~8 us
+    if b.__class__ is float or b.__class__ is int:
+        return np.full(n, float(b))
     arr = as_real(b, what)
     if arr.ndim > 1 and arr.size == n:
         arr = arr.reshape(n)
@@ -182,8 +191,8 @@ class MCP:
         if x0 is None:
             x0 = np.zeros(n)
         x0 = _as_start(x0, n)
-        bad = np.flatnonzero(~np.isfinite(x0))
-        if bad.size:
+        if not all_finite(x0):
+            bad = np.flatnonzero(~np.isfinite(x0))
             raise StartPointError(
                 f"x0 is {x0[bad[0]]} for {_var_label(self.var_names, bad[0])}; the start point "
                 "must be finite"

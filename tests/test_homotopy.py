@@ -380,6 +380,28 @@ def test_homotopy_after_restarts_default_depends_on_whether_its_systems_are_dens
     assert Options(homotopy_after_restarts=0).restarts_before_homotopy(10**5, 10**5) == 0
 
 
+@pytest.mark.parametrize("where", ["best", "start"])
+def test_homotopy_start_option_picks_the_first_paths_start(where, monkeypatch):
+    """homotopy_start = 'best' hands the homotopy the best point NMS found before it
+    stalled, 'start' the start point; both solve the instance (thesis family 2, n = 10,
+    seed 5: its best point is not the start point, and the path from it is shorter)."""
+    seen = []
+    real = hom.homotopy_pass
+
+    def spy(solver, z_start, **kw):
+        seen.append((np.array(z_start, copy=True), solver.best.z.copy()))
+        return real(solver, z_start, **kw)
+
+    monkeypatch.setattr(hom, "homotopy_pass", spy)
+    prob = thesis_family(10, 2, 5).problem
+    res = solve_mcp(prob, options={"homotopy_start": where})
+    assert res.success and natural_residual(res.x, prob.F(res.x), prob.lb, prob.ub) <= 1e-6
+    assert len(seen) == 1
+    z_start, best = seen[0]
+    assert not np.array_equal(best, prob.x0)  # the two choices differ on this instance
+    np.testing.assert_array_equal(z_start, best if where == "best" else prob.x0)
+
+
 def test_small_problem_enters_the_homotopy_at_its_first_stall():
     """billups from 0: NMS stalls at a local minimizer of the merit function.  By default
     the homotopy follows at once (no restart, each of which stalled at the same point);

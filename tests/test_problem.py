@@ -107,6 +107,43 @@ def test_bounds_beyond_1e20_are_infinite():
     assert "free=2" in repr(p)
 
 
+def test_one_pass_bounds_check_gives_the_array_routes_bounds_and_errors():
+    """as_bounds checks valid bounds in one compiled pass (clean_bounds) and falls back to
+    the array operations, which name the offender, otherwise.  On random pairs drawn from
+    values at, beyond and below 1e20, infinities and NaN: valid pairs give the mapped
+    bounds, every invalid one a BoundsError; arrays given by the user are not changed."""
+    from compass_sparse.problem import as_bounds
+
+    rng = np.random.default_rng(7)
+    values = np.array([-np.inf, -1e25, -1e20, -9.9e19, -1.0, 0.0, 2.5, 9.9e19, 1e20, 1e25,
+                       np.inf, np.nan])
+    valid = invalid = 0
+    for _ in range(400):
+        lb, ub = rng.choice(values, 2), rng.choice(values, 2)
+        lb0, ub0 = lb.copy(), ub.copy()
+        lo = np.where(lb <= -INFINITY, -np.inf, np.where(lb >= INFINITY, np.inf, lb))
+        hi = np.where(ub >= INFINITY, np.inf, np.where(ub <= -INFINITY, -np.inf, ub))
+        ok = not (np.isnan(lb).any() or np.isnan(ub).any()) and bool(
+            np.all((lo < np.inf) & (hi > -np.inf) & (lo <= hi)))
+        if ok:
+            valid += 1
+            got = as_bounds(lb, ub, 2)
+            np.testing.assert_array_equal(got[0], lo)
+            np.testing.assert_array_equal(got[1], hi)
+        else:
+            invalid += 1
+            with pytest.raises(BoundsError):
+                as_bounds(lb, ub, 2)
+        np.testing.assert_array_equal(lb, lb0)  # (NaN compare equal here)
+        np.testing.assert_array_equal(ub, ub0)
+    assert valid > 40 and invalid > 40, (valid, invalid)
+    # scalars of Python and numpy types take the same values
+    for lo_s, hi_s in ((0, 1e30), (0.0, np.inf), (np.float32(-2.0), 3)):
+        lo, hi = as_bounds(lo_s, hi_s, 2)
+        assert lo.dtype == hi.dtype == np.float64 and lo.shape == hi.shape == (2,)
+        assert lo[0] == float(lo_s) and (hi[0] == np.inf if hi_s >= INFINITY else hi[0] == hi_s)
+
+
 def test_F_wrong_shape():
     with pytest.raises(ShapeError, match=r"F\(x\) returned shape"):
         MCP(lambda z: np.zeros(N + 1), lin_J, 0.0, np.inf, np.zeros(N))
