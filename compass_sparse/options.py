@@ -29,6 +29,7 @@ PATH_NAMES: dict[str, str | None] = {
     "lm_fallback": None,
     "homotopy": None,  # PATH has no homotopy fallback
     "homotopy_after_restarts": None,
+    "homotopy_start": None,
     "homotopy_path_limit": None,
     "homotopy_step_limit": None,
     "homotopy_smoothing": None,
