@@ -82,3 +82,101 @@ def dense_bordered(indptr, indices, data, dx, dmu, lam, mu0, G, x, a, B, work):
     lm = lam * mu0
     for i in range(n):
         B[i, n] = (G[i] - (x[i] - a[i])) - lm * (work[i] - dmu[i])
+
+
+@njit(cache=True, error_model="numpy")  # a zero pivot gives inf, reported, not an exception
+def lu_solve(lu, piv, b):
+    """b <- B^{-1} b in place with LAPACK getrf's factors of B (``lu``: unit lower L and
+    upper U; ``piv``: its row interchanges, 0-based as scipy returns them); whether the
+    solution is finite.  What getrs computes, without its Python call (~6 us a solve); the
+    last bits may differ from it (another order of the triangular sweeps' sums)."""
+    m = b.shape[0]
+    for i in range(m):
+        k = piv[i]
+        if k != i:
+            t = b[i]
+            b[i] = b[k]
+            b[k] = t
+    for j in range(m):  # L y = P b, column by column (lu is column-major)
+        bj = b[j]
+        if bj != 0.0:
+            for i in range(j + 1, m):
+                b[i] -= lu[i, j] * bj
+    for j in range(m - 1, -1, -1):  # U x = y
+        b[j] /= lu[j, j]
+        bj = b[j]
+        if bj != 0.0:
+            for i in range(j):
+                b[i] -= lu[i, j] * bj
+    for i in range(m):
+        if not math.isfinite(b[i]):
+            return False
+    return True
+
+
+@njit(cache=True)
+def bordered_pivots_ok(lu):
+    """Whether getrf's U has finite pivots, none at most 1e-14 of the largest (below that
+    the bordered matrix [[H_x, H_lam], [v^T]] is taken as singular: the augmented Jacobian
+    lost rank, or the tangent row v is orthogonal to the curve)."""
+    hi = 0.0
+    lo = math.inf
+    for i in range(lu.shape[0]):
+        d = abs(lu[i, i])
+        if not math.isfinite(d):
+            return False
+        hi = max(hi, d)
+        lo = min(lo, d)
+    return lo > 1e-14 * max(hi, 1e-300)
+
+
+@njit(cache=True, error_model="numpy")
+def unit_tangent(lu, piv, v, tau):
+    """The unit tangent of the curve from the factors of B = [[H_x, H_lam], [v^T]]: tau =
+    w / ||w||_2 with B w = e_{n+1}, turned so that tau . v >= 0 (the previous tangent v
+    keeps the orientation).  Returns -1 when w is not finite, 1 when lam changed direction
+    (tau_lam v_lam < 0: a turning point was passed), else 0."""
+    m = tau.shape[0]
+    for i in range(m):
+        tau[i] = 0.0
+    tau[m - 1] = 1.0
+    if not lu_solve(lu, piv, tau):
+        return -1
+    s = 0.0
+    for i in range(m):
+        s += tau[i] * tau[i]
+    nrm = math.sqrt(s)
+    dot = 0.0
+    for i in range(m):
+        tau[i] /= nrm
+        dot += tau[i] * v[i]
+    if dot < 0.0:
+        for i in range(m):
+            tau[i] = -tau[i]
+    return 1 if tau[m - 1] * v[m - 1] < 0.0 else 0
+
+
+@njit(cache=True)
+def chord_correction(f, y, yp, p, a, v, lu, piv, d):
+    """One chord iteration of the corrector at y = (x, lam), where p = p_mu(x) and f = F(p):
+    d = -B^{-1} (H(y), v . (y - yp)) with the factors of the bordered matrix B of the last
+    accepted point, and y += d in place (``d``: n + 1 floats, overwritten).  H as
+    homotopy_values computes it (the same bits).  Returns ||d||_2, or -1.0 when d is not
+    finite (the caller shortens the step)."""
+    n = f.shape[0]
+    lam = y[n]
+    c = 1.0 - lam
+    for i in range(n):
+        g = (f[i] + y[i]) - p[i]
+        d[i] = -(lam * g + c * (y[i] - a[i]))
+    s = 0.0
+    for i in range(n + 1):
+        s += v[i] * (y[i] - yp[i])
+    d[n] = -s
+    if not lu_solve(lu, piv, d):
+        return -1.0
+    s = 0.0
+    for i in range(n + 1):
+        s += d[i] * d[i]
+        y[i] += d[i]
+    return math.sqrt(s)

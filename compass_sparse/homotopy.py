@@ -84,11 +84,12 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ._blas import single_threaded_blas
-from ._homotopy_kernels import dense_bordered, homotopy_values, smoothed_projection
+from ._homotopy_kernels import (bordered_pivots_ok, chord_correction, dense_bordered,
+                                homotopy_values, lu_solve, smoothed_projection, unit_tangent)
 from ._csc import csc_times
 from ._merit_kernels import csc_to_dense
 from .evaluation import all_finite
-from .merit import dot_norm, fb_phi, fb_psi, max_abs, project
+from .merit import dot_norm, fb_phi, fb_psi, float_vector, max_abs, project
 from .options import HOMOTOPY_DENSE_DENSITY, HOMOTOPY_DENSE_MAX_N
 from .path import _floats
 from .restarts import random_point
@@ -223,14 +224,13 @@ class _Bordered:
                 B[:n, n] = c[:n]
                 B[n, :] = v
                 B[n, n] = v[n]
-            # LAPACK's getrf and getrs directly: what scipy.linalg.lu_factor and lu_solve
-            # call, without their checks and dispatch (~35 us a step at n = 1)
+            # LAPACK's getrf directly (what scipy.linalg.lu_factor calls, without its
+            # checks and dispatch: ~35 us a step at n = 1); the solves are compiled
             lu, piv, info = _getrf(B, overwrite_a=True)
             if info < 0:
                 raise ValueError(f"illegal argument {-info} of getrf")
             self.lu = (lu, piv)
-            d = np.abs(np.diag(lu))
-            if not all_finite(d) or d.min() <= 1e-14 * max(d.max(), 1e-300):
+            if not bordered_pivots_ok(lu):
                 raise np.linalg.LinAlgError("singular bordered matrix")
         else:
             col = sp.csc_matrix(c[:n].reshape(-1, 1))
@@ -240,12 +240,12 @@ class _Bordered:
 
     def solve(self, b):
         if self.dense:
-            x, info = _getrs(*self.lu, b)
-            if info != 0:
-                raise ValueError(f"illegal argument {-info} of getrs")
+            x = np.array(b, dtype=float)
+            finite = lu_solve(*self.lu, x)
         else:
             x = self.lu.solve(b)
-        if not all_finite(x):
+            finite = all_finite(x)
+        if not finite:
             raise np.linalg.LinAlgError("non-finite solution of the bordered system")
         return x
 
@@ -257,7 +257,7 @@ def _solve_square(A, b, dense: bool):
     return spla.splu(sp.csc_matrix(A), permc_spec="COLAMD").solve(b)
 
 
-_getrf, _getrs = sla.lapack.get_lapack_funcs(("getrf", "getrs"), (np.empty(1),))
+_getrf = sla.lapack.get_lapack_funcs("getrf", (np.empty(1),))
 
 
 def _float_csc(J):
@@ -301,6 +301,7 @@ class _Tracker:
         self.turning_points = 0
         self.newton_iterations = 0
         self.dense = None
+        self._dx, self._dmu = np.empty(self.n), np.empty(self.n)  # the corrector's work
         self.best = None  # (z, psi) of the lowest merit seen
         width = np.where(np.isfinite(self.ub - self.lb), self.ub - self.lb, np.nan)
         scale = float(np.nanmedian(width)) if np.any(np.isfinite(width)) else 1.0
@@ -402,17 +403,11 @@ class _Tracker:
             # --- tangent at y, from the factorization that also serves the corrector
             try:
                 Bf = self.factor(Hx, Hlam, v)
-                e = np.zeros(n + 1)
-                e[-1] = 1.0
-                w = Bf.solve(e)
+                tau, turned = self._tangent(Bf, v)
             except (np.linalg.LinAlgError, RuntimeError):
                 return (HomotopyStatus.SINGULAR,
                         f"singular augmented Jacobian at lam = {y[-1]:.6f}", y)
-            tau = w / dot_norm(w)
-            if tau @ v < 0:  # keep the orientation
-                tau = -tau
-            if tau[-1] * v[-1] < 0:  # lam changed direction: a turning point was passed
-                self.turning_points += 1
+            self.turning_points += turned
             # --- predictor-corrector with step control
             retried = False
             while True:
@@ -462,6 +457,35 @@ class _Tracker:
         return (HomotopyStatus.STEP_LIMIT,
                 f"{opt.homotopy_step_limit} steps without reaching lam = 1", y)
 
+    def _tangent(self, Bf, v):
+        """(tau, 1 if lam turned else 0): the unit tangent at the last accepted point from
+        the factors Bf of its bordered matrix, oriented by the previous tangent v."""
+        if Bf.dense and float_vector(v):  # one compiled call
+            tau = np.empty(v.size)
+            turned = unit_tangent(*Bf.lu, v, tau)
+            if turned < 0:
+                raise np.linalg.LinAlgError("non-finite tangent")
+            return tau, turned
+        e = np.zeros(v.size)
+        e[-1] = 1.0
+        w = Bf.solve(e)
+        tau = w / dot_norm(w)
+        if tau @ v < 0:  # keep the orientation
+            tau = -tau
+        return tau, int(tau[-1] * v[-1] < 0)  # lam changed direction: a turning point
+
+    def _chord_dense(self, y, yp, a, Bf, v, d, p):
+        """One chord iteration of a dense problem in two compiled calls around F: y += d
+        in place.  Returns ||d||, None when F is undefined at the point, -1.0 when d is not
+        finite.  (``d``, ``p``: work vectors of n + 1 and n floats.)"""
+        n = self.n
+        mu = self.mu0 * max(1.0 - float(y[n]), 0.0)
+        smoothed_projection(y[:n], mu, self.lb, self.ub, p, self._dx, self._dmu)
+        f = self.ev.f(p)
+        if f is None:
+            return None
+        return chord_correction(f, y, yp, p, a, v, *Bf.lu, d)
+
     def _correct(self, yp, a, Bf, v):
         """Chord iterations with the factorization Bf.  Returns ((y, step factor), ok): the
         factor by which the next step is divided, from the contraction ratio kappa and the
@@ -472,17 +496,28 @@ class _Tracker:
         kappa = 0.0
         tol_y = CORRECTOR_TOLERANCE * (1.0 + dot_norm(yp))
         rhs = np.empty(yp.size)
+        # a dense problem's iterations in compiled calls (the same formulas; the solves'
+        # last bits may differ from the array route's, which remains for the others)
+        fast = Bf.dense and _floats(self.n, a, self.lb, self.ub) and float_vector(y) \
+            and float_vector(v)
+        p = np.empty(self.n) if fast else None
         for _ in range(CORRECTOR_ITERATIONS):
-            r = self.residual(y, a, False)
-            if r is None:
-                return None, False
-            np.negative(r[0], out=rhs[:-1])
-            rhs[-1] = -(v @ (y - yp))
-            try:
-                d = Bf.solve(rhs)
-            except np.linalg.LinAlgError:  # a non-finite correction: a shorter step
-                return None, False
-            dn = dot_norm(d)
+            if fast:
+                dn = self._chord_dense(y, yp, a, Bf, v, rhs, p)
+                if dn is None or dn < 0.0:  # F undefined, or a non-finite correction
+                    return None, False
+            else:
+                r = self.residual(y, a, False)
+                if r is None:
+                    return None, False
+                np.negative(r[0], out=rhs[:-1])
+                rhs[-1] = -(v @ (y - yp))
+                try:
+                    d = Bf.solve(rhs)
+                except np.linalg.LinAlgError:  # a non-finite correction: a shorter step
+                    return None, False
+                dn = dot_norm(d)
+                y = y + d
             if prev is not None:
                 kappa = max(kappa, dn / max(prev, 1e-300))
                 if kappa > CONTRACTION_MAX:
@@ -493,7 +528,6 @@ class _Tracker:
                 # a correction of that size is not the predictor's error.
                 if first > max(DISTANCE_MAX * h, 10.0 * tol_y):
                     return None, False
-            y = y + d
             if dn <= tol_y:
                 factor = max(kappa / KAPPA_NOMINAL, first / (DISTANCE_NOMINAL * h))
                 return (y, min(max(float(factor), 0.5), 2.0)), True

@@ -317,22 +317,36 @@ def test_end_game_from_the_end_of_the_path_only_still_solves():
     assert res.success
 
 
-def test_a_non_finite_correction_shortens_the_step_instead_of_failing_the_solve(monkeypatch):
+@pytest.mark.parametrize("route", ["compiled", "arrays"])
+def test_a_non_finite_correction_shortens_the_step_instead_of_failing_the_solve(
+        monkeypatch, route):
     # _Bordered.solve raises on a non-finite solution; in the corrector that once escaped
     # the pass.  Every third corrector solve fails here (the tangent's right-hand side is
-    # e_{n+1}): the pass must carry on with shorter steps.
+    # e_{n+1}): the pass must carry on with shorter steps.  A dense problem's corrector
+    # solves in the compiled chord step (-1 for a non-finite correction), the array route
+    # through _Bordered.solve.
     calls = {"n": 0}
-    solve = hom._Bordered.solve
+    if route == "compiled":
+        chord = hom.chord_correction
 
-    def flaky(self, b):
-        if b[-1] == 1.0 and not np.any(b[:-1]):
+        def flaky(*args):
+            calls["n"] += 1
+            return -1.0 if calls["n"] % 3 == 0 else chord(*args)
+
+        monkeypatch.setattr(hom, "chord_correction", flaky)
+    else:
+        solve = hom._Bordered.solve
+
+        def flaky(self, b):
+            if b[-1] == 1.0 and not np.any(b[:-1]):
+                return solve(self, b)
+            calls["n"] += 1
+            if calls["n"] % 3 == 0:
+                raise np.linalg.LinAlgError("non-finite solution of the bordered system")
             return solve(self, b)
-        calls["n"] += 1
-        if calls["n"] % 3 == 0:
-            raise np.linalg.LinAlgError("non-finite solution of the bordered system")
-        return solve(self, b)
 
-    monkeypatch.setattr(hom._Bordered, "solve", flaky)
+        monkeypatch.setattr(hom, "_floats", lambda *args: False)
+        monkeypatch.setattr(hom._Bordered, "solve", flaky)
     F, J, lb, ub, x0 = _stationary_problem()
     res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"})
     assert calls["n"] >= 3
@@ -451,3 +465,84 @@ def test_compiled_homotopy_values_and_bordered_matrix_give_the_array_expressions
     for got, ref in zip(compiled, reference):
         for u, w in zip(got, ref):
             assert np.array_equal(u, w)
+
+
+# ------------------------------------------------------------------ compiled dense steps
+@pytest.mark.parametrize("m", [1, 2, 7, 40])
+def test_compiled_lu_solve_agrees_with_lapack_getrs(m):
+    """lu_solve on getrf's factors (row interchanges included) against LAPACK's getrs, to
+    rounding; a non-finite solution is reported."""
+    import scipy.linalg as sla
+
+    from compass_sparse._homotopy_kernels import lu_solve
+
+    rng = np.random.default_rng(m)
+    for _ in range(5):
+        B = np.asfortranarray(rng.normal(size=(m, m)))
+        lu, piv, info = hom._getrf(B.copy(order="F"), overwrite_a=True)
+        assert info == 0
+        b = rng.normal(size=m)
+        x = b.copy()
+        assert lu_solve(lu, piv, x)
+        ref = sla.lu_solve((lu, piv), b)
+        np.testing.assert_allclose(x, ref, rtol=1e-10, atol=1e-12 * np.abs(ref).max())
+        np.testing.assert_allclose(B @ x, b, atol=1e-9 * (1 + np.abs(b).max()))
+    lu[-1, -1] = 0.0  # a zero pivot: the solution overflows
+    assert not lu_solve(lu, piv, np.ones(m))
+
+
+@pytest.mark.parametrize("n,family,seed", [(1, 1, 0), (7, 2, 1), (30, 1, 2)])
+def test_compiled_tangent_and_chord_steps_agree_with_the_array_route(monkeypatch, n, family,
+                                                                     seed):
+    """The dense route's tangent (unit_tangent) and corrector (chord_correction around F)
+    against the array route (_Bordered.solve, residual): the same tangent, turning flag,
+    corrected point and step factor to rounding, at points along lam in (0, 1)."""
+    g = thesis_family(n, family, seed=seed)
+    p = g.problem
+    rng = np.random.default_rng(seed)
+    a = np.clip(rng.normal(size=n), p.lb, p.ub)
+    tr = hom._Tracker(p.evaluator, p.lb, p.ub, Options(), deadline=None, on_point=None,
+                      tol=1e-12, log=None)
+    compared = 0
+    for lam in (0.05, 0.2, 0.4, 0.6):
+        y = np.append(a + rng.normal(scale=0.1, size=n), lam)
+        for _ in range(30):  # Newton in x at fixed lam: onto the curve
+            H, Hx, Hlam = tr.residual(y, a, True)
+            y[:-1] += np.linalg.solve(Hx, -H)
+        v = rng.normal(size=n + 1)
+        v /= np.linalg.norm(v)
+        H, Hx, Hlam = tr.residual(y, a, True)
+        Bf = tr.factor(Hx, Hlam, v)
+        tau, turned = tr._tangent(Bf, v)
+        e = np.zeros(n + 1)
+        e[-1] = 1.0
+        w = Bf.solve(e)
+        ref = w / np.linalg.norm(w) * (1.0 if w @ v >= 0 else -1.0)
+        np.testing.assert_allclose(tau, ref, rtol=1e-10, atol=1e-12)
+        assert turned == int(ref[-1] * v[-1] < 0)
+        tr._y = y
+        yp = y + 1e-3 * tau
+        fast = tr._correct(yp, a, Bf, v)
+        with monkeypatch.context() as mp:
+            mp.setattr(hom, "_floats", lambda *args: False)
+            slow = tr._correct(yp, a, Bf, v)
+        assert fast[1] == slow[1]
+        if fast[1]:
+            compared += 1
+            np.testing.assert_allclose(fast[0][0], slow[0][0], rtol=1e-10, atol=1e-12)
+            assert abs(fast[0][1] - slow[0][1]) <= 1e-8 * abs(slow[0][1])
+    assert compared >= 2
+
+
+@pytest.mark.parametrize("family,seed", [(1, 10), (2, 1), (2, 5), (2, 27)])
+def test_compiled_dense_path_steps_reach_the_array_routes_solution(monkeypatch, family, seed):
+    """homotopy = 'only' on thesis instances at n = 10 with the dense route's compiled steps
+    and with the array route: both solve, at the same solution."""
+    prob = thesis_family(10, family, seed).problem
+    got = solve_mcp(prob, options={"homotopy": "only"})
+    with monkeypatch.context() as mp:
+        mp.setattr(hom, "_floats", lambda *args: False)
+        ref = solve_mcp(thesis_family(10, family, seed).problem, options={"homotopy": "only"})
+    for r in (got, ref):
+        assert r.success and natural_residual(r.x, prob.F(r.x), prob.lb, prob.ub) <= 1e-6
+    np.testing.assert_allclose(got.x, ref.x, atol=1e-5)
