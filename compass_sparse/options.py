@@ -246,7 +246,8 @@ class Options(OptionsMixin):
         "at n = 100, 1.0 took 3-7x fewer steps than 0.1 and 0.01; 3 and 10 were alike)",
         lo=0.0, lo_open=True)
     homotopy_initial_step: float = _opt(
-        0.01, "first arclength step, relative to 1 + ||a||_inf", lo=0.0, lo_open=True)
+        0.1, "first arclength step, relative to 1 + ||a||_inf (a step the corrector cannot "
+        "follow is halved)", lo=0.0, lo_open=True)
     homotopy_maximum_step: float = _opt(
         1.0, "largest arclength step, relative to 1 + ||x||_inf", lo=0.0, lo_open=True)
     homotopy_step_minimum: float = _opt(
