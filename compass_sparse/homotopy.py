@@ -307,8 +307,10 @@ class _Tracker:
         self.dense = None
         self._dx, self._dmu = np.empty(self.n), np.empty(self.n)  # the corrector's work
         self.best = None  # (z, psi) of the lowest merit seen
-        width = np.where(np.isfinite(self.ub - self.lb), self.ub - self.lb, np.nan)
-        scale = float(np.nanmedian(width)) if np.any(np.isfinite(width)) else 1.0
+        width = self.ub - self.lb
+        width = width[np.isfinite(width)]
+        # the median of the finite widths (np.nanmedian's value, without its ~50 us)
+        scale = float(np.median(width)) if width.size else 1.0
         self.mu0 = opt.homotopy_smoothing * max(scale, 1e-8)
 
     # -------------------------------------------------------------- evaluations
