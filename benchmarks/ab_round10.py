@@ -8,6 +8,9 @@ solver's time per solve without the user's F and J):
              older worktree (``--old``, e.g. a checkout of fa31d82, the commit before);
              on billups and thesis instances that end in the homotopy
   start      homotopy_start = 'best' against 'start' on the same instances
+  steps      the step control of round 10 (nominal contraction 0.3, distance 0.2, initial
+             step 0.1) against round 9's (0.2, 0.1, 0.01), on these and three more
+             instances
   construction  building an MCP from the user's functions with its start check (what
              solve_mcp(F, J, lb, ub, x0) does before solving): the problem and evaluation
              modules of ``--old`` against the current ones, per construction
@@ -76,7 +79,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("experiments", nargs="+",
-                    choices=("corrector", "start", "round", "construction"))
+                    choices=("corrector", "start", "round", "construction", "steps"))
     ap.add_argument("--rounds", type=int, default=20)
     ap.add_argument("--old", help="worktree of the older revision (corrector)")
     a = ap.parse_args(argv)
@@ -113,6 +116,19 @@ def main(argv=None):
             "round 10": (use(new), None)}, a.rounds)
         _print("The homotopy of round 10 against round 9's", rows, "round 9", "round 10",
                a.rounds)
+    if "steps" in a.experiments:
+        import compass_sparse.homotopy as H
+
+        def control(kappa, dist):
+            return lambda: (setattr(H, "KAPPA_NOMINAL", kappa),
+                            setattr(H, "DISTANCE_NOMINAL", dist))
+
+        cases = (_cases() + bs._thesis_cases([20], [2], [3, 7])
+                 + bs._thesis_cases([100], [1], [2]))
+        rows = ab(cases, {
+            "round 9": (control(0.2, 0.1), {"homotopy_initial_step": 0.01}),
+            "round 10": (control(H.KAPPA_NOMINAL, H.DISTANCE_NOMINAL), None)}, a.rounds)
+        _print("The homotopy's step control", rows, "round 9", "round 10", a.rounds)
     if "start" in a.experiments:
         rows = ab(_cases(), {"start": (nothing, {"homotopy_start": "start"}),
                              "best": (nothing, {"homotopy_start": "best"})}, a.rounds)
