@@ -39,6 +39,21 @@ def _cases():
             + bs._thesis_cases([50], [2], [22]))
 
 
+def _trackers(worktree, rounds, title, old_variant, new_variant):
+    """The homotopy tracker of ``worktree`` (with the options of ``old_variant``: (label,
+    options)) against the current one."""
+    import compass_sparse.homotopy as H
+
+    old, new = old_module(worktree, "homotopy")._Tracker, H._Tracker
+
+    def use(tracker):
+        return lambda: setattr(H, "_Tracker", tracker)
+
+    rows = ab(_cases(), {old_variant[0]: (use(old), old_variant[1]),
+                         new_variant[0]: (use(new), new_variant[1])}, rounds)
+    _print(title, rows, old_variant[0], new_variant[0], rounds)
+
+
 def _construction(worktree, rounds, per_batch=200):
     """Median time per construction (with the start check) of each problem, the old and
     the current problem/evaluation modules alternated batch by batch in this process."""
@@ -81,41 +96,22 @@ def main(argv=None):
     ap.add_argument("experiments", nargs="+",
                     choices=("corrector", "start", "round", "construction", "steps"))
     ap.add_argument("--rounds", type=int, default=20)
-    ap.add_argument("--old", help="worktree of the older revision (corrector)")
+    ap.add_argument("--old", help="worktree of the older revision (corrector, round, "
+                    "construction)")
     a = ap.parse_args(argv)
     nothing = lambda: None  # noqa: E731
+    for name in ("corrector", "construction", "round"):
+        if name in a.experiments and not a.old:
+            ap.error(f"{name} needs --old <worktree>")
     if "corrector" in a.experiments:
-        if not a.old:
-            ap.error("corrector needs --old <worktree>")
-        import compass_sparse.homotopy as H
-
-        old, new = old_module(a.old, "homotopy")._Tracker, H._Tracker
-
-        def use(tracker):
-            return lambda: setattr(H, "_Tracker", tracker)
-
-        rows = ab(_cases(), {"old": (use(old), None), "new": (use(new), None)}, a.rounds)
-        _print("The homotopy's dense tangent and corrector steps in compiled calls", rows,
-               "old", "new", a.rounds)
+        _trackers(a.old, a.rounds, "The homotopy's dense tangent and corrector steps in "
+                  "compiled calls", ("old", None), ("new", None))
     if "construction" in a.experiments:
-        if not a.old:
-            ap.error("construction needs --old <worktree>")
         _construction(a.old, a.rounds)
     if "round" in a.experiments:
-        if not a.old:
-            ap.error("round needs --old <worktree>")
-        import compass_sparse.homotopy as H
-
-        old, new = old_module(a.old, "homotopy")._Tracker, H._Tracker
-
-        def use(tracker):
-            return lambda: setattr(H, "_Tracker", tracker)
-
-        rows = ab(_cases(), {
-            "round 9": (use(old), {"homotopy_initial_step": 0.01, "homotopy_start": "start"}),
-            "round 10": (use(new), None)}, a.rounds)
-        _print("The homotopy of round 10 against round 9's", rows, "round 9", "round 10",
-               a.rounds)
+        _trackers(a.old, a.rounds, "The homotopy of round 10 against round 9's",
+                  ("round 9", {"homotopy_initial_step": 0.01, "homotopy_start": "start"}),
+                  ("round 10", None))
     if "steps" in a.experiments:
         import compass_sparse.homotopy as H
 
