@@ -55,8 +55,13 @@ without special treatment) by a predictor-corrector method:
   their nominal values (at most doubling it); h below ``homotopy_step_minimum`` ends the
   path.  Points are followed to the relative accuracy ``CORRECTOR_TOLERANCE`` only.
 
-The bordered matrix is factorized densely (LAPACK) when the Jacobian is dense or small and
-by SuperLU otherwise (the border adds one dense row and column).
+The bordered matrix is factorized densely (LAPACK's getrf) when the Jacobian is dense or
+small and by SuperLU otherwise (the border adds one dense row and column).  A dense
+problem's tangent and each chord iteration are then one compiled call (triangular sweeps
+on getrf's factors), around the evaluation of F; the array route serves the others.
+
+The first path starts from ``homotopy_start``: the best point the stabilized Newton method
+found before it stalled (the default), or the user's start point.
 
 End game (Speight's hybrid)
 ---------------------------
