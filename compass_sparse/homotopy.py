@@ -61,7 +61,8 @@ problem's tangent and each chord iteration are then one compiled call (triangula
 on getrf's factors), around the evaluation of F; the array route serves the others.
 
 The first path starts from ``homotopy_start``: the best point the stabilized Newton method
-found before it stalled (the default), or the user's start point.
+found before it stalled (the default; the second path then starts from the user's start
+point), or the user's start point.
 
 End game (Speight's hybrid)
 ---------------------------
@@ -603,10 +604,12 @@ class _Tracker:
         return z
 
 
-def track_paths(evalr, lb, ub, z_start, opt, *, on_point=None, rng, deadline=None, tol=1e-6,
-                polish=None, log=None, _tracker_out=None) -> HomotopyOutcome:
+def track_paths(evalr, lb, ub, z_start, opt, *, second=None, on_point=None, rng,
+                deadline=None, tol=1e-6, polish=None, log=None,
+                _tracker_out=None) -> HomotopyOutcome:
     """Follow up to ``opt.homotopy_path_limit`` homotopy paths, the first from ``z_start``,
-    the others from random points of the box.
+    the second from ``second`` when given (the caller's other candidate: the user's start
+    point when the first is the best point found), the others from random points of the box.
 
     ``on_point(z, f, phi, psi)`` receives every accepted path point and every end-game
     point and may raise to stop the pass (the stabilized Newton method raises when a point is a solution); ``polish(z)``
@@ -621,7 +624,9 @@ def track_paths(evalr, lb, ub, z_start, opt, *, on_point=None, rng, deadline=Non
     status, message, y = HomotopyStatus.STEP_LIMIT, "no path followed", None
     a = project(np.asarray(z_start, float), lb, ub)
     for k in range(opt.homotopy_path_limit):
-        if k > 0:
+        if k == 1 and second is not None:
+            a = project(np.asarray(second, float), lb, ub)
+        elif k > 0:
             a = random_point(rng, np.asarray(z_start, float), lb, ub)
         try:
             status, message, y = tr.follow(a, polish=polish)
@@ -643,9 +648,10 @@ def track_paths(evalr, lb, ub, z_start, opt, *, on_point=None, rng, deadline=Non
         factorizations=tr.factorizations, path_status=statuses)
 
 
-def homotopy_pass(solver, z_start, *, polish=None) -> HomotopyOutcome:
+def homotopy_pass(solver, z_start, *, polish=None, second=None) -> HomotopyOutcome:
     """The homotopy as a pass of the stabilized Newton method ``solver`` (an NMSSolver):
-    its evaluator, deadline, best-point bookkeeping and random stream; the work done is
+    its evaluator, deadline, best-point bookkeeping and random stream.  The first path
+    starts from ``z_start``, the second from ``second`` when given.  The work done is
     added to ``solver.passes['homotopy']`` whether the pass ends normally or by a stop
     raised from ``solver._consider`` (a solution)."""
     st = solver.passes.setdefault("homotopy", PassStats())
@@ -665,7 +671,7 @@ def homotopy_pass(solver, z_start, *, polish=None) -> HomotopyOutcome:
         # factorizations 10x slower on a loaded machine: 150 ms against 15 ms at n = 500)
         with single_threaded_blas():
             out = track_paths(solver.ev, solver.lb, solver.ub, z_start, solver.opt0,
-                              on_point=solver._consider, rng=solver.rng,
+                              second=second, on_point=solver._consider, rng=solver.rng,
                               deadline=solver.deadline, tol=solver.tol, polish=polish, log=log,
                               _tracker_out=tracker_box)
         return out

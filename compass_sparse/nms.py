@@ -666,8 +666,7 @@ class NMSSolver:
                 why = self._run(start, opt)
                 if (self.opt0.homotopy == "auto" and "homotopy" not in self.passes and
                         self.restarts >= min(homotopy_after, self.opt0.restart_limit)):
-                    why = self._homotopy(self.best.z if self.opt0.homotopy_start == "best"
-                                         else z0)
+                    why = self._homotopy(z0)
                 if self.restarts >= self.opt0.restart_limit:
                     status, message = Status.NO_PROGRESS, f"{why}; restart limit reached"
                     break
@@ -706,13 +705,19 @@ class NMSSolver:
         )
 
     def _homotopy(self, start):
-        """The homotopy pass from ``start`` (a solution stops the solve from inside)."""
+        """The homotopy pass (a solution stops the solve from inside): its first path from
+        ``start`` (the user's start point), or with homotopy_start = 'best' after a stall
+        from the best point and its second from ``start``."""
         from .homotopy import HomotopyStatus, homotopy_pass
 
         polish = None if self.opt0.homotopy == "only" else (lambda z: self._run(z, self.opt0))
+        first, second = start, None
+        if self.opt0.homotopy == "auto" and self.opt0.homotopy_start == "best" and \
+                not np.array_equal(self.best.z, start):
+            first, second = self.best.z, start
         self.nit += 1  # the pass is one major iteration of the log and the history
         try:
-            out = homotopy_pass(self, start, polish=polish)
+            out = homotopy_pass(self, first, polish=polish, second=second)
         finally:
             self.history.append(Iteration(self.nit, self.best.fbn, "-H", 0, 0.0,
                                           time.perf_counter() - self._t_start))
