@@ -61,8 +61,8 @@ problem's tangent and each chord iteration are then one compiled call (triangula
 on getrf's factors), around the evaluation of F; the array route serves the others.
 
 The first path starts from ``homotopy_start``: the best point the stabilized Newton method
-found before it stalled (the default; the second path then starts from the user's start
-point), or the user's start point.
+found before it stalled (the default), or the user's start point.  Later paths start from
+random points drawn around the user's start point.
 
 End game (Speight's hybrid)
 ---------------------------
@@ -604,12 +604,13 @@ class _Tracker:
         return z
 
 
-def track_paths(evalr, lb, ub, z_start, opt, *, second=None, on_point=None, rng,
+def track_paths(evalr, lb, ub, z_start, opt, *, center=None, on_point=None, rng,
                 deadline=None, tol=1e-6, polish=None, log=None,
                 _tracker_out=None) -> HomotopyOutcome:
     """Follow up to ``opt.homotopy_path_limit`` homotopy paths, the first from ``z_start``,
-    the second from ``second`` when given (the caller's other candidate: the user's start
-    point when the first is the best point found), the others from random points of the box.
+    the others from random points of the box drawn around ``center`` (default z_start; the
+    user's start point when the first path starts from the best point found:
+    :func:`~compass_sparse.restarts.random_point`).
 
     ``on_point(z, f, phi, psi)`` receives every accepted path point and every end-game
     point and may raise to stop the pass (the stabilized Newton method raises when a point is a solution); ``polish(z)``
@@ -623,11 +624,10 @@ def track_paths(evalr, lb, ub, z_start, opt, *, second=None, on_point=None, rng,
     statuses = []
     status, message, y = HomotopyStatus.STEP_LIMIT, "no path followed", None
     a = project(np.asarray(z_start, float), lb, ub)
+    center = np.asarray(z_start if center is None else center, float)
     for k in range(opt.homotopy_path_limit):
-        if k == 1 and second is not None:
-            a = project(np.asarray(second, float), lb, ub)
-        elif k > 0:
-            a = random_point(rng, np.asarray(z_start, float), lb, ub)
+        if k > 0:
+            a = random_point(rng, center, lb, ub)
         try:
             status, message, y = tr.follow(a, polish=polish)
         except _Stop as stop:
@@ -648,10 +648,11 @@ def track_paths(evalr, lb, ub, z_start, opt, *, second=None, on_point=None, rng,
         factorizations=tr.factorizations, path_status=statuses)
 
 
-def homotopy_pass(solver, z_start, *, polish=None, second=None) -> HomotopyOutcome:
+def homotopy_pass(solver, z_start, *, polish=None, center=None) -> HomotopyOutcome:
     """The homotopy as a pass of the stabilized Newton method ``solver`` (an NMSSolver):
     its evaluator, deadline, best-point bookkeeping and random stream.  The first path
-    starts from ``z_start``, the second from ``second`` when given.  The work done is
+    starts from ``z_start``, the others around ``center`` (:func:`track_paths`).  The work
+    done is
     added to ``solver.passes['homotopy']`` whether the pass ends normally or by a stop
     raised from ``solver._consider`` (a solution)."""
     st = solver.passes.setdefault("homotopy", PassStats())
@@ -671,7 +672,7 @@ def homotopy_pass(solver, z_start, *, polish=None, second=None) -> HomotopyOutco
         # factorizations 10x slower on a loaded machine: 150 ms against 15 ms at n = 500)
         with single_threaded_blas():
             out = track_paths(solver.ev, solver.lb, solver.ub, z_start, solver.opt0,
-                              second=second, on_point=solver._consider, rng=solver.rng,
+                              center=center, on_point=solver._consider, rng=solver.rng,
                               deadline=solver.deadline, tol=solver.tol, polish=polish, log=log,
                               _tracker_out=tracker_box)
         return out

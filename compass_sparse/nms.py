@@ -707,17 +707,16 @@ class NMSSolver:
     def _homotopy(self, start):
         """The homotopy pass (a solution stops the solve from inside): its first path from
         ``start`` (the user's start point), or with homotopy_start = 'best' after a stall
-        from the best point and its second from ``start``."""
+        from the best point; later paths from random points around ``start``."""
         from .homotopy import HomotopyStatus, homotopy_pass
 
         polish = None if self.opt0.homotopy == "only" else (lambda z: self._run(z, self.opt0))
-        first, second = start, None
-        if self.opt0.homotopy == "auto" and self.opt0.homotopy_start == "best" and \
-                not np.array_equal(self.best.z, start):
-            first, second = self.best.z, start
+        first = start
+        if self.opt0.homotopy == "auto" and self.opt0.homotopy_start == "best":
+            first = self.best.z
         self.nit += 1  # the pass is one major iteration of the log and the history
         try:
-            out = homotopy_pass(self, first, polish=polish, second=second)
+            out = homotopy_pass(self, first, polish=polish, center=start)
         finally:
             self.history.append(Iteration(self.nit, self.best.fbn, "-H", 0, 0.0,
                                           time.perf_counter() - self._t_start))

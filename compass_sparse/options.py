@@ -232,9 +232,8 @@ class Options(OptionsMixin):
         "best", "where the first homotopy path of 'auto' starts: 'best' (the best point the "
         "stabilized Newton method found before it stalled: on the 105 thesis instances, n = "
         "10 ... 200, that reached the homotopy, 15% fewer path steps and 16% fewer F "
-        "evaluations than 'start', every instance solved with both; the second path, if "
-        "one is needed, starts from the user's start point) or 'start' (the user's start "
-        "point).  "
+        "evaluations than 'start', every instance solved with both) or 'start' (the user's "
+        "start point); later paths start from random points around the start point.  "
         "homotopy = 'only' always starts at the start point",
         choices=("best", "start"))
     homotopy_path_limit: int = _opt(

@@ -403,7 +403,7 @@ def test_homotopy_start_option_picks_the_first_paths_start(where, monkeypatch):
     real = hom.homotopy_pass
 
     def spy(solver, z_start, **kw):
-        seen.append((np.array(z_start, copy=True), solver.best.z.copy(), kw.get("second")))
+        seen.append((np.array(z_start, copy=True), solver.best.z.copy(), kw.get("center")))
         return real(solver, z_start, **kw)
 
     monkeypatch.setattr(hom, "homotopy_pass", spy)
@@ -411,37 +411,38 @@ def test_homotopy_start_option_picks_the_first_paths_start(where, monkeypatch):
     res = solve_mcp(prob, options={"homotopy_start": where})
     assert res.success and natural_residual(res.x, prob.F(res.x), prob.lb, prob.ub) <= 1e-6
     assert len(seen) == 1
-    z_start, best, second = seen[0]
+    z_start, best, center = seen[0]
     assert not np.array_equal(best, prob.x0)  # the two choices differ on this instance
     np.testing.assert_array_equal(z_start, best if where == "best" else prob.x0)
-    # from the best point, the start point is the second path's (the others random)
-    if where == "best":
-        np.testing.assert_array_equal(second, prob.x0)
-    else:
-        assert second is None
+    np.testing.assert_array_equal(center, prob.x0)  # later paths: around the start point
 
 
-def test_second_homotopy_path_starts_at_the_given_point_the_third_at_random():
-    """track_paths: path 1 from z_start, path 2 from ``second``, path 3 from a random
-    point of the box (a one-step limit ends every path)."""
+def test_later_homotopy_paths_start_at_random_points_around_the_center(monkeypatch):
+    """track_paths: path 1 from z_start, paths 2 and 3 from random points of the box drawn
+    around ``center`` (a one-step limit ends every path)."""
     g = thesis_family(10, 2, 1)
     p = g.problem
-    starts = []
-    real = hom._Tracker.follow
+    starts, centers = [], []
+    follow, draw = hom._Tracker.follow, hom.random_point
 
-    def follow(self, a, polish=None):
+    def spy_follow(self, a, polish=None):
         starts.append(a.copy())
-        return real(self, a, polish=polish)
+        return follow(self, a, polish=polish)
 
+    def spy_draw(rng, z0, lb, ub):
+        centers.append(np.array(z0, copy=True))
+        return draw(rng, z0, lb, ub)
+
+    monkeypatch.setattr(hom._Tracker, "follow", spy_follow)
+    monkeypatch.setattr(hom, "random_point", spy_draw)
     z1 = np.clip(p.x0 + 0.5, p.lb, p.ub)
-    with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(hom._Tracker, "follow", follow)
-        out = track_paths(p.evaluator, p.lb, p.ub, z1, Options(homotopy_step_limit=1),
-                          second=p.x0, rng=np.random.default_rng(0))
-    assert out.paths == 3 and len(starts) == 3
+    out = track_paths(p.evaluator, p.lb, p.ub, z1, Options(homotopy_step_limit=1),
+                      center=p.x0, rng=np.random.default_rng(0))
+    assert out.paths == 3 and len(starts) == 3 and len(centers) == 2
     np.testing.assert_array_equal(starts[0], z1)
-    np.testing.assert_array_equal(starts[1], np.clip(p.x0, p.lb, p.ub))
-    assert not np.array_equal(starts[2], z1) and not np.array_equal(starts[2], p.x0)
+    for c in centers:
+        np.testing.assert_array_equal(c, p.x0)
+    assert not any(np.array_equal(s, z1) or np.array_equal(s, p.x0) for s in starts[1:])
 
 
 def test_small_problem_enters_the_homotopy_at_its_first_stall():
