@@ -279,7 +279,7 @@ def dense_direct_path(M, q, lb, ub, x, r, previous, factors: DirectFactors):
             return None
     if previous is not None and previous.basic.shape != (n,):
         return None  # (the path raises its ShapeError)
-    z, w, v, zt, wt, vt = (np.empty(n) for _ in range(6))
+    z, w, v, zt, wt, vt = np.empty((6, n))  # one allocation; its rows are C vectors
     basic = np.empty(n, dtype=np.int8)
     use_previous = previous is not None
     code, res, mz, nf = _dense_direct_from(

@@ -335,12 +335,15 @@ class _Tracker:
         elif np.sqrt(2.0 * psi) <= self.tol:
             raise _Stop(HomotopyStatus.SOLVED, "solution found on the homotopy pass")
 
+    def _mu(self, lam):
+        """The smoothing mu(lam) = mu0 (1 - lam), 0 from lam = 1 on."""
+        return self.mu0 * max(1.0 - lam, 0.0)
+
     def residual(self, y, a, want_jac):
         """H(y), and with want_jac the pieces of DH: (H, Hx, Hlam).  Points where the
         Jacobian is evaluated (the accepted ones) are offered as candidate best points."""
         x, lam = y[:-1], y[-1]
-        mu = self.mu0 * max(1.0 - lam, 0.0)
-        p, dx, dmu = self.smooth.project(x, mu)
+        p, dx, dmu = self.smooth.project(x, self._mu(lam))
         if want_jac:
             f, J = self.ev.fj(p)
         else:
@@ -491,8 +494,8 @@ class _Tracker:
         in place.  Returns ||d||, None when F is undefined at the point, -1.0 when d is not
         finite.  (``d``, ``p``: work vectors of n + 1 and n floats.)"""
         n = self.n
-        mu = self.mu0 * max(1.0 - float(y[n]), 0.0)
-        smoothed_projection(y[:n], mu, self.lb, self.ub, p, self._dx, self._dmu)
+        smoothed_projection(y[:n], self._mu(float(y[n])), self.lb, self.ub, p, self._dx,
+                            self._dmu)
         f = self.ev.f(p)
         if f is None:
             return None
@@ -652,9 +655,8 @@ def homotopy_pass(solver, z_start, *, polish=None, center=None) -> HomotopyOutco
     """The homotopy as a pass of the stabilized Newton method ``solver`` (an NMSSolver):
     its evaluator, deadline, best-point bookkeeping and random stream.  The first path
     starts from ``z_start``, the others around ``center`` (:func:`track_paths`).  The work
-    done is
-    added to ``solver.passes['homotopy']`` whether the pass ends normally or by a stop
-    raised from ``solver._consider`` (a solution)."""
+    done is added to ``solver.passes['homotopy']`` whether the pass ends normally or by a
+    stop raised from ``solver._consider`` (a solution)."""
     st = solver.passes.setdefault("homotopy", PassStats())
     counters = solver.p.counters
     nf0, nj0 = counters.nfev, counters.njev

@@ -237,8 +237,8 @@ class Options(OptionsMixin):
         "homotopy = 'only' always starts at the start point",
         choices=("best", "start"))
     homotopy_path_limit: int = _opt(
-        3, "paths followed per homotopy pass: the first from the start point, the others "
-        "from random points of the box", lo=1)
+        3, "paths followed per homotopy pass: the first from homotopy_start's point, the "
+        "others from random points of the box around the start point", lo=1)
     homotopy_step_limit: int = _opt(
         3000, "accepted predictor-corrector steps per path", lo=1)
     homotopy_smoothing: float = _opt(
