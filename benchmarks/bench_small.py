@@ -20,6 +20,11 @@ disk cache) by a warm-up before anything is timed.  Each problem is solved ``--r
 by each solver (PATH: ``--path-repeats``) in each of ``--rounds`` passes over all problems, and
 the MEDIAN over all rounds is reported: with several rounds a problem's samples are spread
 over the whole run, so that a slow minute of a shared machine weighs on every problem alike.
+Within a round, compass_sparse's solves of all problems come first and PATH's runs of all
+problems after them (``--order sweeps``); ``--order interleaved`` follows each problem's
+solves with its PATH runs, so that each of our solves follows a wait on the GAMS process,
+which slows this process' next solves (and the user's F and J in them) down by up to 2x
+(see small.md, Round 11).
 For compass_sparse, ``time`` is the wall time of ``solve_mcp`` MINUS the time spent inside
 the user's F and J (measured by wrapping the callbacks); ``user`` is that F/J time.  For
 PATH, ``time`` is PATH's own "Total Time" from its log (the GAMS process start and model
@@ -459,6 +464,9 @@ def main(argv=None):
     ap.add_argument("--static-n", nargs="+", type=int, default=[90, 830])
     ap.add_argument("--time-limit", type=float, default=60.0)
     ap.add_argument("--no-path", action="store_true")
+    ap.add_argument("--order", choices=["sweeps", "interleaved"], default="sweeps",
+                    help="within a round: all our solves, then all PATH runs (sweeps), or "
+                         "each problem's solves followed by its PATH runs (interleaved)")
     ap.add_argument("--import-time", action="store_true",
                     help="only measure the import and the first solve in fresh interpreters")
     ap.add_argument("--suffix", default="")
@@ -497,21 +505,39 @@ def main(argv=None):
     # PATH runs), so that each problem's samples are spread over the whole run and a slow
     # minute of the shared machine touches all problems alike instead of a few; the rows
     # of the last round report the medians over all rounds.
+    # Sweeps (the default order): within a round, our solves of all problems come first,
+    # then PATH's runs of all problems.  With --order interleaved each problem's solves
+    # follow the previous problem's PATH run: this process then waits, idle, on the GAMS
+    # process, and its next solves run on a cooled-down core (measured at f2aee1a: cournot2
+    # 0.32 ms per solve with the sweeps, 0.69 ms interleaved; the user's F and J slow
+    # down alike, 0.038 -> 0.070 ms; the first ~10 solves after a PATH run take 1.2-2.5x
+    # the steady time).  PATH's time is its own timer inside the GAMS process either way.
     ours_samples = {c.name: {} for c in cases}
     path_samples = {c.name: [] for c in cases}
     rows = []
     log = CsvLog(RESULTS / f"small{a.suffix}.csv", FIELDS)  # rows of the last round
+
+    def ours(c, rnd):
+        if rnd == 0:
+            run_ours(c, 1, a.time_limit)  # first solve of a new shape: not timed
+        return run_ours(c, a.repeats, a.time_limit, ours_samples[c.name])
+
+    def theirs(c):
+        if use_path and c.path_run is not None:
+            return run_path(c, a.path_repeats, path_samples[c.name])
+        return None
+
     for rnd in range(a.rounds):
         last = rnd == a.rounds - 1
-        for c in cases:
-            if rnd == 0:
-                run_ours(c, 1, a.time_limit)  # first solve of a new shape: not timed
-            r = run_ours(c, a.repeats, a.time_limit, ours_samples[c.name])
+        if a.order == "interleaved":
+            pairs = [(ours(c, rnd), theirs(c)) for c in cases]
+        else:
+            mine = [ours(c, rnd) for c in cases]
+            pairs = list(zip(mine, [theirs(c) for c in cases]))
+        for c, (r, p) in zip(cases, pairs):
             line = f"{c.group:7s} {c.name:22s} n={c.n:5d} ours {fmt_time(r['time']):>9s} " \
                    f"(F/J {fmt_time(r['user'])}) {'ok' if r['success'] else 'FAIL'}"
-            p = None
-            if use_path and c.path_run is not None:
-                p = run_path(c, a.path_repeats, path_samples[c.name])
+            if p is not None:
                 line += f" | PATH {fmt_time(p['time']):>9s} {'ok' if p['success'] else 'FAIL'}"
             if last:
                 for row in [r] + ([p] if p is not None else []):
