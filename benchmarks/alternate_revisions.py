@@ -15,8 +15,9 @@ copy of one built problem (``MCP.with_start``: the Jacobian pattern is known); w
 ``--one-shot`` each solve is ``solve_mcp(F, J, lb, ub, x0)`` from the user's functions, as
 a script calls it once: the problem's construction, its bounds' checks, the start check and
 the first Jacobian's pattern are timed too (known problems only).  Problems: the names of
-``bench_fixed_cost.py`` (known problems) and ``ramseyT`` (one-sector Ramsey CGE model with
-T periods, 25% capital tax) or ``staticN`` (static CGE model of about N variables).
+``bench_fixed_cost.py`` (known problems), ``ramseyT`` (one-sector Ramsey CGE model with
+T periods, 25% capital tax), ``staticN`` (static CGE model of about N variables) or
+``famF_nN_sS`` (the thesis' family F at n = N, seed S, as bench_small.py names them).
 """
 from __future__ import annotations
 
@@ -44,6 +45,11 @@ def problem(name):
         m = static_cge(**size_for(int(name[6:])))
         m = m.with_shock(output_tax=0.25) if m.info["regions"] == 1 else m.with_shock(tariff=0.25)
         return m.problem, m.problem.x0
+    if name.startswith("fam"):  # famF_nN_sS: thesis family F at n = N, seed S
+        from compass_sparse.generators import thesis_family
+        fam, n, seed = (int(part[1:]) for part in name[3:].split("_"))
+        p = thesis_family(n, fam, seed).problem
+        return p, p.x0
     from bench_fixed_cost import _problem
     return _problem(name)
 

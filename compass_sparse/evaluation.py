@@ -350,6 +350,10 @@ class Evaluator:
         n = self.n
         if J.__class__ is np.ndarray and J.dtype == np.float64:
             # a dense float array (small problems): no sparse tests, no complex check
+            if P is not None and J.shape == (n, n) and P.indices.shape[0] == n * n:
+                # on the full pattern stored already: a copy of J, column after column
+                return trusted_csc(J.flatten(order="F"), P.indices.copy(), P.indptr.copy(),
+                                   (n, n))
             return self._fix_pattern(_dense_csc(J, n))
         if (P is not None and sp.issparse(J) and J.format == "csc" and J.shape == (n, n)
                 and J.data.dtype == np.float64 and J.indices.dtype == np.int32
@@ -527,13 +531,31 @@ class Evaluator:
             return self._reject(f"{what} returned NaN/Inf")
         return v
 
+    # f and jac are guarded() written out: they run at every point of a solve, where the
+    # closure and the test callable cost a small model ~2 us per evaluation.
     def f(self, x, _k=None):
         """F(x), or None when F raised or returned NaN/Inf there (counted)."""
-        return self.guarded(lambda: self.F(x, _k), all_finite, "F")
+        try:
+            v = self.F(x, _k)
+        except (CompassError, KeyboardInterrupt):
+            raise
+        except Exception as exc:  # the user's function failed here: reject the point
+            return self._reject(repr(exc))
+        if not all_finite(v):
+            return self._reject("F returned NaN/Inf")
+        return v
 
     def jac(self, x, f=None, _k=None):
         """J(x), or None when J raised or returned NaN/Inf there (counted)."""
-        return self.guarded(lambda: self.J(x, f, _k), lambda J: all_finite(J.data), "J")
+        try:
+            J = self.J(x, f, _k)
+        except (CompassError, KeyboardInterrupt):
+            raise
+        except Exception as exc:
+            return self._reject(repr(exc))
+        if not all_finite(J.data):
+            return self._reject("J returned NaN/Inf")
+        return J
 
     def fj(self, x):
         """(f, J), or (None, None) when either is rejected (the memo key of x is made

@@ -261,9 +261,17 @@ class _Bordered:
 
 
 def _solve_square(A, b, dense: bool):
+    """A^-1 b (non-finite entries when A is singular: the caller tests the step)."""
     if dense:
+        # getrf and the compiled triangular solves: scipy's lu_factor and lu_solve cost a
+        # small problem's end game ~25 us per Newton iteration in their checks and dispatch
         M = A.toarray() if sp.issparse(A) else A
-        return sla.lu_solve(sla.lu_factor(M, check_finite=False), b, check_finite=False)
+        lu, piv, info = _getrf(np.asarray(M, dtype=float), overwrite_a=True)
+        if info < 0:
+            raise ValueError(f"illegal argument {-info} of getrf")
+        x = np.array(b, dtype=float)
+        lu_solve(lu, piv, x)
+        return x
     return spla.splu(sp.csc_matrix(A), permc_spec="COLAMD").solve(b)
 
 
@@ -405,14 +413,15 @@ class _Tracker:
         self._y = y
         v = np.zeros(n + 1)
         v[-1] = 1.0
-        bound = opt.homotopy_divergence_bound * (1.0 + float(np.max(np.abs(a), initial=0.0)))
+        a_max = max_abs(a)
+        bound = opt.homotopy_divergence_bound * (1.0 + a_max)
         out = self.residual(y, a, True)
         if out is None:
             raise _Stop(HomotopyStatus.EVALUATION_ERROR, "F or J undefined at the start of the path")
         H, Hx, Hlam = out
         lam_end = opt.homotopy_end_lambda
-        h = opt.homotopy_initial_step * (1.0 + float(np.linalg.norm(a, np.inf)))
-        hmin = opt.homotopy_step_minimum * (1.0 + float(np.linalg.norm(a, np.inf)))
+        h = opt.homotopy_initial_step * (1.0 + a_max)
+        hmin = opt.homotopy_step_minimum * (1.0 + a_max)
         for _ in range(opt.homotopy_step_limit):
             self._check_time()
             # --- tangent at y, from the factorization that also serves the corrector
@@ -560,7 +569,7 @@ class _Tracker:
             return None
         self._offer(z, f)
         fb = f + x - z
-        nrm = float(np.linalg.norm(fb))
+        nrm = dot_norm(fb)
         for _ in range(NEWTON_ITERATIONS):
             self._check_time()
             J = self.ev.jac(z, f)
@@ -585,8 +594,8 @@ class _Tracker:
             # Jacobian's, not Newton's convergence (it once jumped from 1 to 1e7).
             # (the ratio only when it is below 1: at |x| ~ 1e17 and |dx| ~ 1e-300 it
             # overflowed, with a RuntimeWarning, to a min() that took 1 anyway)
-            cap = NEWTON_STEP_MAX * (1.0 + np.linalg.norm(x, np.inf))
-            size = np.linalg.norm(dx, np.inf)
+            cap = NEWTON_STEP_MAX * (1.0 + max_abs(x))
+            size = max_abs(dx)
             alpha = 1.0 if size <= cap else cap / size
             accepted = False
             while alpha >= 1e-3:
@@ -596,7 +605,7 @@ class _Tracker:
                 if ft is not None:
                     self._offer(zt, ft)  # raises in the caller when zt is a solution
                     fbt = ft + xt - zt
-                    nt = float(np.linalg.norm(fbt))
+                    nt = dot_norm(fbt)
                     if nt < (1.0 - 1e-4 * alpha) * nrm:
                         x, z, f, fb, nrm, accepted = xt, zt, ft, fbt, nt, True
                         break
@@ -615,10 +624,11 @@ def track_paths(evalr, lb, ub, z_start, opt, *, center=None, on_point=None, rng,
     user's start point when the first path starts from the best point found:
     :func:`~compass_sparse.restarts.random_point`).
 
-    ``on_point(z, f, phi, psi)`` receives every accepted path point and every end-game
-    point and may raise to stop the pass (the stabilized Newton method raises when a point is a solution); ``polish(z)``
-    (optional) is called with the end point of a path (lam = 1) whose Newton end game
-    missed the tolerance."""
+    ``rng``: the random generator of those points, or a callable that returns it (called
+    when the second path starts).  ``on_point(z, f, phi, psi)`` receives every accepted
+    path point and every end-game point and may raise to stop the pass (the stabilized
+    Newton method raises when a point is a solution); ``polish(z)`` (optional) is called
+    with the end point of a path (lam = 1) whose Newton end game missed the tolerance."""
     tr = _Tracker(evalr, lb, ub, opt, deadline=deadline, on_point=on_point, tol=tol, log=log)
     if _tracker_out is not None:  # lets homotopy_pass count work when a stop is raised
         _tracker_out["tracker"] = tr
@@ -630,6 +640,8 @@ def track_paths(evalr, lb, ub, z_start, opt, *, center=None, on_point=None, rng,
     center = np.asarray(z_start if center is None else center, float)
     for k in range(opt.homotopy_path_limit):
         if k > 0:
+            if callable(rng):  # made now: most passes end on their first path
+                rng = rng()
             a = random_point(rng, center, lb, ub)
         try:
             status, message, y = tr.follow(a, polish=polish)
@@ -674,7 +686,8 @@ def homotopy_pass(solver, z_start, *, polish=None, center=None) -> HomotopyOutco
         # factorizations 10x slower on a loaded machine: 150 ms against 15 ms at n = 500)
         with single_threaded_blas():
             out = track_paths(solver.ev, solver.lb, solver.ub, z_start, solver.opt0,
-                              center=center, on_point=solver._consider, rng=solver.rng,
+                              center=center, on_point=solver._consider,
+                              rng=lambda: solver.rng,
                               deadline=solver.deadline, tol=solver.tol, polish=polish, log=log,
                               _tracker_out=tracker_box)
         return out

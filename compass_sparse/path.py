@@ -252,7 +252,7 @@ def _dense_direct_result(M, q, lb, ub, manager, options, x, r, warm, direct, kw)
 class PathState:
     """Everything one run of :meth:`PivotalPath.run` changes, set afresh by every run."""
 
-    art_sign: np.ndarray  #: sign of the artificial unit column of each row
+    art_sign: np.ndarray | None = None  #: sign of the artificial unit column of each row
     sk: np.ndarray | None = None  #: slot table: kind (VAR_*) of each slot's basic variable
     si: np.ndarray | None = None  #: slot table: index of each slot's basic variable
     xb: np.ndarray | None = None  #: values of the basic variables, by slot
@@ -393,12 +393,12 @@ class PivotalPath:
                 return res
         # The path's state, made afresh by every run (a path may run again), only now: a
         # solved start or a direct step needs none (~5 us of a small major iteration).
-        self.st = PathState(art_sign=np.ones(n, dtype=np.int64))
+        # (_reset_slots sets the slot table, z's values and the artificials' signs)
+        self.st = PathState()
         self.st.r = r
         self.st.t_lower, self.st.below_from = 0.0, -1
         self.st.free_below = not ray_start
         self.st.start = (z, w, v)
-        self.st.zval = z.copy()  # values of z (basic or not); basic ones refreshed from xb
         self._reset_slots(basic, z, w, v)
         self.bm.set_dense_column(r)
         if getattr(self.bm, "runs_paths", False):
@@ -456,7 +456,7 @@ class PivotalPath:
             xb = np.where(basic == VAR_Z, z, np.where(basic == VAR_W, w, v))
             xb = np.where(basic == VAR_S, w - v, xb)
             self.st.xb = xb.astype(float)
-        self.st.zval = z.copy()
+        self.st.zval = z.copy()  # values of z (basic or not); basic ones refreshed from xb
         self.st.art_sign = np.ones(n, dtype=np.int64)
         self.st.displaced = {}  # artificial row -> z index it displaced
 
@@ -767,9 +767,8 @@ class PivotalPath:
             z, w, v = self._current_point() if self.st.xb is not None else (self.st.zval, 0, 0)
         else:
             # Not solved: return the point with the largest t (PATH's return-best-point).
-            cur = self._current_point()
             if self.st.t >= self.st.best[0]:
-                z, w, v = cur
+                z, w, v = self._current_point()
             else:
                 x = self.st.best[1]
                 z, w, v = components(x, self.lb, self.ub)

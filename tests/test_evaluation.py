@@ -294,3 +294,30 @@ def test_user_jacobian_outside_a_declared_pattern_still_raises():
     ev.J(np.zeros(n))
     assert np.array_equal(ev.J(np.ones(n)).toarray(), J.toarray())
     assert ev.pattern_growths == 1
+
+
+@pytest.mark.parametrize("order", ["C", "F"])
+def test_dense_jacobian_on_the_full_pattern_is_a_copy_equal_to_the_general_route(order):
+    """A dense float J on the full pattern stored already is copied column after column
+    (the small problems' route): the general route's matrix, bit for bit, in either memory
+    order of the user's array, and a copy -- the user writing into their array later does
+    not change the evaluator's J."""
+    from compass_sparse.evaluation import _dense_csc
+
+    n = 4
+    rng = np.random.default_rng(3)
+    A = np.asarray(rng.normal(size=(n, n)), order=order)
+    A[1, 2] = 0.0  # a zero stays stored on the full pattern
+    ev = Evaluator(lambda x: np.zeros(n), lambda x: A, n)
+    first = ev.J(np.zeros(n))  # stores the full pattern
+    assert first.nnz == n * n
+    got = ev._user_J_on_pattern(A)
+    ref = ev._fix_pattern(_dense_csc(A, n))
+    for a in ("indptr", "indices", "data"):
+        assert np.array_equal(getattr(got, a), getattr(ref, a)), a
+        assert getattr(got, a).dtype == getattr(ref, a).dtype
+        assert getattr(got, a) is not getattr(ev.pattern_ref, a)
+    assert np.array_equal(got.toarray(), A)
+    kept = ev.J(np.ones(n))
+    A[0, 0] += 1.0  # the user's array changes after the evaluation
+    assert kept.toarray()[0, 0] == A[0, 0] - 1.0

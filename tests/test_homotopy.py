@@ -575,3 +575,40 @@ def test_compiled_dense_path_steps_reach_the_array_routes_solution(monkeypatch, 
     for r in (got, ref):
         assert r.success and natural_residual(r.x, prob.F(r.x), prob.lb, prob.ub) <= 1e-6
     np.testing.assert_allclose(got.x, ref.x, atol=1e-5)
+
+
+def test_end_game_dense_solve_agrees_with_scipy_and_is_not_finite_when_singular():
+    """The end game's dense Newton solve (getrf and the compiled triangular solves) gives
+    scipy's lu_factor + lu_solve to rounding; an exactly singular matrix gives a
+    non-finite step, which the end game refuses."""
+    import scipy.linalg as sla
+
+    rng = np.random.default_rng(11)
+    for n in (1, 2, 5, 12):
+        for _ in range(5):
+            A = rng.normal(size=(n, n)) + n * np.eye(n)
+            b = rng.normal(size=n)
+            want = sla.lu_solve(sla.lu_factor(A), b)
+            got = hom._solve_square(A.copy(), b, True)
+            assert np.allclose(got, want, rtol=1e-12, atol=1e-12)
+    S = np.array([[1.0, 2.0], [2.0, 4.0]])
+    assert not np.isfinite(hom._solve_square(S, np.array([1.0, 0.0]), True)).all()
+
+
+def test_homotopy_random_generator_is_made_only_when_a_second_path_starts():
+    """The generator of the later paths' start points is asked for when a second path
+    starts, and only then: a pass that ends on its first path never makes it."""
+    F, J, lb, ub, x0 = _diverging_problem()
+    made = []
+
+    def rng():
+        made.append(1)
+        return np.random.default_rng(0)
+
+    out = track_paths(MCP(F, J, lb, ub, x0).evaluator, lb, ub, x0,
+                      Options(homotopy_path_limit=3), rng=rng)
+    assert out.paths == 3 and len(made) == 1
+    made.clear()
+    out = track_paths(MCP(F, J, lb, ub, x0).evaluator, lb, ub, x0,
+                      Options(homotopy_path_limit=1), rng=rng)
+    assert out.paths == 1 and made == []

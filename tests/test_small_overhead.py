@@ -494,6 +494,44 @@ def test_linearizer_on_patterns_that_hold_the_diagonal(kind):
         np.testing.assert_array_equal(M.toarray(), J.toarray() + eps * np.eye(n))
 
 
+@pytest.mark.parametrize("kind", ["full", "with diagonal", "without diagonal"])
+def test_one_pass_linearization_gives_the_array_formulas_bits(kind):
+    """Linearizer.linearize: M = J + eps I, q = f - M z and r = f + x - z of a major
+    iteration in one compiled pass give the array formulas' bits (M's entries and pattern,
+    q with M z summed column by column, r), on J's own pattern and with the diagonal
+    added; a vector that is not the solver's float vector takes the array route."""
+    from compass_sparse._merit_kernels import csc_matvec
+    from compass_sparse.evaluation import canonical_csc
+    from compass_sparse.nms import Linearizer
+
+    rng = np.random.default_rng(21)
+    n = 11
+    if kind == "full":
+        J = canonical_csc(rng.standard_normal((n, n)), n)
+    else:
+        J = sp.random(n, n, density=0.3, random_state=rng, format="csc")
+        J = (J + sp.diags(rng.standard_normal(n))).tocsc() if kind == "with diagonal" \
+            else J
+        J = J.tolil()
+        if kind == "without diagonal":
+            J.setdiag(0.0)
+        J = canonical_csc(J.tocsc(), n)
+        J.eliminate_zeros()
+    L = Linearizer(J)
+    z, f, x = (rng.standard_normal(n) * 10.0 ** rng.integers(-3, 4, n) for _ in range(3))
+    for eps in (0.0, 1e-3):
+        M, q, r = L.linearize(J, eps, z, f, x)
+        ref = L(J, eps)
+        Mz = np.empty(n)
+        csc_matvec(ref.indptr, ref.indices, ref.data, z, Mz)
+        for a in ("indptr", "indices", "data"):
+            assert np.array_equal(getattr(M, a), getattr(ref, a)), a
+        assert np.array_equal(q, f - Mz) and np.array_equal(r, f + x - z)
+        M2, q2, r2 = L.linearize(J, eps, list(z), f, x)  # not a float vector: arrays
+        assert np.array_equal(M2.data, ref.data) and np.array_equal(q2, q)
+        assert np.array_equal(r2, r)
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_compiled_scale_test_gives_the_array_formula_verdict(seed):
     """The compiled flat-step test returns the verdict, the row and the step of the array
