@@ -47,8 +47,8 @@ def problem(name):
         return m.problem, m.problem.x0
     if name.startswith("fam"):  # famF_nN_sS: thesis family F at n = N, seed S
         from compass_sparse.generators import thesis_family
-        fam, n, seed = (int(part[1:]) for part in name[3:].split("_"))
-        p = thesis_family(n, fam, seed).problem
+        fam, n, seed = name[3:].split("_")
+        p = thesis_family(int(n[1:]), int(fam), int(seed[1:])).problem
         return p, p.x0
     from bench_fixed_cost import _problem
     return _problem(name)
