@@ -232,44 +232,50 @@ def _dense_direct(indptr, indices, data, q, lb, ub, basic, z, w, v, tol, rank_to
 
 @njit(cache=True)
 def _dense_direct_from(indptr, indices, data, q, lb, ub, x, r, previous, use_previous,
-                       z, w, v, basic, zt, wt, vt, tol, rank_tol):
+                       z, w, v, basic, slack, zt, wt, vt, tol, rank_tol):
     """The start of a pivotal path from x and its direct step, in one compiled call (what
     PivotalPath.run does before its first factorization, for a dense direct step):
     (z, w, v) = the components of x, ``basic`` = the start basis (path.default_basis,
     with the inward guess when there is no warm basis ``previous``), then the end point
-    (zt, wt, vt) of :func:`_dense_direct`.  Returns (code, residual, max|M z|, |F|): code
-    0 when r = 0 (the start solves the linear problem), 1 after a direct step."""
+    (zt, wt, vt) of :func:`_dense_direct`; ``slack`` = the start basis before the inward
+    guess (the path's fallback when the guess makes the basis singular).  Returns (code,
+    residual, max|M z|, |F|, whether the guess changed the basis): code 0 when r = 0 (the
+    start solves the linear problem), 1 after a direct step."""
     n = x.shape[0]
     components(x, lb, ub, z, w, v)
     start_basis(z, lb, ub, previous, use_previous, basic)
+    guessed = False
     if not use_previous:
         # the inward guess of PivotalPath._run: z basic at a bound with no slack value
         # where the residual pushes it inwards
         for i in range(n):
+            slack[i] = basic[i]
             if lb[i] < ub[i] and ((z[i] <= lb[i] and w[i] == 0.0 and r[i] < 0.0)
                                   or (z[i] >= ub[i] and v[i] == 0.0 and r[i] > 0.0)):
                 basic[i] = VAR_Z
+                guessed = True
     solved = True
     for i in range(n):
         if r[i] != 0.0:  # (NaN too: the path meets it)
             solved = False
             break
     if solved:
-        return 0, 0.0, 0.0, 0
+        return 0, 0.0, 0.0, 0, guessed
     for i in range(n):
         zt[i] = z[i]
     res, mz, nf = _dense_direct(indptr, indices, data, q, lb, ub, basic.astype(np.int64), zt,
                                 wt, vt, tol, rank_tol)
-    return 1, res, mz, nf
+    return 1, res, mz, nf, guessed
 
 
 def dense_direct_path(M, q, lb, ub, x, r, previous, factors: DirectFactors):
     """The outcome of a pivotal path from x (covering vector r, warm basis ``previous`` or
     None) when its dense direct step decides it, computed in one compiled call:
     ``("start", (z, w, v), basic, 0)`` when r = 0, ``("direct", (z, w, v), basic, nnz of
-    the LU)`` for the direct step's end point, ``("path", None, basic, nnz)`` when the
-    path must run (the step failed), or None when the arguments are not the compiled
-    call's (the path then does everything itself).  The same values, bit for bit, as
+    the LU)`` for the direct step's end point, ``("path", (z, w, v, basic, slack basis or
+    None), basic, nnz)`` when the path must run (the step failed: the path's start, for
+    ``PivotalPath.run(start=)``), or None when the arguments are not the compiled call's
+    (the path then does everything itself).  The same values, bit for bit, as
     PivotalPath.run's own start and :func:`direct_step` (``test_direct_step.py``)."""
     if not (factors.dense and float_vector(x) and M.data.dtype == np.float64):
         return None
@@ -280,18 +286,20 @@ def dense_direct_path(M, q, lb, ub, x, r, previous, factors: DirectFactors):
     if previous is not None and previous.basic.shape != (n,):
         return None  # (the path raises its ShapeError)
     z, w, v, zt, wt, vt = np.empty((6, n))  # one allocation; its rows are C vectors
-    basic = np.empty(n, dtype=np.int8)
+    basic, slack = np.empty((2, n), dtype=np.int8)
     use_previous = previous is not None
-    code, res, mz, nf = _dense_direct_from(
+    code, res, mz, nf, guessed = _dense_direct_from(
         M.indptr, M.indices, M.data, q, lb, ub, x, r,
-        previous.basic if use_previous else basic, use_previous, z, w, v, basic, zt, wt, vt,
-        FEASIBILITY_TOLERANCE, factors.rank_tolerance)
+        previous.basic if use_previous else basic, use_previous, z, w, v, basic, slack, zt,
+        wt, vt, FEASIBILITY_TOLERANCE, factors.rank_tolerance)
     if code == 0:
         return "start", (z, w, v), basic, 0
     factors.method = ("dense", "partial pivoting")
     factors.lu_nnz = nnz_lu = nf * nf
     end, _ = _accepted(res, mz, q, zt, wt, vt, nnz_lu)
-    return ("direct" if end is not None else "path"), end, basic, nnz_lu
+    if end is None:
+        return "path", (z, w, v, basic, slack if guessed else None), basic, nnz_lu
+    return "direct", end, basic, nnz_lu
 
 
 def reduced_system(M, free, z, q):

@@ -239,8 +239,9 @@ def _dense_direct_result(M, q, lb, ub, manager, options, x, r, warm, direct, kw)
     if kind == "direct":
         res = PathResult(LinearCode.SOLVED, *end, 1.0, factorizations=1,
                          basis=WarmBasis(basic), ray_start=False, direct_lu_nnz=nnz_lu)
-    else:
-        res = PivotalPath(M, q, lb, ub, manager, options, **kw).run(x, warm=warm, r=r)
+    else:  # the step failed: the path runs from the start the call computed
+        res = PivotalPath(M, q, lb, ub, manager, options, **kw).run(x, warm=warm, r=r,
+                                                                    start=end)
         # the failed step's factorization counts in the path's, as inside run()
         res.factorizations += 1 if nnz_lu else 0
         res.direct_lu_nnz = nnz_lu
@@ -333,12 +334,16 @@ class PivotalPath:
         return KIND_UNIT, index, 1
 
     def run(self, x_start, *, warm: WarmBasis | None = None, ray_start: bool = False,
-            r=None) -> PathResult:
+            r=None, start=None) -> PathResult:
+        """The path from x_start (or from the Lemke start).  ``start``: (z, w, v, basic,
+        slack basis or None) of x_start, as this method computes them (the components of
+        x_start, the start basis with the inward guess, and the basis before the guess
+        when it changed something), when the caller has them already."""
         t0 = time.perf_counter()
         st0 = self._stats0()  # (the counts include a first attempt on reused factors)
         for attempt in range(PATH_ATTEMPTS):
             try:
-                return self._run(x_start, warm, ray_start, r, t0, st0)
+                return self._run(x_start, warm, ray_start, r, t0, st0, start)
             except FactorReuseFailed:
                 # The basis (solved on the factors of an older one, or found inaccurate by
                 # a residual check) is singular and its repair changed the manager's slot
@@ -348,11 +353,13 @@ class PivotalPath:
                     return self._finish(LinearCode.SINGULAR, 0.0, t0, st0, ray_start,
                                         "the basis kept turning singular in its solves")
 
-    def _run(self, x_start, warm, ray_start, r, t0, st0) -> PathResult:
+    def _run(self, x_start, warm, ray_start, r, t0, st0, start=None) -> PathResult:
         n, lb, ub = self.n, self.lb, self.ub
         slack_basis = None
         if ray_start:
             z, w, v, r, basic = self._lemke_start()
+        elif start is not None and r is not None:
+            z, w, v, basic, slack_basis = start
         else:
             z, w, v = components(np.asarray(x_start, dtype=float), lb, ub)
             if r is None:
@@ -776,14 +783,16 @@ class PivotalPath:
         if not isinstance(w, np.ndarray):
             w = np.zeros(self.n)
             v = np.zeros(self.n)
-        basic = np.full(self.n, VAR_Z, dtype=np.int8)
         if self.st.sk is not None and _floats(self.n, z, self.lb, self.ub):
+            basic = np.empty(self.n, dtype=np.int8)  # (slot_basis sets every entry)
             slot_basis(z, self.lb, self.ub, self.st.sk, self.st.si, basic)
         elif self.st.sk is not None:
             basic = default_basis(z, self.lb, self.ub)
             for kind in (VAR_Z, VAR_W, VAR_V, VAR_S):
                 m = self.st.sk == kind
                 basic[self.st.si[m]] = kind
+        else:
+            basic = np.full(self.n, VAR_Z, dtype=np.int8)
         res = PathResult(
             code, z, w, v, float(t if code is not LinearCode.SOLVED else 1.0),
             pivots=self.st.pivots,

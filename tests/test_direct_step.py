@@ -576,3 +576,46 @@ def test_solves_through_the_one_call_direct_step_are_bit_identical(monkeypatch, 
     assert (fused.nit, fused.minor_iterations, fused.restarts, fused.nfev, fused.njev) == \
         (plain.nit, plain.minor_iterations, plain.restarts, plain.nfev, plain.njev)
     assert fused.passes["path"].factorizations == plain.passes["path"].factorizations
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_failed_one_call_step_hands_the_path_the_start_it_would_compute(seed):
+    """When the one-call dense direct step fails, the path runs from the start that call
+    computed: the components of x, the start basis with the inward guess and, when the
+    guess changed the basis, the basis before it -- what PivotalPath._run computes
+    itself (path.components, path.default_basis and its inward rule)."""
+    from compass_sparse.direct_step import dense_direct_path
+    from compass_sparse.path import VAR_Z, WarmBasis, components, default_basis
+
+    rng = np.random.default_rng(seed)
+    got = set()
+    for trial in range(40):
+        n = int(rng.integers(1, 9))
+        M = sp.csc_matrix(rng.standard_normal((n, n)) * (rng.random((n, n)) < 0.6))
+        q = rng.standard_normal(n)
+        lb = np.where(rng.random(n) < 0.7, 0.0, -np.inf)
+        ub = np.where(rng.random(n) < 0.3, 1.0, np.inf)
+        x = rng.standard_normal(n) * 2.0
+        x[rng.random(n) < 0.4] = 0.0  # components at the lower bound, no slack value
+        r = _covering(M, q, lb, ub, x)
+        warm = None if trial % 3 else WarmBasis(default_basis(np.clip(x, lb, ub), lb, ub))
+        out = dense_direct_path(M, q, lb, ub, x, r, warm, ds.DirectFactors(dense=True))
+        if out is None or out[0] != "path":
+            continue
+        z, w, v, basic, slack = out[1]
+        z0, w0, v0 = components(x, lb, ub)
+        b0 = default_basis(z0, lb, ub, warm)
+        want_slack = None
+        if warm is None:
+            inward = ((z0 <= lb) & (w0 == 0) & (r < 0)) | ((z0 >= ub) & (v0 == 0) & (r > 0))
+            inward &= lb < ub
+            if inward.any():
+                want_slack = b0.copy()
+                b0[inward] = VAR_Z
+        for a, b in ((z, z0), (w, w0), (v, v0), (basic, b0)):
+            assert np.array_equal(a, b)
+        assert (slack is None) == (want_slack is None)
+        if slack is not None:
+            assert np.array_equal(slack, want_slack)
+        got.add(("warm" if warm is not None else "cold", slack is not None))
+    assert got == {("cold", False), ("cold", True), ("warm", False)}
