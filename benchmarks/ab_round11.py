@@ -6,7 +6,8 @@ without the user's F and J).
 The functions round 11 changed are swapped, in this process, for their versions in an
 older worktree (``--old``, a checkout of f2aee1a): the evaluator's ``f``, ``jac`` and
 ``_user_J_on_pattern``, the homotopy pass (its tracker, end game and path loop), the
-pivotal path's ``_run`` and ``_finish`` and the major iteration's ``_newton_point``.  The
+pivotal path's ``run``, ``_run`` and ``_finish`` with the hand-over from the one-call
+direct step (``_dense_direct_result``), and the major iteration's ``_newton_point``.  The
 old functions run on the current package's helpers and objects; everything else is the
 same code in both variants.  On a shared machine whose speed moves by up to 2x between
 minutes this separates the change from the drift, where timing two checkouts in turns
@@ -44,7 +45,8 @@ def _swaps(worktree):
              for k in ("f", "jac", "_user_J_on_pattern")]
     swaps.append((H, "homotopy_pass", oh.homotopy_pass, H.homotopy_pass))
     swaps += [(P.PivotalPath, k, getattr(op.PivotalPath, k), getattr(P.PivotalPath, k))
-              for k in ("_run", "_finish")]
+              for k in ("run", "_run", "_finish")]
+    swaps.append((P, "_dense_direct_result", op._dense_direct_result, P._dense_direct_result))
     swaps.append((N.NMSSolver, "_newton_point", on.NMSSolver._newton_point,
                   N.NMSSolver._newton_point))
     return swaps
