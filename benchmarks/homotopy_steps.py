@@ -1,7 +1,7 @@
 """The homotopy's step control on the COMPASS thesis instances that reach it, in one process.
 
 Variants set the tracker's step-control constants (compass_sparse.homotopy: KAPPA_NOMINAL,
-DISTANCE_NOMINAL, STEP_GROWTH_MAX, CORRECTOR_TOLERANCE) and the option
+DISTANCE_NOMINAL, STEP_GROWTH_MAX, CORRECTOR_TOLERANCE, CORRECTOR_ESTIMATE) and the option
 homotopy_initial_step; the instances are
 chosen with the package's defaults.
 The instances are those of families 1 and 2 (n = 10, 20, 50 with seeds 0-29, n = 100,
@@ -10,7 +10,7 @@ solves each of them once.  Reported per variant: instances solved (natural resid
 <= 1e-6), path steps, F and J evaluations (deterministic), and time.
 
     python3 benchmarks/homotopy_steps.py
-    python3 benchmarks/homotopy_steps.py --sizes 10 20 --variants "0.3 0.2 2 0.1 (default)"
+    python3 benchmarks/homotopy_steps.py --sizes 10 20 --variants "0.3 0.2 2 0.1, estimate (default)"
 
 Results: benchmarks/results/homotopy_steps.md (the printed table).
 """
@@ -33,10 +33,14 @@ from compass_sparse import MCP, solve_mcp  # noqa: E402
 from compass_sparse.generators import thesis_family  # noqa: E402
 
 BASE = dict(KAPPA_NOMINAL=hom.KAPPA_NOMINAL, DISTANCE_NOMINAL=hom.DISTANCE_NOMINAL,
-            STEP_GROWTH_MAX=hom.STEP_GROWTH_MAX, CORRECTOR_TOLERANCE=hom.CORRECTOR_TOLERANCE)
-def _variant(kappa, dist, growth=2.0, init=0.01, ctol=1e-4):
+            STEP_GROWTH_MAX=hom.STEP_GROWTH_MAX, CORRECTOR_TOLERANCE=hom.CORRECTOR_TOLERANCE,
+            CORRECTOR_ESTIMATE=hom.CORRECTOR_ESTIMATE)
+
+
+def _variant(kappa, dist, growth=2.0, init=0.01, ctol=1e-4, estimate=False):
     return ({"KAPPA_NOMINAL": kappa, "DISTANCE_NOMINAL": dist, "STEP_GROWTH_MAX": growth,
-             "CORRECTOR_TOLERANCE": ctol}, {"homotopy_initial_step": init})
+             "CORRECTOR_TOLERANCE": ctol, "CORRECTOR_ESTIMATE": estimate},
+            {"homotopy_initial_step": init})
 
 
 VARIANTS = {  # (kappa nominal, distance nominal, growth cap, initial step)
@@ -49,11 +53,14 @@ VARIANTS = {  # (kappa nominal, distance nominal, growth cap, initial step)
     "0.3 0.2 2 0.01": _variant(0.3, 0.2),
     "0.2 0.1 2 0.1": _variant(0.2, 0.1, init=0.1),
     "0.2 0.1 3 0.1": _variant(0.2, 0.1, growth=3.0, init=0.1),
-    "0.3 0.2 2 0.1 (default)": _variant(0.3, 0.2, init=0.1),
+    "0.3 0.2 2 0.1 (round 10)": _variant(0.3, 0.2, init=0.1),
     "0.3 0.2 3 0.1": _variant(0.3, 0.2, growth=3.0, init=0.1),
     "0.4 0.2 3 0.1": _variant(0.4, 0.2, growth=3.0, init=0.1),
     "0.3 0.2 2 0.1, corrector 3e-4": _variant(0.3, 0.2, init=0.1, ctol=3e-4),
     "0.3 0.2 2 0.1, corrector 1e-3": _variant(0.3, 0.2, init=0.1, ctol=1e-3),
+    "0.3 0.2 2 0.1, estimate (default)": _variant(0.3, 0.2, init=0.1, estimate=True),
+    "0.3 0.2 2 0.1, estimate, corrector 3e-5": _variant(0.3, 0.2, init=0.1, ctol=3e-5,
+                                                        estimate=True),
 }
 
 

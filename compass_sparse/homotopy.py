@@ -53,7 +53,9 @@ without special treatment) by a predictor-corrector method:
   that needs more than ``CORRECTOR_ITERATIONS`` iterations halves h and retries; an
   accepted step rescales h by the observed contraction and first correction against
   their nominal values (at most doubling it); h below ``homotopy_step_minimum`` ends the
-  path.  Points are followed to the relative accuracy ``CORRECTOR_TOLERANCE`` only.
+  path.  Points are followed to the relative accuracy ``CORRECTOR_TOLERANCE`` only, judged
+  by the estimated distance to the curve after the last correction
+  (``CORRECTOR_ESTIMATE``).
 
 The bordered matrix is factorized densely (LAPACK's getrf) when the Jacobian is dense or
 small and by SuperLU otherwise (the border adds one dense row and column).  A dense
@@ -123,10 +125,20 @@ fewer steps, 17% fewer J and 7% fewer F evaluations than 0.2 and 0.1 (with 0.01)
 106 thesis instances that reach the homotopy, all solved either way
 (benchmarks/homotopy_steps.py)."""
 CORRECTOR_TOLERANCE = 1e-4
-"""Relative size of the last correction (to 1 + ||y||) at which the corrector stops.  The
+"""Relative distance to the curve (to 1 + ||y||) at which the corrector stops (see
+CORRECTOR_ESTIMATE).  The
 path only has to be followed closely enough not to jump to another branch; the end game
 gets the solution's accuracy.  On the thesis families 1e-4 took half the steps and a
 quarter of the evaluations of 1e-8 and found the same solutions."""
+CORRECTOR_ESTIMATE = True
+"""Stop the corrector when the estimated distance of its point to the curve, theta d /
+(1 - theta) with theta the ratio of the last two corrections and d the last one, is below
+the tolerance (True), or only when the last correction itself is (False; the last
+correction bounds the distance of the point *before* it, so that test asks one chord
+iteration more whenever the contraction is good).  On the 106 thesis instances that reach
+the homotopy (benchmarks/homotopy_steps.py): all solved either way, 11% fewer F
+evaluations, 2% fewer steps; at n = 500 (21 instances): 21/21 either way, 11% fewer F,
+9% fewer steps and 6% fewer J evaluations."""
 DENSE_DENSITY = HOMOTOPY_DENSE_DENSITY
 """Bordered systems whose Jacobian is at least this dense, or small (n <= DENSE_MAX_N),
 are factorized densely (the option ``homotopy_after_restarts`` reads the same rule)."""
@@ -552,7 +564,8 @@ class _Tracker:
                 # a correction of that size is not the predictor's error.
                 if first > max(DISTANCE_MAX * h, 10.0 * tol_y):
                     return None, False
-            if dn <= tol_y:
+            if dn <= tol_y or (CORRECTOR_ESTIMATE and prev is not None
+                               and dn * dn <= tol_y * (prev - dn)):
                 factor = max(kappa / KAPPA_NOMINAL, first / (DISTANCE_NOMINAL * h))
                 return (y, min(max(float(factor), 1.0 / STEP_GROWTH_MAX), 2.0)), True
             prev = dn
