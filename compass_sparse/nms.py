@@ -470,9 +470,13 @@ class NMSSolver:
         return out, letter
 
     # ------------------------------------------------------------------ one run
-    def _run(self, start, opt):
+    def _run(self, start, opt, stall_limit=None):
         """Crash + NMS from ``start`` (a point of the box, or an evaluated Point) with
-        options opt.  Returns when stuck (for a restart)."""
+        options opt.  Returns when stuck (for a restart or the homotopy): when the best
+        merit has not improved in ``stall_limit`` major iterations (default
+        opt.restart_stationary_limit)."""
+        if stall_limit is None:
+            stall_limit = opt.restart_stationary_limit
         lb, ub = self.lb, self.ub
         cur = start if isinstance(start, Point) else self._point(start)
         if cur is None:
@@ -598,7 +602,7 @@ class NMSSolver:
                 st.stall = 0
             else:
                 st.stall += 1
-                if st.stall >= opt.restart_stationary_limit:
+                if st.stall >= stall_limit:
                     return f"no progress in {st.stall} major iterations"
 
     def _descent_ok(self, cur, cand, R, opt):
@@ -683,9 +687,12 @@ class NMSSolver:
                 self._consider(start.z, start.f, start.phi, start.psi)
                 raise _Stop(Status.NO_PROGRESS, self._homotopy(z0))
             while True:
-                why = self._run(start, opt)
-                if (self.opt0.homotopy == "auto" and "homotopy" not in self.passes and
-                        self.restarts >= min(homotopy_after, self.opt0.restart_limit)):
+                homotopy_next = (self.opt0.homotopy == "auto" and "homotopy" not in self.passes
+                                 and self.restarts >= min(homotopy_after,
+                                                          self.opt0.restart_limit))
+                why = self._run(start, opt, stall_limit=self.opt0.homotopy_stationary_limit
+                                if homotopy_next else None)
+                if homotopy_next:
                     why = self._homotopy(z0)
                 if self.restarts >= self.opt0.restart_limit:
                     status, message = Status.NO_PROGRESS, f"{why}; restart limit reached"

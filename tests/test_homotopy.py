@@ -646,3 +646,20 @@ def test_corrector_points_are_within_the_tolerance_of_the_curve(monkeypatch, fam
     assert len(seen) >= 5
     assert max(seen) <= 2.0, max(seen)
     assert np.median(seen) <= 1.0
+
+
+@pytest.mark.parametrize("limit", [1, 2, 3])
+def test_homotopy_starts_after_homotopy_stationary_limit_stalled_iterations(limit):
+    """In the run the homotopy follows, NMS stops after homotopy_stationary_limit major
+    iterations without progress (billups: every iteration from the start stalls), and the
+    homotopy then solves the problem; restart_stationary_limit does not decide it."""
+    import known_problems as kp
+
+    k = kp.billups()
+    r = solve_mcp(k.F, k.J, k.lb, k.ub, k.x0,
+                  options={"homotopy_stationary_limit": limit, "restart_stationary_limit": 7})
+    assert r.success and r.passes["homotopy"].ran and r.restarts == 0
+    stalled = [h for h in r.history if h.step and "H" not in h.step]
+    assert len(stalled) == limit
+    assert r.nit == limit + 1  # the stalled iterations and the homotopy's
+    assert natural_residual(r.x, k.F(r.x), k.lb, k.ub) <= 1e-6

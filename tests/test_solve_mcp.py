@@ -352,8 +352,10 @@ def test_jac_forms_on_sparse_manufactured():
 
 # ----------------------------------------------------------------------------- limits & stops
 def test_major_iteration_limit_returns_best_point():
-    p = kp.kojima_shindo()  # needs several major iterations from 0 (without the crash)
-    o = {"crash_method": "none"}
+    # needs several major iterations from 0 (without the crash); without the homotopy,
+    # which would take over after the stall of homotopy_stationary_limit = 2 iterations
+    p = kp.kojima_shindo()
+    o = {"crash_method": "none", "homotopy": "off"}
     full = solve_mcp(p.F, p.J, p.lb, p.ub, p.x0, options=o)
     check_success(full, p.F, p.lb, p.ub)
     assert full.nit > 2
@@ -418,8 +420,10 @@ def test_callback_stop_iteration_and_information():
         if len(seen) == 3:
             raise StopIteration
 
-    # (without the crash: kojshin then takes more than 3 major iterations from 0)
-    r = solve_mcp(p.F, p.J, p.lb, p.ub, p.x0, callback=cb, options={"crash_method": "none"})
+    # (without the crash and the homotopy: kojshin then takes more than 3 major iterations
+    # from 0; the homotopy would take over after 2)
+    r = solve_mcp(p.F, p.J, p.lb, p.ub, p.x0, callback=cb,
+                  options={"crash_method": "none", "homotopy": "off"})
     assert r.status is Status.CALLBACK_STOP
     assert seen == sorted(seen) and len(seen) == 3
     # a callback that never stops changes nothing
