@@ -13,7 +13,11 @@ same code in both variants.  On a shared machine whose speed moves by up to 2x b
 minutes this separates the change from the drift, where timing two checkouts in turns
 of fresh processes (``alternate_revisions.py``) did not.
 
+``--stall`` instead compares the option homotopy_stationary_limit = 3 (the stall rule
+before round 11) with 2 (its default), both on the current code.
+
 Usage:  PYTHONPATH=. python3 benchmarks/ab_round11.py --old <worktree> [--rounds 20]
+        PYTHONPATH=. python3 benchmarks/ab_round11.py --stall [--rounds 20]
 """
 from __future__ import annotations
 
@@ -60,9 +64,19 @@ def _cases():
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--old", required=True)
+    ap.add_argument("--old")
+    ap.add_argument("--stall", action="store_true")
     ap.add_argument("--rounds", type=int, default=20)
     a = ap.parse_args(argv)
+    if a.stall:
+        rows = ab(_cases(), {"limit 3": (lambda: None, {"homotopy_stationary_limit": 3}),
+                             "limit 2": (lambda: None, {"homotopy_stationary_limit": 2})},
+                  a.rounds)
+        _print("homotopy_stationary_limit 2 against 3 (solver time per solve)", rows,
+               "limit 3", "limit 2", a.rounds)
+        return
+    if a.old is None:
+        ap.error("--old <worktree> is required (or --stall)")
     swaps = _swaps(a.old)
 
     def use(which):
