@@ -61,6 +61,11 @@ VARIANTS = {  # (kappa nominal, distance nominal, growth cap, initial step)
     "0.3 0.2 2 0.1, estimate (default)": _variant(0.3, 0.2, init=0.1, estimate=True),
     "0.3 0.2 2 0.1, estimate, corrector 3e-5": _variant(0.3, 0.2, init=0.1, ctol=3e-5,
                                                         estimate=True),
+    "0.3 0.2 3 0.1, estimate": _variant(0.3, 0.2, growth=3.0, init=0.1, estimate=True),
+    "0.3 0.2 2 0.3, estimate": _variant(0.3, 0.2, init=0.3, estimate=True),
+    "0.3 0.2 3 0.3, estimate": _variant(0.3, 0.2, growth=3.0, init=0.3, estimate=True),
+    "0.4 0.2 2 0.1, estimate": _variant(0.4, 0.2, init=0.1, estimate=True),
+    "0.3 0.3 2 0.1, estimate": _variant(0.3, 0.3, init=0.1, estimate=True),
 }
 
 
