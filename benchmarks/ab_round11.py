@@ -7,7 +7,8 @@ The functions round 11 changed are swapped, in this process, for their versions 
 older worktree (``--old``, a checkout of f2aee1a): the evaluator's ``f``, ``jac`` and
 ``_user_J_on_pattern``, the homotopy pass (its tracker, end game and path loop), the
 pivotal path's ``run``, ``_run`` and ``_finish`` with the hand-over from the one-call
-direct step (``_dense_direct_result``), and the major iteration's ``_newton_point``.  The
+direct step (``_dense_direct_result``), the small-problem engine's ``run_path`` (with the
+``_factor`` it called), and the major iteration's ``_newton_point``.  The
 old functions run on the current package's helpers and objects; everything else is the
 same code in both variants.  On a shared machine whose speed moves by up to 2x between
 minutes this separates the change from the drift, where timing two checkouts in turns
@@ -51,6 +52,13 @@ def _swaps(worktree):
     swaps += [(P.PivotalPath, k, getattr(op.PivotalPath, k), getattr(P.PivotalPath, k))
               for k in ("run", "_run", "_finish")]
     swaps.append((P, "_dense_direct_result", op._dense_direct_result, P._dense_direct_result))
+    import compass_sparse.dense_path as D
+
+    od = old_module(worktree, "dense_path")
+    od.LinearCode = P.LinearCode
+    swaps += [(D.DensePathEngine, "run_path", od.DensePathEngine.run_path,
+               D.DensePathEngine.run_path),
+              (D.DensePathEngine, "_factor", od.DensePathEngine._factor, None)]
     swaps.append((N.NMSSolver, "_newton_point", on.NMSSolver._newton_point,
                   N.NMSSolver._newton_point))
     return swaps

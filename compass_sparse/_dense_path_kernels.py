@@ -108,6 +108,7 @@ import numpy as np
 
 from ._jit import njit
 from ._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
+from ._slot_kernels import slot_table
 
 # path_loop return codes (mapped to LinearCode and messages by dense_path.py)
 RUNNING, SOLVED, RAY, CYCLE, MINOR_LIMIT, SINGULAR, TOLERANCE, ERROR = range(8)
@@ -794,6 +795,66 @@ def path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_coun
             fstate[F_EV] = zval[j]
         else:
             return ERROR, MSG_LEAVE_KIND
+
+
+@njit(cache=True)
+def start_path(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_count,
+               istate, fstate, L, U, R, perm, best_x, bp_t, bp_x, work, fwork,
+               piv_tol_base, ratio_tol, rank_tol, update_tol, stab_tol, growth_limit,
+               minor_limit, cycle_limit, max_pivots, free_below, below_limit, t_progress,
+               slack, use_slack, z, w, v):
+    """A path on the slot table (sk, si, xb) in one call: fresh state, the factorization
+    (again on the slot table of the basis ``slack`` when ``use_slack`` and the first one
+    is singular or holds artificials, as DensePathEngine.run_path did in Python), the
+    first ``max_pivots`` pivots, and the solution check when t reaches 1.  Returns
+    (factored, code, message): factored False with the SINGULAR message when no basis
+    could be factorized; code RUNNING when the pivots are used up (the caller continues
+    with path_loop)."""
+    n = sk.shape[0]
+    for k in range(istate.shape[0]):
+        istate[k] = 0
+    for k in range(fstate.shape[0]):
+        fstate[k] = 0.0
+    istate[I_TSLOT] = -1
+    istate[I_BELOW] = -1
+    for i in range(n):
+        displaced[i] = -1
+    msg = refactor(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate, L, U, R,
+                   perm, rank_tol, lb, ub, 0.0, work, fwork)
+    if use_slack:
+        artificial = False
+        for k in range(n):
+            if sk[k] == VAR_A:
+                artificial = True
+                break
+        if msg != 0 or artificial:
+            # PivotalPath._reset_slots on the basis without the inward guess
+            slot_table(slack, z, w, v, sk, si, xb)
+            for i in range(n):
+                zval[i] = z[i]
+                art_sign[i] = 1
+                displaced[i] = -1
+            msg = refactor(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate,
+                           L, U, R, perm, rank_tol, lb, ub, 0.0, work, fwork)
+    if msg != 0:
+        return False, SINGULAR, msg
+    fstate[F_T] = 0.0
+    istate[I_EK] = VAR_T
+    istate[I_EI] = 0
+    fstate[F_ES] = 1.0
+    fstate[F_EV] = 0.0
+    for j in range(enter_count.shape[1]):
+        for k in range(enter_count.shape[0]):
+            enter_count[k, j] = 0
+    code, msg = path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced,
+                          enter_count, istate, fstate, L, U, R, perm, best_x, bp_t, bp_x,
+                          work, fwork, piv_tol_base, ratio_tol, rank_tol, update_tol,
+                          stab_tol, growth_limit, minor_limit, cycle_limit, max_pivots,
+                          free_below, below_limit, t_progress)
+    if code == SOLVED:
+        code, msg = verify(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate, L,
+                           U, R, perm, rank_tol, lb, ub, fstate[F_TLOW], work, fwork)
+    return True, code, msg
 
 
 def allocate_factors(n: int, update_limit: int):

@@ -49,6 +49,8 @@ PIVOT_CHUNK = 1000
 
 _NAMES = "zwvatS"
 
+_NO_BASIS = np.empty(0, dtype=np.int8)  # start_path's slack basis when there is none
+
 _CODES = {K.SOLVED: LinearCode.SOLVED, K.RAY: LinearCode.RAY, K.CYCLE: LinearCode.CYCLE,
           K.MINOR_LIMIT: LinearCode.MINOR_LIMIT, K.SINGULAR: LinearCode.SINGULAR,
           K.TOLERANCE: LinearCode.TOLERANCE, K.ERROR: LinearCode.ERROR}
@@ -119,14 +121,6 @@ class DensePathEngine:
         self.r = np.ascontiguousarray(r, dtype=float)
 
     # ------------------------------------------------------------------ the path
-    def _factor(self, path, istate, fstate):
-        st = path.st
-        msg = K.refactor(self.M, path.q, self.r, st.sk, st.si, st.xb, st.zval,
-                         st.art_sign, self.displaced, istate, fstate, self.L, self.U, self.R,
-                         self.perm, self.rank_tolerance, path.lb, path.ub, st.t_lower,
-                         self.work, self.fwork)
-        return msg
-
     def run_path(self, path, z, w, v, slack_basis):
         """Factor, pivot and check on ``path``'s slot table (set by PivotalPath.run).
         Leaves the path's fields as its own loop would and returns (LinearCode, message)."""
@@ -136,44 +130,40 @@ class DensePathEngine:
         ub = np.ascontiguousarray(path.ub, dtype=float)
         path.lb, path.ub = lb, ub
         q = path.q = np.ascontiguousarray(path.q, dtype=float)
-        istate = np.zeros(K.N_ISTATE, dtype=np.int64)
-        fstate = np.zeros(K.N_FSTATE)
-        istate[K.I_TSLOT] = -1
-        istate[K.I_BELOW] = -1
-        self.displaced[:] = -1
+        istate = np.empty(K.N_ISTATE, dtype=np.int64)
+        fstate = np.empty(K.N_FSTATE)
         st = path.st  # the run's PathState: slot table set by PivotalPath.run
-        msg = self._factor(path, istate, fstate)
-        if slack_basis is not None and (msg != 0 or (st.sk == K.VAR_A).any()):
-            path._reset_slots(slack_basis, z, w, v)
-            self.displaced[:] = -1
-            msg = self._factor(path, istate, fstate)
-        if msg != 0:
+        opt = path.opt
+        tolerances = (opt.pivot_tolerance, opt.ratio_tolerance, self.rank_tolerance,
+                      self.pivot_tolerance, self.stability_tolerance, self.growth_limit,
+                      int(path.minor_limit), int(opt.lemke_cycle_limit), PIVOT_CHUNK,
+                      st.free_below, int(PK.BELOW_ZERO_PIVOTS), float(PK.T_PROGRESS))
+        # the state's reset, the factorization (again on the slack basis when needed),
+        # the first chunk of pivots and the solution check in one compiled call: a small
+        # path's Python around three calls cost more than its pivots
+        use_slack = slack_basis is not None
+        factored, code, msg = K.start_path(
+            self.M, q, self.r, lb, ub, st.sk, st.si, st.xb, st.zval, st.art_sign,
+            self.displaced, self.enter_count, istate, fstate, self.L, self.U, self.R,
+            self.perm, self.best_x, self.bp_t, self.bp_x, self.work, self.fwork, *tolerances,
+            slack_basis if use_slack else _NO_BASIS, use_slack, z, w, v)
+        if not factored:
             self._account(istate)
             return LinearCode.SINGULAR, self._message(msg, istate, fstate, path)
-        fstate[K.F_T] = 0.0
-        istate[K.I_EK], istate[K.I_EI] = K.VAR_T, 0
-        fstate[K.F_ES], fstate[K.F_EV] = 1.0, 0.0
-        self.enter_count[:] = 0
-        opt = path.opt
-        while True:
+        while code == K.RUNNING:
+            if path.deadline is not None and time.perf_counter() > path.deadline:
+                code, msg = K.MINOR_LIMIT, -1
+                break
             code, msg = K.path_loop(
                 self.M, q, self.r, lb, ub, st.sk, st.si, st.xb, st.zval,
                 st.art_sign, self.displaced, self.enter_count, istate, fstate, self.L,
                 self.U, self.R, self.perm, self.best_x, self.bp_t, self.bp_x, self.work,
-                self.fwork, opt.pivot_tolerance, opt.ratio_tolerance, self.rank_tolerance,
-                self.pivot_tolerance, self.stability_tolerance, self.growth_limit,
-                int(path.minor_limit), int(opt.lemke_cycle_limit), PIVOT_CHUNK,
-                st.free_below, int(PK.BELOW_ZERO_PIVOTS), float(PK.T_PROGRESS))
-            if code != K.RUNNING:
-                break
-            if path.deadline is not None and time.perf_counter() > path.deadline:
-                code, msg = K.MINOR_LIMIT, -1
-                break
-        if code == K.SOLVED:
-            code, msg = K.verify(self.M, q, self.r, st.sk, st.si, st.xb, st.zval,
-                                 st.art_sign, self.displaced, istate, fstate, self.L, self.U,
-                                 self.R, self.perm, self.rank_tolerance, lb, ub,
-                                 fstate[K.F_TLOW], self.work, self.fwork)
+                self.fwork, *tolerances)
+            if code == K.SOLVED:
+                code, msg = K.verify(self.M, q, self.r, st.sk, st.si, st.xb, st.zval,
+                                     st.art_sign, self.displaced, istate, fstate, self.L,
+                                     self.U, self.R, self.perm, self.rank_tolerance, lb, ub,
+                                     fstate[K.F_TLOW], self.work, self.fwork)
         st.unbounded = msg == K.MSG_RAY_UNBOUNDED
         if st.unbounded:
             # z moves along dz: basic z's at their rates, an entering z at its direction

@@ -338,3 +338,28 @@ def test_t_below_t_progress_is_not_progress_above_zero(monkeypatch, eps, t_progr
         assert abs(cc.t - eps / 3.0) <= 1e-3 * eps  # the path's best point
     else:
         assert np.allclose(cc.z, [0.0, 3.0, 0.0], atol=1e-6)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_singular_inward_guess_falls_back_to_the_slack_basis_in_the_engine(seed):
+    """A start where the inward guess makes z_i basic on a zero column of M: the guessed
+    basis is singular (an artificial repairs it), so the path starts again on the basis
+    without the guess.  The engine does this inside its one start call; it gives the
+    Python loop's path (same code, pivots, point and basis)."""
+    import scipy.sparse as sps
+
+    rng = np.random.default_rng(seed)
+    n = 6
+    M = rng.standard_normal((n, n)) + n * np.eye(n)
+    j = int(rng.integers(n))
+    M[:, j] = 0.0  # z_j's column: dependent whenever z_j is basic
+    M[j, j] = 0.0
+    q = rng.standard_normal(n)
+    q[j] = -1.0  # F_j < 0 at z = 0: the residual pushes z_j inwards
+    lb, ub = np.zeros(n), np.full(n, np.inf)
+    x = np.zeros(n)  # z = 0 at the lower bounds with no slack value: the guess applies
+    Ms = sps.csc_matrix(M)
+    r = Ms @ x + q
+    assert r[j] < 0.0
+    py, cc = _both((Ms, q, lb, ub), x=x, r=r)
+    _assert_same_path(py, cc, Ms, q)
