@@ -663,3 +663,22 @@ def test_homotopy_starts_after_homotopy_stationary_limit_stalled_iterations(limi
     assert len(stalled) == limit
     assert r.nit == limit + 1  # the stalled iterations and the homotopy's
     assert natural_residual(r.x, k.F(r.x), k.lb, k.ub) <= 1e-6
+
+
+def test_tracker_smoothing_scale_is_numpys_median_of_the_finite_widths():
+    """mu0 = homotopy_smoothing * max(median of the finite box widths, 1e-8), the median
+    taken without np.median's dispatch: np.median's value for odd and even counts, 1 when
+    no width is finite."""
+    rng = np.random.default_rng(2)
+    opt = Options()
+    for n in (1, 2, 3, 7, 10, 31):
+        for _ in range(10):
+            lb = rng.standard_normal(n) * 10.0 ** rng.integers(-3, 4)
+            ub = lb + rng.random(n) * 10.0 ** rng.integers(-3, 4)
+            lb[rng.random(n) < 0.3] = -np.inf
+            tr = hom._Tracker(None, lb, ub, opt, deadline=None, on_point=None, tol=1e-6,
+                              log=None)
+            w = (ub - lb)[np.isfinite(ub - lb)]
+            want = opt.homotopy_smoothing * max(float(np.median(w)) if w.size else 1.0,
+                                                1e-8)
+            assert tr.mu0 == want
