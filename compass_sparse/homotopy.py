@@ -81,6 +81,7 @@ by a new one from a random point of the box, up to ``homotopy_path_limit`` paths
 """
 from __future__ import annotations
 
+import contextlib
 import enum
 import logging
 import time
@@ -91,7 +92,7 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ._blas import single_threaded_blas
+from ._blas import BLAS_LIMIT_MIN_N, single_threaded_blas
 from ._homotopy_kernels import (bordered_pivots_ok, chord_correction, dense_bordered,
                                 homotopy_values, lu_solve, smoothed_projection, unit_tangent)
 from ._csc import csc_times
@@ -703,8 +704,10 @@ def homotopy_pass(solver, z_start, *, polish=None, center=None) -> HomotopyOutco
 
     try:
         # dense LU of the bordered system: one BLAS thread (a multithreaded BLAS ran these
-        # factorizations 10x slower on a loaded machine: 150 ms against 15 ms at n = 500)
-        with single_threaded_blas():
+        # factorizations 10x slower on a loaded machine: 150 ms against 15 ms at n = 500);
+        # below BLAS_LIMIT_MIN_N OpenBLAS keeps such small kernels on one thread itself
+        with (single_threaded_blas() if solver.n >= BLAS_LIMIT_MIN_N
+              else contextlib.nullcontext()):
             out = track_paths(solver.ev, solver.lb, solver.ub, z_start, solver.opt0,
                               center=center, on_point=solver._consider,
                               rng=lambda: solver.rng,

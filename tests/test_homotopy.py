@@ -682,3 +682,24 @@ def test_tracker_smoothing_scale_is_numpys_median_of_the_finite_widths():
             want = opt.homotopy_smoothing * max(float(np.median(w)) if w.size else 1.0,
                                                 1e-8)
             assert tr.mu0 == want
+
+
+@pytest.mark.parametrize("n", [10, 20])
+def test_homotopy_pass_limits_blas_threads_only_from_blas_limit_min_n(monkeypatch, n):
+    """The homotopy pass sets BLAS to one thread around its dense factorizations from
+    BLAS_LIMIT_MIN_N on; below it (OpenBLAS keeps such small kernels on one thread) the
+    thread count is not touched."""
+    import contextlib
+
+    from compass_sparse._blas import BLAS_LIMIT_MIN_N
+
+    entered = []
+
+    def counting():
+        entered.append(1)
+        return contextlib.nullcontext()
+
+    monkeypatch.setattr(hom, "single_threaded_blas", counting)
+    r = solve_mcp(thesis_family(n, 2, 1).problem, options={"homotopy": "only"})
+    assert r.passes["homotopy"].ran
+    assert len(entered) == (1 if n >= BLAS_LIMIT_MIN_N else 0)
