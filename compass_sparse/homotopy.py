@@ -375,7 +375,7 @@ class _Tracker:
         if want_jac:
             f, J = self.ev.fj(p)
         else:
-            f, J = self.ev.f(p), None
+            f, J = self.ev.f_once(p), None  # (the corrector's iterates: no memo)
         if f is None:
             return None
         if want_jac:
@@ -525,7 +525,7 @@ class _Tracker:
         n = self.n
         smoothed_projection(y[:n], self._mu(float(y[n])), self.lb, self.ub, p, self._dx,
                             self._dmu)
-        f = self.ev.f(p)
+        f = self.ev.f_once(p)
         if f is None:
             return None
         return chord_correction(f, y, yp, p, a, v, *Bf.lu, d)

@@ -321,3 +321,43 @@ def test_dense_jacobian_on_the_full_pattern_is_a_copy_equal_to_the_general_route
     kept = ev.J(np.ones(n))
     A[0, 0] += 1.0  # the user's array changes after the evaluation
     assert kept.toarray()[0, 0] == A[0, 0] - 1.0
+
+
+def test_f_once_is_f_without_the_memo_on_every_kind_of_evaluator():
+    """f_once (the homotopy corrector's evaluations): the values of f, counted at every
+    call (no memo: the same point twice is two evaluations), NaN and exceptions rejected
+    and counted as domain errors, our own errors passed on -- on the user's problem and
+    its scaled form (whose evaluator goes through the user's)."""
+    from compass_sparse.exceptions import ShapeError
+    from compass_sparse.scaling import equilibrate, scale_problem
+
+    def F(x):
+        if x[0] < -5:
+            raise ValueError("outside F's domain")
+        return np.array([np.nan if x[0] > 5 else 3.0 * x[0] + x[1], 1e4 * x[1] - 2.0])
+
+    def J(x):
+        return sp.csc_matrix(np.array([[3.0, 1.0], [0.0, 1e4]]))
+
+    p = cs.MCP(F, J, np.full(2, -10.0), np.full(2, 10.0), np.zeros(2))
+    sc = equilibrate(J(np.zeros(2)))
+    scaled = scale_problem(p, sc)
+    rng = np.random.default_rng(0)
+    for prob in (p, scaled):
+        ev = prob.evaluator
+        for _ in range(5):
+            x = rng.uniform(-4, 4, 2)
+            n0 = ev.counters.nfev
+            a = ev.f_once(x)
+            b = ev.f_once(x)
+            assert ev.counters.nfev == n0 + 2  # no memo
+            assert np.array_equal(a, ev.f(x)) and np.array_equal(a, b)
+        e0 = ev.counters.domain_errors
+        bad = np.array([6.0, 0.0]) if prob is p else np.array([6.0, 0.0]) / sc.col
+        assert ev.f_once(bad) is None and "NaN" in ev.last_error
+        worse = np.array([-6.0, 0.0]) if prob is p else np.array([-6.0, 0.0]) / sc.col
+        assert ev.f_once(worse) is None and "domain" in ev.last_error
+        assert ev.counters.domain_errors == e0 + 2
+    wrong = Evaluator(lambda x: np.ones(3), None, 2, pattern=sp.identity(2, format="csc"))
+    with pytest.raises(ShapeError):
+        wrong.f_once(np.zeros(2))
