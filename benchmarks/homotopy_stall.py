@@ -22,23 +22,18 @@ from pathlib import Path
 import numpy as np
 
 HERE = Path(__file__).resolve().parent
-sys.path[:0] = [str(HERE.parent), str(HERE.parent / "tests")]
+sys.path[:0] = [str(HERE.parent), str(HERE.parent / "tests"), str(HERE)]
 
 import known_problems as kp  # noqa: E402
 
+from homotopy_steps import _instances as thesis_and_billups  # noqa: E402
+
 from compass_sparse import MCP, solve_mcp  # noqa: E402
-from compass_sparse.generators import thesis_family  # noqa: E402
 
 
 def _instances(sizes):
-    for fam in (1, 2):
-        for n in sizes:
-            for seed in range(22 if n <= 50 else 8):
-                yield (f"fam{fam} n{n} s{seed}",
-                       lambda fam=fam, n=n, seed=seed: thesis_family(n, fam, seed).problem)
-    makers = dict(kp.ALL_SOLVABLE)
-    makers["billups"] = kp.billups
-    for name, make in makers.items():
+    yield from thesis_and_billups(sizes, seeds_small=22, seeds_large=8)
+    for name, make in kp.ALL_SOLVABLE.items():
         k = make()
         yield name, lambda k=k: MCP(k.F, k.J, k.lb, k.ub, k.x0)
 

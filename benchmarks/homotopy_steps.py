@@ -69,10 +69,12 @@ VARIANTS = {  # (kappa nominal, distance nominal, growth cap, initial step)
 }
 
 
-def _instances(sizes):
+def _instances(sizes, seeds_small=30, seeds_large=10):
+    """(label, maker) of the thesis instances (``seeds_small`` seeds up to n = 50,
+    ``seeds_large`` above) and billups."""
     for fam in (1, 2):
         for n in sizes:
-            for seed in range(30 if n <= 50 else 10):
+            for seed in range(seeds_small if n <= 50 else seeds_large):
                 yield (f"fam{fam} n{n} s{seed}",
                        lambda fam=fam, n=n, seed=seed: thesis_family(n, fam, seed).problem)
     p = kp.billups()
