@@ -138,6 +138,11 @@ def all_finite(x) -> bool:
     return bool(np.isfinite(x).all())
 
 
+def _entries_finite(J) -> bool:
+    """Whether every stored entry of the sparse matrix J is finite."""
+    return all_finite(J.data)
+
+
 class _Memo:
     """The last point and its value, plus one pinned point (the start point, asked for
     again by the preprocessor, its reduced problem and every restart).
@@ -350,11 +355,10 @@ class Evaluator:
         n = self.n
         if J.__class__ is np.ndarray and J.dtype == np.float64:
             # a dense float array (small problems): no sparse tests, no complex check
-            if P is not None and J.shape == (n, n) and P.indices.shape[0] == n * n:
-                # on the full pattern stored already: a copy of J, column after column
-                return trusted_csc(J.flatten(order="F"), P.indices.copy(), P.indptr.copy(),
-                                   (n, n))
-            return self._fix_pattern(_dense_csc(J, n))
+            C = _dense_csc(J, n)
+            if P is not None and P.indices.shape[0] == n * n:
+                return C  # on the full pattern stored already: nothing to check
+            return self._fix_pattern(C)
         if (P is not None and sp.issparse(J) and J.format == "csc" and J.shape == (n, n)
                 and J.data.dtype == np.float64 and J.indices.dtype == np.int32
                 and J.indptr.dtype == np.int32 and P.indices.dtype == np.int32
@@ -521,8 +525,14 @@ class Evaluator:
     def guarded(self, call, finite, what):
         """call(), or None when it raised or its value is not ``finite`` (the point is
         rejected and counted as a domain error; the solver's errors and Ctrl-C pass)."""
+        return self._guarded(call, (), finite, what)
+
+    def _guarded(self, fn, args, finite, what):
+        """guarded() of fn(*args): the evaluations of every point of a solve pass their
+        method and arguments, not a closure made per call (~2 us of a small model's
+        evaluation)."""
         try:
-            v = call()
+            v = fn(*args)
         except (CompassError, KeyboardInterrupt):
             raise
         except Exception as exc:  # the user's function failed here: reject the point
@@ -531,45 +541,22 @@ class Evaluator:
             return self._reject(f"{what} returned NaN/Inf")
         return v
 
-    # f and jac are guarded() written out: they run at every point of a solve, where the
-    # closure and the test callable cost a small model ~2 us per evaluation.
     def f(self, x, _k=None):
         """F(x), or None when F raised or returned NaN/Inf there (counted)."""
-        try:
-            v = self.F(x, _k)
-        except (CompassError, KeyboardInterrupt):
-            raise
-        except Exception as exc:  # the user's function failed here: reject the point
-            return self._reject(repr(exc))
-        if not all_finite(v):
-            return self._reject("F returned NaN/Inf")
-        return v
+        return self._guarded(self.F, (x, _k), all_finite, "F")
 
     def f_once(self, x):
         """:meth:`f` at a point the solver will not ask about again (the homotopy's
         corrector iterates): counted and guarded the same, without the memo's look-up and
         store (~3 us of a small problem's evaluation, the memo would never be hit)."""
-        try:
-            v = self._call_F(np.asarray(x, dtype=float))[0]
-        except (CompassError, KeyboardInterrupt):
-            raise
-        except Exception as exc:
-            return self._reject(repr(exc))
-        if not all_finite(v):
-            return self._reject("F returned NaN/Inf")
-        return v
+        return self._guarded(self._F_value, (x,), all_finite, "F")
+
+    def _F_value(self, x):
+        return self._call_F(np.asarray(x, dtype=float))[0]
 
     def jac(self, x, f=None, _k=None):
         """J(x), or None when J raised or returned NaN/Inf there (counted)."""
-        try:
-            J = self.J(x, f, _k)
-        except (CompassError, KeyboardInterrupt):
-            raise
-        except Exception as exc:
-            return self._reject(repr(exc))
-        if not all_finite(J.data):
-            return self._reject("J returned NaN/Inf")
-        return J
+        return self._guarded(self.J, (x, f, _k), _entries_finite, "J")
 
     def fj(self, x):
         """(f, J), or (None, None) when either is rejected (the memo key of x is made
