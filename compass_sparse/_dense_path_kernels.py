@@ -806,8 +806,8 @@ def start_path(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_cou
     """A path on the slot table (sk, si, xb) in one call: fresh state, the factorization
     (again on the slot table of the basis ``slack`` when ``use_slack`` and the first one
     is singular or holds artificials, as DensePathEngine.run_path did in Python), the
-    first ``max_pivots`` pivots, and the solution check when t reaches 1.  Returns
-    (factored, code, message): factored False with the SINGULAR message when no basis
+    first ``max_pivots`` pivots, and the solution check when t reaches 1 (:func:`run_pivots`).
+    Returns (factored, code, message): factored False with the SINGULAR message when no basis
     could be factorized; code RUNNING when the pivots are used up (the caller continues
     with path_loop)."""
     n = sk.shape[0]
@@ -846,6 +846,21 @@ def start_path(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_cou
     for j in range(enter_count.shape[1]):
         for k in range(enter_count.shape[0]):
             enter_count[k, j] = 0
+    code, msg = run_pivots(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced,
+                           enter_count, istate, fstate, L, U, R, perm, best_x, bp_t, bp_x,
+                           work, fwork, piv_tol_base, ratio_tol, rank_tol, update_tol,
+                           stab_tol, growth_limit, minor_limit, cycle_limit, max_pivots,
+                           free_below, below_limit, t_progress)
+    return True, code, msg
+
+
+@njit(cache=True)
+def run_pivots(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_count,
+               istate, fstate, L, U, R, perm, best_x, bp_t, bp_x, work, fwork, piv_tol_base,
+               ratio_tol, rank_tol, update_tol, stab_tol, growth_limit, minor_limit,
+               cycle_limit, max_pivots, free_below, below_limit, t_progress):
+    """Up to ``max_pivots`` pivots of the path (path_loop) and, when t reaches 1, the
+    solution check (verify): (code, message), RUNNING when the pivots are used up."""
     code, msg = path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced,
                           enter_count, istate, fstate, L, U, R, perm, best_x, bp_t, bp_x,
                           work, fwork, piv_tol_base, ratio_tol, rank_tol, update_tol,
@@ -854,7 +869,7 @@ def start_path(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_cou
     if code == SOLVED:
         code, msg = verify(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate, L,
                            U, R, perm, rank_tol, lb, ub, fstate[F_TLOW], work, fwork)
-    return True, code, msg
+    return code, msg
 
 
 def allocate_factors(n: int, update_limit: int):

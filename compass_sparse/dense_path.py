@@ -154,16 +154,11 @@ class DensePathEngine:
             if path.deadline is not None and time.perf_counter() > path.deadline:
                 code, msg = K.MINOR_LIMIT, -1
                 break
-            code, msg = K.path_loop(
+            code, msg = K.run_pivots(
                 self.M, q, self.r, lb, ub, st.sk, st.si, st.xb, st.zval,
                 st.art_sign, self.displaced, self.enter_count, istate, fstate, self.L,
                 self.U, self.R, self.perm, self.best_x, self.bp_t, self.bp_x, self.work,
                 self.fwork, *tolerances)
-            if code == K.SOLVED:
-                code, msg = K.verify(self.M, q, self.r, st.sk, st.si, st.xb, st.zval,
-                                     st.art_sign, self.displaced, istate, fstate, self.L,
-                                     self.U, self.R, self.perm, self.rank_tolerance, lb, ub,
-                                     fstate[K.F_TLOW], self.work, self.fwork)
         st.unbounded = msg == K.MSG_RAY_UNBOUNDED
         if st.unbounded:
             # z moves along dz: basic z's at their rates, an entering z at its direction

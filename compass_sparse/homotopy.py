@@ -251,12 +251,7 @@ class _Bordered:
                 B[:n, n] = c[:n]
                 B[n, :] = v
                 B[n, n] = v[n]
-            # LAPACK's getrf directly (what scipy.linalg.lu_factor calls, without its
-            # checks and dispatch: ~35 us a step at n = 1); the solves are compiled
-            lu, piv, info = _getrf(B, overwrite_a=True)
-            if info < 0:
-                raise ValueError(f"illegal argument {-info} of getrf")
-            self.lu = (lu, piv)
+            lu, piv = self.lu = _dense_lu(B)
             if not bordered_pivots_ok(lu):
                 raise np.linalg.LinAlgError("singular bordered matrix")
         else:
@@ -283,16 +278,24 @@ def _solve_square(A, b, dense: bool):
         # getrf and the compiled triangular solves: scipy's lu_factor and lu_solve cost a
         # small problem's end game ~25 us per Newton iteration in their checks and dispatch
         M = A.toarray() if sp.issparse(A) else A
-        lu, piv, info = _getrf(np.asarray(M, dtype=float), overwrite_a=True)
-        if info < 0:
-            raise ValueError(f"illegal argument {-info} of getrf")
         x = np.array(b, dtype=float)
-        lu_solve(lu, piv, x)
+        lu_solve(*_dense_lu(np.asarray(M, dtype=float)), x)
         return x
     return spla.splu(sp.csc_matrix(A), permc_spec="COLAMD").solve(b)
 
 
 _getrf = sla.lapack.get_lapack_funcs("getrf", (np.empty(1),))
+
+
+def _dense_lu(A):
+    """(lu, piv) of A by LAPACK's getrf directly, in place when A is Fortran-ordered (what
+    scipy.linalg.lu_factor calls, without its checks and dispatch: ~35 us a step at n = 1;
+    the solves with these factors are compiled: lu_solve).  An exactly singular A gives
+    factors with a zero pivot (the callers test the pivots or the solution)."""
+    lu, piv, info = _getrf(A, overwrite_a=True)
+    if info < 0:
+        raise ValueError(f"illegal argument {-info} of getrf")
+    return lu, piv
 
 
 def _float_csc(J):

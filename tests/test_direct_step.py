@@ -583,9 +583,10 @@ def test_failed_one_call_step_hands_the_path_the_start_it_would_compute(seed):
     """When the one-call dense direct step fails, the path runs from the start that call
     computed: the components of x, the start basis with the inward guess and, when the
     guess changed the basis, the basis before it -- what PivotalPath._run computes
-    itself (path.components, path.default_basis and its inward rule)."""
+    itself (path.components and path.start_basis_with_guess)."""
     from compass_sparse.direct_step import dense_direct_path
-    from compass_sparse.path import VAR_Z, WarmBasis, components, default_basis
+    from compass_sparse.path import (WarmBasis, components, default_basis,
+                                     start_basis_with_guess)
 
     rng = np.random.default_rng(seed)
     got = set()
@@ -604,14 +605,7 @@ def test_failed_one_call_step_hands_the_path_the_start_it_would_compute(seed):
             continue
         z, w, v, basic, slack = out[1]
         z0, w0, v0 = components(x, lb, ub)
-        b0 = default_basis(z0, lb, ub, warm)
-        want_slack = None
-        if warm is None:
-            inward = ((z0 <= lb) & (w0 == 0) & (r < 0)) | ((z0 >= ub) & (v0 == 0) & (r > 0))
-            inward &= lb < ub
-            if inward.any():
-                want_slack = b0.copy()
-                b0[inward] = VAR_Z
+        b0, want_slack = start_basis_with_guess(z0, w0, v0, r, lb, ub, warm)
         for a, b in ((z, z0), (w, w0), (v, v0), (basic, b0)):
             assert np.array_equal(a, b)
         assert (slack is None) == (want_slack is None)
