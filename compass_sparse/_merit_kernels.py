@@ -144,6 +144,18 @@ def fb_gradient_kernel(z, f, lb, ub, phi, indptr, indices, data, g):
 
 
 @njit(cache=True)
+def fb_directional_kernel(z, f, lb, ub, phi, indptr, indices, data, zc, g, d):
+    """grad Psi(z) . (zc - z), the directional derivative of the descent test of a major
+    iteration, in one call: g as fb_gradient_kernel, d = zc - z, and their product by
+    np.dot (the same BLAS routine as the array formula's ``g @ (zc - z)``, so the same
+    bits).  ``g``, ``d``: work vectors of length n."""
+    fb_gradient_kernel(z, f, lb, ub, phi, indptr, indices, data, g)
+    for i in range(z.shape[0]):
+        d[i] = zc[i] - z[i]
+    return np.dot(g, d)
+
+
+@njit(cache=True)
 def csc_diagonal(indptr, indices, data, diag):
     """diag[j] = A_jj of a CSC matrix A (duplicates summed, 0 where not stored), as
     scipy's A.diagonal() without its dispatch (~15 us on a small matrix)."""

@@ -34,7 +34,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from ._eval_kernels import top_abs_distinct
-from ._merit_kernels import (csc_rmatvec, fb_diagonals_kernel, fb_gradient_kernel,
+from ._merit_kernels import (csc_rmatvec, fb_diagonals_kernel, fb_directional_kernel,
+                              fb_gradient_kernel,
                              fb_phi_kernel, max_abs_kernel, normal_map_kernel,
                              residual_maxima_kernel)
 
@@ -44,6 +45,7 @@ __all__ = [
     "fb_psi",
     "fb_jacobian_diagonals",
     "fb_gradient",
+    "fb_directional",
     "project",
     "normal_map",
     "normal_map_at",
@@ -241,6 +243,22 @@ def fb_gradient(z, f, J, lb, ub, phi=None):
         csc_rmatvec(J.indptr, J.indices, J.data, u, jtu)  # J^T u without building J^T
         return da * phi + jtu
     return da * phi + J.T @ u
+
+
+def fb_directional(z, f, J, lb, ub, phi, zc) -> float:
+    """grad Psi(z) . (zc - z): the directional derivative of the merit function towards
+    zc, as ``fb_gradient(z, f, J, lb, ub, phi) @ (zc - z)`` (the same bits), in one
+    compiled call for the solver's own vectors and J (the descent test of a major
+    iteration: the gradient, the difference and the product were three calls and three
+    arrays)."""
+    if (_solver_vectors(z, f, lb, ub) and float_vector(phi) and float_vector(zc)
+            and phi.shape == z.shape and zc.shape == z.shape and sp.issparse(J)
+            and J.format == "csc" and J.shape == (z.shape[0],) * 2
+            and J.data.dtype == np.float64):
+        w = np.empty((2, z.shape[0]))  # g and zc - z: one allocation, C rows
+        return float(fb_directional_kernel(z, f, lb, ub, phi, J.indptr, J.indices, J.data,
+                                           zc, w[0], w[1]))
+    return float(fb_gradient(z, f, J, lb, ub, phi) @ (np.asarray(zc, dtype=float) - z))
 
 
 def project(x, lb, ub):

@@ -57,7 +57,7 @@ from .direct_step import (DIRECT_MIN_N, REUSE_BEATS_REFACTOR_NNZ, DirectFactors,
 from .evaluation import all_finite
 from .exceptions import FactorBudgetError
 from .fallback import gradient_steps, lm_step
-from .merit import (_solver_vectors, fb_gradient, fb_phi, fb_psi, max_abs_diff,
+from .merit import (_solver_vectors, fb_directional, fb_phi, fb_psi, max_abs_diff,
                     normal_map_at, project)
 from .path import LinearCode, WarmBasis, solve_linear_mcp
 from .progress import ProgressLine
@@ -609,8 +609,7 @@ class NMSSolver:
         # The directional derivative of Psi at z_k uses the Jacobian of this major iteration.
         J = self._last_J
         if J is not None:
-            g = fb_gradient(cur.z, cur.f, J, self.lb, self.ub, cur.phi)
-            dd = float(g @ (cand.z - cur.z))
+            dd = fb_directional(cur.z, cur.f, J, self.lb, self.ub, cur.phi, cand.z)
             if dd < 0:
                 return cand.psi <= R + opt.nms_sigma * dd
         return cand.psi <= (1.0 - opt.nms_sigma) * R

@@ -19,7 +19,7 @@ import scipy.sparse as sp
 from .acceptance import Acceptance, judge
 from .crash import crash
 from .exceptions import CompassError
-from .merit import fb_phi, fb_psi, normal_map_at, residual_report
+from .merit import dot_norm, fb_phi, fb_psi, normal_map_at, residual_report
 from .nms import NMSSolver, Point
 from .options import Options
 from .exceptions import ShapeError
@@ -495,7 +495,7 @@ class _UserJacobian:
 def _history(solver, out, phi0):
     """The start point, every logged major iteration, and the final point when the solve
     stopped inside a major iteration (a solution found during a search: empty type)."""
-    hist = [Iteration(0, float(np.linalg.norm(phi0)), "", 0, 0.0, 0.0)] + solver.history
+    hist = [Iteration(0, dot_norm(phi0), "", 0, 0.0, 0.0)] + solver.history
     if out.best is not None and hist[-1].nit < out.nit:
         hist.append(Iteration(out.nit, out.best.fbn, "", 0, 0.0,
                               time.perf_counter() - solver._t_start))
