@@ -180,3 +180,27 @@ def chord_correction(f, y, yp, p, a, v, lu, piv, d):
         s += d[i] * d[i]
         y[i] += d[i]
     return math.sqrt(s)
+
+
+@njit(cache=True)
+def chord_step(f, y, yp, p, a, v, lu, piv, d, mu0, lb, ub, dx, dmu):
+    """One chord iteration of the dense corrector in one call: chord_correction at y (p =
+    p_mu(x), f = F(p)), then, when its correction is finite, the smoothed projection of
+    the corrected point for the next iteration -- p, dx, dmu at the new x with mu = mu0
+    max(1 - lam, 0), the tracker's mu(lam) -- in place.  The values of the two kernels
+    called in turn (the same bits); returns chord_correction's ||d||_2 or -1.0."""
+    dn = chord_correction(f, y, yp, p, a, v, lu, piv, d)
+    if dn >= 0.0:
+        n = p.shape[0]
+        c = 1.0 - y[n]
+        smoothed_projection(y[:n], mu0 * (0.0 if 0.0 > c else c), lb, ub, p, dx, dmu)
+    return dn
+
+
+@njit(cache=True)
+def bordered_values(f, x, p, a, lam, G, H, indptr, indices, data, dx, dmu, mu0, B, work):
+    """homotopy_values and dense_bordered of an accepted point in one call (the same
+    bits): G, H and the first n rows of the bordered matrix B."""
+    homotopy_values(f, x, p, a, lam, G, H)
+    dense_bordered(indptr, indices, data, dx, dmu, lam, mu0, G, x, a, B, work)
+

@@ -93,8 +93,9 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ._blas import BLAS_LIMIT_MIN_N, single_threaded_blas
-from ._homotopy_kernels import (bordered_pivots_ok, chord_correction, dense_bordered,
-                                homotopy_values, lu_solve, smoothed_projection, unit_tangent)
+from ._homotopy_kernels import (bordered_pivots_ok, bordered_values, chord_step,
+                                homotopy_values, lu_solve, smoothed_projection,
+                                unit_tangent)
 from ._csc import csc_times
 from ._merit_kernels import csc_to_dense
 from .evaluation import all_finite
@@ -384,29 +385,33 @@ class _Tracker:
         if want_jac:
             self._offer(p, f)
         lam = float(lam)
-        if _floats(self.n, f, x, p, a):
-            G, H = np.empty(self.n), np.empty(self.n)
+        floats = _floats(self.n, f, x, p, a)
+        n = self.n
+        if want_jac:
+            if J is None:
+                return None
+            J = _float_csc(J)
+            if self.dense is None:
+                self.dense = n <= DENSE_MAX_N or J.nnz >= DENSE_DENSITY * n * n
+            if self.dense and floats and _floats(n, dx, dmu):
+                # the map's values, H_x and H_lam in one compiled call, the latter two as
+                # views of the bordered matrix that factor() completes with the tangent's
+                # row and factors in place (column-major for getrf)
+                G, H = np.empty(n), np.empty(n)
+                B = np.empty((n + 1, n + 1), order="F")
+                bordered_values(f, x, p, a, lam, G, H, J.indptr, J.indices, J.data, dx, dmu,
+                                self.mu0, B, np.empty(n))
+                return H, B[:n, :n], B[:n, n]
+        if floats:
+            G, H = np.empty(n), np.empty(n)
             homotopy_values(f, x, p, a, lam, G, H)
         else:
             G = f + x - p
             H = lam * G + (1.0 - lam) * (x - a)
         if not want_jac:
             return H, None, None
-        if J is None:
-            return None
-        J = _float_csc(J)
-        n = self.n
-        if self.dense is None:
-            self.dense = n <= DENSE_MAX_N or J.nnz >= DENSE_DENSITY * n * n
         # H_x = lam (J D + I - D) + (1 - lam) I = lam J D + I - lam D
         # dH/dlam = G - (x - a) + lam (J - I) dp/dmu * dmu/dlam,  dmu/dlam = -mu0
-        if self.dense and _floats(n, dx, dmu, G, x, a):
-            # Hx and Hlam in one pass, as views of the bordered matrix that factor() will
-            # complete with the tangent's row and factor in place (column-major for getrf)
-            B = np.empty((n + 1, n + 1), order="F")
-            dense_bordered(J.indptr, J.indices, J.data, dx, dmu, lam, self.mu0, G, x, a, B,
-                           np.empty(n))
-            return H, B[:n, :n], B[:n, n]
         if self.dense:
             Hx = _dense(J)
             Hx *= lam * dx  # scales column j by lam dx_j
@@ -476,15 +481,16 @@ class _Tracker:
             if retried:  # do not grow right after a rejection (avoids oscillating)
                 factor = max(factor, 1.0)
             self.steps += 1
+            x_max = max_abs(yn[:-1])  # (the divergence test's too, below)
             h = min(max(h, dot_norm(yn - y)) / factor,
-                    opt.homotopy_maximum_step * (1.0 + max_abs(yn[:-1])))
+                    opt.homotopy_maximum_step * (1.0 + x_max))
             y, v = yn, tau
             self._y = y
             lam = y[-1]
             if self.log is not None and self.steps % 20 == 0:
                 self.log(f"homotopy step {self.steps:5d} lam {lam:.6f} h {h:9.2e} "
                          f"|x| {np.linalg.norm(y[:-1], np.inf):9.2e}")
-            if not all_finite(y) or max_abs(y[:-1]) > bound:
+            if not all_finite(y) or x_max > bound:
                 return (HomotopyStatus.DIVERGED,
                         f"||x|| exceeded {bound:.3g} at lam = {lam:.6f}", y)
             if lam < -0.5:
@@ -521,18 +527,6 @@ class _Tracker:
             tau = -tau
         return tau, int(tau[-1] * v[-1] < 0)  # lam changed direction: a turning point
 
-    def _chord_dense(self, y, yp, a, Bf, v, d, p):
-        """One chord iteration of a dense problem in two compiled calls around F: y += d
-        in place.  Returns ||d||, None when F is undefined at the point, -1.0 when d is not
-        finite.  (``d``, ``p``: work vectors of n + 1 and n floats.)"""
-        n = self.n
-        smoothed_projection(y[:n], self._mu(float(y[n])), self.lb, self.ub, p, self._dx,
-                            self._dmu)
-        f = self.ev.f_once(p)
-        if f is None:
-            return None
-        return chord_correction(f, y, yp, p, a, v, *Bf.lu, d)
-
     def _correct(self, yp, a, Bf, v):
         """Chord iterations with the factorization Bf.  Returns ((y, step factor), ok): the
         factor by which the next step is divided, from the contraction ratio kappa and the
@@ -547,11 +541,22 @@ class _Tracker:
         # last bits may differ from the array route's, which remains for the others)
         fast = Bf.dense and _floats(self.n, a, self.lb, self.ub) and float_vector(y) \
             and float_vector(v)
-        p = np.empty(self.n) if fast else None
+        p = None
+        if fast:  # p = p_mu(x) of the first iterate; each chord step makes the next one's
+            n = self.n
+            p = np.empty(n)
+            smoothed_projection(y[:n], self._mu(float(y[n])), self.lb, self.ub, p, self._dx,
+                                self._dmu)
         for _ in range(CORRECTOR_ITERATIONS):
             if fast:
-                dn = self._chord_dense(y, yp, a, Bf, v, rhs, p)
-                if dn is None or dn < 0.0:  # F undefined, or a non-finite correction
+                # one chord iteration of a dense problem: F, then one compiled call (y += d
+                # in place, and p at the new point)
+                f = self.ev.f_once(p)
+                if f is None:  # F undefined at the point
+                    return None, False
+                dn = chord_step(f, y, yp, p, a, v, *Bf.lu, rhs, self.mu0, self.lb, self.ub,
+                                self._dx, self._dmu)
+                if dn < 0.0:  # a non-finite correction
                     return None, False
             else:
                 r = self.residual(y, a, False)

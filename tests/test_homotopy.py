@@ -327,13 +327,13 @@ def test_a_non_finite_correction_shortens_the_step_instead_of_failing_the_solve(
     # through _Bordered.solve.
     calls = {"n": 0}
     if route == "compiled":
-        chord = hom.chord_correction
+        chord = hom.chord_step
 
         def flaky(*args):
             calls["n"] += 1
             return -1.0 if calls["n"] % 3 == 0 else chord(*args)
 
-        monkeypatch.setattr(hom, "chord_correction", flaky)
+        monkeypatch.setattr(hom, "chord_step", flaky)
     else:
         solve = hom._Bordered.solve
 
@@ -561,6 +561,46 @@ def test_compiled_tangent_and_chord_steps_agree_with_the_array_route(monkeypatch
             np.testing.assert_allclose(fast[0][0], slow[0][0], rtol=1e-10, atol=1e-12)
             assert abs(fast[0][1] - slow[0][1]) <= 1e-8 * abs(slow[0][1])
     assert compared >= 2
+
+
+@pytest.mark.parametrize("n,lam", [(1, 0.3), (7, 0.999), (30, 1.0), (12, 1.2)])
+def test_chord_step_is_the_correction_then_the_next_smoothed_projection_bit_for_bit(n, lam):
+    """chord_step (one call per chord iteration of the dense corrector) gives what
+    chord_correction followed by smoothed_projection at the corrected point, with the
+    tracker's mu(lam) (0 past lam = 1), gives: the same y, d, p, dp/dx, dp/dmu and ||d||
+    bits; a non-finite correction (-1.0) leaves p alone."""
+    from compass_sparse._homotopy_kernels import (chord_correction, chord_step,
+                                                  smoothed_projection)
+
+    g = thesis_family(n, 2, seed=n)
+    p = g.problem
+    rng = np.random.default_rng(n)
+    a = np.clip(rng.normal(size=n), p.lb, p.ub)
+    tr = hom._Tracker(p.evaluator, p.lb, p.ub, Options(), deadline=None, on_point=None,
+                      tol=1e-12, log=None)
+    y = np.append(a + rng.normal(scale=0.1, size=n), lam)
+    v = rng.normal(size=n + 1)
+    H, Hx, Hlam = tr.residual(y, a, True)
+    lu, piv = tr.factor(Hx, Hlam, v).lu
+    yp = y + 1e-3 * rng.normal(size=n + 1)
+    pt = np.empty(n)
+    smoothed_projection(yp[:n], tr._mu(float(yp[n])), tr.lb, tr.ub, pt, np.empty(n),
+                        np.empty(n))
+    f = p.F(pt)
+    y1, p1, d1, dx1, dm1 = yp.copy(), pt.copy(), np.empty(n + 1), np.empty(n), np.empty(n)
+    dn1 = chord_step(f, y1, yp, p1, a, v, lu, piv, d1, tr.mu0, tr.lb, tr.ub, dx1, dm1)
+    y2, p2, d2, dx2, dm2 = yp.copy(), pt.copy(), np.empty(n + 1), np.empty(n), np.empty(n)
+    dn2 = chord_correction(f, y2, yp, p2, a, v, lu, piv, d2)
+    smoothed_projection(y2[:n], tr._mu(float(y2[n])), tr.lb, tr.ub, p2, dx2, dm2)
+    assert dn1 == dn2 >= 0.0
+    for u, w in ((y1, y2), (d1, d2), (p1, p2), (dx1, dx2), (dm1, dm2)):
+        assert u.tobytes() == w.tobytes()
+    bad = lu.copy()
+    bad[-1, -1] = 0.0  # a zero pivot: the correction is not finite
+    p3 = pt.copy()
+    assert chord_step(f, yp.copy(), yp, p3, a, v, bad, piv, np.empty(n + 1), tr.mu0, tr.lb,
+                      tr.ub, np.empty(n), np.empty(n)) == -1.0
+    assert p3.tobytes() == pt.tobytes()
 
 
 @pytest.mark.parametrize("family,seed", [(1, 10), (2, 1), (2, 5), (2, 27)])
