@@ -29,7 +29,7 @@ import sys
 sys.path[:0] = [os.path.dirname(__file__), os.path.join(os.path.dirname(__file__), "..", "tests")]
 
 import bench_small as bs
-from ab_round8 import _print, ab, old_module
+from ab_round8 import _print, ab, ab_swapped, old_module
 
 
 def _swaps(worktree):
@@ -85,14 +85,8 @@ def main(argv=None):
         return
     if a.old is None:
         ap.error("--old <worktree> is required (or --stall)")
-    swaps = _swaps(a.old)
-
-    def use(which):
-        return lambda: [setattr(owner, k, (old, new)[which]) for owner, k, old, new in swaps]
-
-    rows = ab(_cases(), {"round 10": (use(0), None), "round 11": (use(1), None)}, a.rounds)
-    _print("Round 11's changes against round 10's functions (solver time per solve)", rows,
-           "round 10", "round 11", a.rounds)
+    ab_swapped(_cases(), _swaps(a.old), ("round 10", "round 11"), a.rounds,
+               "Round 11's changes against round 10's functions (solver time per solve)")
 
 
 if __name__ == "__main__":

@@ -29,7 +29,7 @@ import time
 sys.path[:0] = [os.path.dirname(__file__), os.path.join(os.path.dirname(__file__), "..", "tests")]
 
 import bench_small as bs
-from ab_round8 import _print, ab, old_module
+from ab_round8 import ab_swapped, old_module
 
 from compass_sparse import solve_mcp
 
@@ -101,14 +101,8 @@ def main(argv=None):
         return
     if a.old is None:
         ap.error("--old <worktree> is required (or --order)")
-    swaps = _swaps(a.old)
-
-    def use(which):
-        return lambda: [setattr(owner, k, (old, new)[which]) for owner, k, old, new in swaps]
-
-    rows = ab(_cases(), {"round 11": (use(0), None), "round 12": (use(1), None)}, a.rounds)
-    _print("Round 12's changes against round 11's functions (solver time per solve)", rows,
-           "round 11", "round 12", a.rounds)
+    ab_swapped(_cases(), _swaps(a.old), ("round 11", "round 12"), a.rounds,
+               "Round 12's changes against round 11's functions (solver time per solve)")
 
 
 if __name__ == "__main__":

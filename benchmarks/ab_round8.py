@@ -79,6 +79,17 @@ def _print(title, rows, la, lb, rounds):
               f"{w}/{rounds} |")
 
 
+def ab_swapped(cases, swaps, labels, rounds, title):
+    """ab() of the functions ``swaps`` ([(owner, attribute, old value, current value)])
+    in their old and their current versions, printed under ``title``; ``labels``: the
+    (old, current) column names."""
+    def use(which):
+        return lambda: [setattr(owner, k, pair[which]) for owner, k, *pair in swaps]
+
+    rows = ab(cases, {labels[0]: (use(0), None), labels[1]: (use(1), None)}, rounds)
+    _print(title, rows, labels[0], labels[1], rounds)
+
+
 def old_module(worktree, name):
     """The module ``name`` of the package in an older worktree, loaded beside the current
     one (as ``compass_sparse.<name>_old``, once per process)."""

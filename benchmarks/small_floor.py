@@ -26,9 +26,9 @@ import time
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path[:0] = [HERE, os.path.join(HERE, "..", "tests")]
 
-import bench_small as bs  # noqa: E402
+import bench_small as bs
 
-from compass_sparse import solve_mcp  # noqa: E402
+from compass_sparse import solve_mcp
 
 PROBLEMS = ("cournot2", "kojshin", "double_root", "log_ncp", "billups", "fam2_n10_s1",
             "fam2_n10_s2")

@@ -193,6 +193,7 @@ def chord_step(f, y, yp, p, a, v, lu, piv, d, mu0, lb, ub, dx, dmu):
     if dn >= 0.0:
         n = p.shape[0]
         c = 1.0 - y[n]
+        # (Python's max(c, 0.0), which the tracker's mu(lam) takes: c unless 0 > c)
         smoothed_projection(y[:n], mu0 * (0.0 if 0.0 > c else c), lb, ub, p, dx, dmu)
     return dn
 

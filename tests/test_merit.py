@@ -179,6 +179,18 @@ def test_gradient_matches_central_differences(seed):
         assert np.linalg.norm(g - gfd) <= 1e-6 * np.linalg.norm(g)
 
 
+def _point_with_kinks(F, lb, rng):
+    """(z, F(z)) at a random point with about 30% of its indices at their lower bound and
+    half of those with F = 0 (the kinks of Phi)."""
+    n = lb.size
+    z = rng.uniform(-2, 2, n)
+    at = rng.random(n) < 0.3
+    z[at] = np.where(np.isfinite(lb[at]), lb[at], z[at])
+    f = F(z)
+    f[at & (rng.random(n) < 0.5)] = 0.0
+    return z, f
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_compiled_gradient_gives_the_bits_of_the_array_formula(seed):
     """fb_gradient's one-pass kernel (the descent test of every major iteration) gives
@@ -186,11 +198,7 @@ def test_compiled_gradient_gives_the_bits_of_the_array_formula(seed):
     (z at a bound with F = 0) and a matrix with stored zeros."""
     n = 24
     F, J, lb, ub, rng = _smooth_problem(n, 40 + seed)
-    z = rng.uniform(-2, 2, n)
-    at = rng.random(n) < 0.3
-    z[at] = np.where(np.isfinite(lb[at]), lb[at], z[at])
-    f = F(z)
-    f[at & (rng.random(n) < 0.5)] = 0.0
+    z, f = _point_with_kinks(F, lb, rng)
     Jm = sp.csc_matrix(J(z))
     Jm.data[rng.random(Jm.nnz) < 0.1] = 0.0
     phi = fb_phi(z, f, lb, ub)
@@ -208,11 +216,7 @@ def test_descent_test_directional_derivative_is_the_gradient_formulas(n):
     array J takes the array route and agrees to rounding."""
     F, J, lb, ub, rng = _smooth_problem(n, 70 + n)
     for _ in range(5):
-        z = rng.uniform(-2, 2, n)
-        at = rng.random(n) < 0.3
-        z[at] = np.where(np.isfinite(lb[at]), lb[at], z[at])
-        f = F(z)
-        f[at & (rng.random(n) < 0.5)] = 0.0
+        z, f = _point_with_kinks(F, lb, rng)
         Jm = sp.csc_matrix(J(z))
         phi = fb_phi(z, f, lb, ub)
         zc = z + rng.standard_normal(n)
