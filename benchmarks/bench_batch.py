@@ -40,6 +40,10 @@ sys.path.insert(0, str(ROOT))
 from compass_sparse.batch import grid, read_results, solve_batch
 from compass_sparse.generators.cge import size_for, static_cge
 
+from compass_sparse._jit import end_cold_start  # noqa: E402
+
+end_cold_start()  # timings of compiled kernels (compass_sparse._jit: "Cold start")
+
 
 def revision() -> str:
     try:

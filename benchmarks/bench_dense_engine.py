@@ -38,6 +38,10 @@ from pathlib import Path
 
 import numpy as np
 
+from compass_sparse._jit import end_cold_start  # noqa: E402
+
+end_cold_start()  # timings of compiled kernels (compass_sparse._jit: "Cold start")
+
 HERE = Path(__file__).resolve().parent
 
 

@@ -24,6 +24,10 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
+from compass_sparse._jit import end_cold_start  # noqa: E402
+
+end_cold_start()  # timings of compiled kernels (compass_sparse._jit: "Cold start")
+
 ROOT = Path(__file__).resolve().parent.parent
 
 

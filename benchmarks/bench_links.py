@@ -36,6 +36,10 @@ sys.path.insert(0, str(ROOT))
 from compass_sparse import solve_mcp
 from compass_sparse.examples import cournot, spatial
 
+from compass_sparse._jit import end_cold_start  # noqa: E402
+
+end_cold_start()  # timings of compiled kernels (compass_sparse._jit: "Cold start")
+
 SIZES = {  # n -> model data arguments (n = 5 * markets; n ~ nodes + 2.5 nodes)
     "cournot": {100: (20,), 1000: (200,), 10000: (2000,)},
     "spatial": {100: (29,), 1000: (286,), 10000: (2858,)},

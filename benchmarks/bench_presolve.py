@@ -40,6 +40,10 @@ from compass_sparse.merit import natural_residual
 from compass_sparse.presolve import PresolveOptions, presolve, solve_with_presolve
 from compass_sparse.problem import MCP
 
+from compass_sparse._jit import end_cold_start  # noqa: E402
+
+end_cold_start()  # timings of compiled kernels (compass_sparse._jit: "Cold start")
+
 USE_SOLVE_MCP = True  # compass_sparse.solve_mcp; False: the tests' reference solver
 
 

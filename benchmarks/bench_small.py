@@ -339,8 +339,9 @@ def import_time(repeats=7):
     """Median wall times in fresh interpreters (warm caches: one discarded run first):
     (total, own, first, second) -- ``import compass_sparse`` in all and after numpy and
     scipy.sparse are loaded (what the package itself adds), then the first solve of a
-    small problem (kojshin, n = 4: numba's start-up and the kernels loaded from its disk
-    cache, what a fresh batch worker pays once) and a second solve of it."""
+    small problem (kojshin, n = 4: what a fresh batch worker or a one-shot script pays;
+    its kernels interpreted, numba not loaded -- compass_sparse._jit, "Cold start") and a
+    second solve of it."""
     code = ("import sys, time; sys.path.insert(0, 'tests'); t = time.perf_counter(); "
             "import numpy, scipy.sparse; t1 = time.perf_counter(); import compass_sparse; "
             "t2 = time.perf_counter(); import known_problems as kp; q = kp.kojima_shindo(); "

@@ -22,6 +22,10 @@ from compass_sparse import solve_mcp  # noqa: E402
 from compass_sparse.generators import thesis_family  # noqa: E402
 from test_solve_mcp import KNOWN_RUNS  # noqa: E402
 
+from compass_sparse._jit import end_cold_start  # noqa: E402
+
+end_cold_start()  # timings of compiled kernels (compass_sparse._jit: "Cold start")
+
 EXTRA = {"billups": kp.billups, "double_root": kp.degenerate_root, "sqrt_ncp": kp.sqrt_ncp}
 
 

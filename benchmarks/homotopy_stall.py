@@ -30,6 +30,10 @@ from homotopy_steps import _instances as thesis_and_billups  # noqa: E402
 
 from compass_sparse import MCP, solve_mcp  # noqa: E402
 
+from compass_sparse._jit import end_cold_start  # noqa: E402
+
+end_cold_start()  # timings of compiled kernels (compass_sparse._jit: "Cold start")
+
 
 def _instances(sizes):
     yield from thesis_and_billups(sizes, seeds_small=22, seeds_large=8)

@@ -27,6 +27,10 @@ sys.path[:0] = [str(HERE.parent)]
 from compass_sparse import solve_mcp  # noqa: E402
 from compass_sparse.generators import thesis_family  # noqa: E402
 
+from compass_sparse._jit import end_cold_start  # noqa: E402
+
+end_cold_start()  # timings of compiled kernels (compass_sparse._jit: "Cold start")
+
 VALUES = ("start", "best")
 
 

@@ -32,6 +32,10 @@ import compass_sparse.homotopy as hom  # noqa: E402
 from compass_sparse import MCP, solve_mcp  # noqa: E402
 from compass_sparse.generators import thesis_family  # noqa: E402
 
+from compass_sparse._jit import end_cold_start  # noqa: E402
+
+end_cold_start()  # timings of compiled kernels (compass_sparse._jit: "Cold start")
+
 BASE = dict(KAPPA_NOMINAL=hom.KAPPA_NOMINAL, DISTANCE_NOMINAL=hom.DISTANCE_NOMINAL,
             STEP_GROWTH_MAX=hom.STEP_GROWTH_MAX, CORRECTOR_TOLERANCE=hom.CORRECTOR_TOLERANCE,
             CORRECTOR_ESTIMATE=hom.CORRECTOR_ESTIMATE)

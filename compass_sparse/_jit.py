@@ -15,12 +15,105 @@ compiles anything.  Python callers that imported a stand-in by name get the disp
 also rebinds the built stand-ins in the package's loaded modules, since a forwarded call
 costs an extra Python frame (~0.4 us) and a small solve makes hundreds of kernel calls.
 A module loaded later keeps its stand-in, which forwards each call to the dispatcher.
+
+Cold start.  Loading numba and its first kernel costs 0.5-0.8 s (its import, then the set-up
+of its compiler's contexts, then ~5 ms per kernel from the cache), while the kernels' own
+Python bodies, run by the interpreter, solve a small problem in a few milliseconds.  So a
+process starts by interpreting: a stand-in whose kernel is not built runs its Python body
+(with numpy's floating-point warnings off, as compiled code raises none) as long as the
+call's arrays are small (at most ``INTERPRET_MAX_ENTRIES`` entries each) and less than
+``INTERPRET_WINDOW`` seconds have passed since the process first interpreted a kernel; the
+first call past either limit loads numba, and from then on every kernel is compiled.  A
+one-shot script solving a small model, or a fresh worker of a batch, answers without
+loading numba; a process that goes on solving interprets for the window only (its kernels
+and the Python around them, slower with the numpy scalars they return) and then compiles.
+The window is wall time, not kernel time: it bounds what the interpreted start can cost
+such a process whatever the share of the kernels (measured on 200 solves of one small
+problem: see benchmarks/bench_cold_start.py and small.md, round 12).  The interpreted and
+compiled kernels compute the same formulas in the same order; their last bits may differ
+where numba's LAPACK or math functions differ from numpy's and Python's (math.hypot, for
+one).  The environment variable ``COMPASS_SPARSE_JIT=always`` (read at import) compiles
+from the first call.
 """
 from __future__ import annotations
 
+import os
 import sys
+import threading
+import time
 
-__all__ = ["LazyKernel", "materialize", "njit"]
+import numpy as np
+
+__all__ = ["INTERPRET_MAX_ENTRIES", "INTERPRET_WINDOW", "LazyKernel", "cold_start",
+           "end_cold_start", "materialize", "njit"]
+
+INTERPRET_WINDOW = 0.2
+"""Seconds of wall time, from a process's first interpreted kernel call, during which
+kernels are interpreted: the first solve of the small problems of the benchmarks takes
+3-120 ms interpreted (thesis family 2 n = 10 seed 1 the longest, with the package's own
+first imports), and a process that goes on solving loses at most about this much."""
+
+INTERPRET_MAX_ENTRIES = 4096
+"""Largest array (entries) an interpreted kernel call takes (a dense block of order 64); a
+call with a larger one loads numba.  It also bounds a single interpreted call, which the
+window is only checked before: the small-problem engine's work area has 200 n entries, so
+its paths run interpreted up to n = 20 only, and the longest interpreted calls left (a
+dense direct step or crash step of order 64) take tens of milliseconds."""
+
+
+class _ColdStart:
+    """The process's cold start: whether stand-ins still interpret, and since when."""
+
+    def __init__(self):
+        self.on = os.environ.get("COMPASS_SPARSE_JIT", "auto").strip().lower() != "always"
+        self.since = None  # perf_counter() of the first interpreted call
+        self.local = threading.local()  # .depth: interpreted kernels running in this thread
+
+    def open(self) -> bool:
+        """Whether the window is still open (it opens at the first interpreted call)."""
+        now = time.perf_counter()
+        if self.since is None:
+            self.since = now
+        elif now - self.since > INTERPRET_WINDOW:
+            self.on = False
+        return self.on
+
+
+_COLD = _ColdStart()
+
+
+def cold_start() -> dict:
+    """The cold start's state: ``interpreting`` (stand-ins still run their Python bodies)
+    and ``seconds`` since the first interpreted kernel call (None before one)."""
+    since = _COLD.since
+    return {"interpreting": _COLD.on,
+            "seconds": None if since is None else time.perf_counter() - since}
+
+
+def end_cold_start():
+    """Compile every kernel from its next first call on (benchmarks of warm solves call this
+    first, so that they time compiled kernels)."""
+    _COLD.on = False
+
+
+def _small(args) -> bool:
+    for a in args:
+        if a.__class__ is np.ndarray and a.size > INTERPRET_MAX_ENTRIES:
+            return False
+    return True
+
+
+def _interpret(fn, args):
+    """fn(*args) by the interpreter (the kernels it calls run interpreted inside it)."""
+    local = _COLD.local
+    if getattr(local, "depth", 0):
+        return fn(*args)
+    local.depth = 1
+    try:
+        with np.errstate(all="ignore"):
+            return fn(*args)
+    finally:
+        local.depth = 0
 
 
 class LazyKernel:
@@ -47,12 +140,15 @@ class LazyKernel:
         if self._dispatcher is None:
             import numba
 
+            _COLD.on = False  # numba is loaded: every kernel compiles from now on
             self._dispatcher = numba.njit(**self.options)(self.py_func)
         return self._dispatcher
 
     def __call__(self, *args):
         d = self._dispatcher
         if d is None:
+            if _COLD.on and _small(args) and _COLD.open():
+                return _interpret(self.py_func, args)
             d = self.dispatcher
         return d(*args)
 

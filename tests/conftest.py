@@ -11,6 +11,10 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
+# The kernels compile from their first call (no interpreted cold start: compass_sparse._jit),
+# so that the tests of the compiled kernels test compiled code; the cold start's own tests
+# run it in subprocesses without this variable (test_small_overhead.py).
+os.environ.setdefault("COMPASS_SPARSE_JIT", "always")
 
 import numpy  # noqa: E402,F401
 import scipy.linalg  # noqa: E402,F401

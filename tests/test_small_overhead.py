@@ -4,15 +4,23 @@ each other, the BLAS thread limit reuses one controller, dense Jacobians keep a 
 full pattern."""
 from __future__ import annotations
 
+import json
+import os
 import subprocess
 import sys
+import textwrap
+from pathlib import Path
 
+import known_problems as kp
 import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from compass_sparse import merit
+from compass_sparse import _jit, merit, solve_mcp
 from compass_sparse._merit_kernels import csc_rmatvec
+from compass_sparse.generators import thesis_family
+
+ROOT = Path(__file__).resolve().parent.parent
 
 
 def _random_box(rng, n):
@@ -100,6 +108,107 @@ def test_import_does_not_load_numba():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)
     assert out.stdout.strip() == "False"
+
+
+def _cold_env(**extra):
+    """The environment of a fresh process with the default cold start (the test session
+    itself compiles from the first call: conftest.py)."""
+    env = {k: v for k, v in os.environ.items() if k != "COMPASS_SPARSE_JIT"}
+    env.update(extra)
+    return env
+
+
+def _run_fresh(code, **env):
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, env=_cold_env(**env), cwd=ROOT)
+    return out.stdout.strip().splitlines()[-1]
+
+
+def test_first_small_solve_of_a_process_does_not_load_numba():
+    """A fresh process's first solve of a small problem runs the kernels interpreted:
+    numba (0.5-0.8 s with its first kernel) is not loaded, and the solve succeeds.  With
+    COMPASS_SPARSE_JIT=always the same solve loads it.  (The window is widened to 30 s:
+    the solve takes ~20 ms of the default 0.2 s here, but a test must not depend on the
+    machine's speed; bench_cold_start.py measures the default.)"""
+    code = ("import sys; sys.path.insert(0, 'tests'); import known_problems as kp; "
+            "import compass_sparse._jit as J; J.INTERPRET_WINDOW = 30.0; "
+            "from compass_sparse import solve_mcp; from compass_sparse._jit import cold_start; "
+            "q = kp.kojima_shindo(); r = solve_mcp(q.F, q.J, q.lb, q.ub, q.x0); "
+            "print(r.status.name, r.residual.natural <= 1e-6, 'numba' in sys.modules, "
+            "cold_start()['interpreting'])")
+    assert _run_fresh(code).split() == ["SOLVED", "True", "False", "True"]
+    assert _run_fresh(code, COMPASS_SPARSE_JIT="always").split() == [
+        "SOLVED", "True", "True", "False"]
+
+
+def test_interpreted_kernels_solve_the_small_problems_as_the_compiled_ones():
+    """With the cold start's window unlimited, a fresh process solves the known problems
+    and thesis instances at n = 10 with interpreted kernels only; statuses, major
+    iterations, pivots, F and J evaluations are the compiled kernels' (this process), and
+    both points pass the tolerance."""
+    code = textwrap.dedent("""
+        import sys, json
+        sys.path.insert(0, "tests")
+        import known_problems as kp
+        import compass_sparse._jit as J
+        from compass_sparse import solve_mcp
+        from compass_sparse.generators import thesis_family
+        J.INTERPRET_WINDOW = 1e9
+        out = {}
+        def row(r):
+            return [r.status.name, r.nit, r.minor_iterations, r.nfev, r.njev,
+                    r.residual.natural]
+        for name, make in kp.ALL_SOLVABLE.items():
+            q = make()
+            out[name] = row(solve_mcp(q.F, q.J, q.lb, q.ub, q.x0))
+        for fam in (1, 2):
+            for seed in (1, 2, 3):
+                out[f"f{fam}s{seed}"] = row(solve_mcp(thesis_family(10, fam, seed).problem))
+        print(json.dumps([out, "numba" in sys.modules]))
+        """)
+    interpreted, numba_loaded = json.loads(_run_fresh(code))
+    assert not numba_loaded
+    compiled = {}
+    for name, make in kp.ALL_SOLVABLE.items():
+        q = make()
+        compiled[name] = solve_mcp(q.F, q.J, q.lb, q.ub, q.x0)
+    for fam in (1, 2):
+        for seed in (1, 2, 3):
+            compiled[f"f{fam}s{seed}"] = solve_mcp(thesis_family(10, fam, seed).problem)
+    assert set(compiled) == set(interpreted) and len(compiled) > 10
+    for key, r in compiled.items():
+        status, nit, minor, nfev, njev, natural = interpreted[key]
+        assert (status, nit, minor, nfev, njev) == (
+            r.status.name, r.nit, r.minor_iterations, r.nfev, r.njev), key
+        if r.success:
+            assert natural <= 1e-6 and r.residual.natural <= 1e-6, key
+
+
+def test_cold_start_ends_with_its_window_and_at_a_large_array():
+    """The interpreted cold start ends when its window has passed (the next kernel call
+    loads numba) or at the first kernel call with an array above INTERPRET_MAX_ENTRIES;
+    either way the kernels give the same values."""
+    code = textwrap.dedent("""
+        import sys, numpy as np
+        import compass_sparse._jit as J
+        from compass_sparse._merit_kernels import all_finite_kernel, max_abs_kernel
+        J.INTERPRET_WINDOW = {window}
+        x = np.array([1.0, -3.0])
+        a = max_abs_kernel(x, x, False)
+        first = ("numba" in sys.modules, J.cold_start()["interpreting"])
+        b = all_finite_kernel(np.ones({size}))
+        print(a, bool(b), *first, "numba" in sys.modules, J.cold_start()["interpreting"])
+        """)
+    # a window of 0 s: the first call opens it and is interpreted, the second compiles
+    assert _run_fresh(code.format(window=0.0, size=3)).split() == [
+        "3.0", "True", "False", "True", "True", "False"]
+    # the window open, but the second call's array is large: it compiles
+    big = 2 * _jit.INTERPRET_MAX_ENTRIES
+    assert _run_fresh(code.format(window=100.0, size=big)).split() == [
+        "3.0", "True", "False", "True", "True", "False"]
+    # the window open and small arrays: both interpreted
+    assert _run_fresh(code.format(window=100.0, size=3)).split() == [
+        "3.0", "True", "False", "True", "False", "True"]
 
 
 def test_lazy_kernels_calling_each_other_compile_on_first_use(tmp_path, monkeypatch):
