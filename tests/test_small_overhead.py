@@ -15,10 +15,10 @@ import known_problems as kp
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from compass_sparse.generators import thesis_family
 
 from compass_sparse import _jit, merit, solve_mcp
 from compass_sparse._merit_kernels import csc_rmatvec
-from compass_sparse.generators import thesis_family
 
 ROOT = Path(__file__).resolve().parent.parent
 
