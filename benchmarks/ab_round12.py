@@ -30,6 +30,7 @@ sys.path[:0] = [os.path.dirname(__file__), os.path.join(os.path.dirname(__file__
 
 import bench_small as bs
 from ab_round8 import ab_swapped, old_module
+from ab_round11 import _cases  # the same problems as round 11's A/B
 
 from compass_sparse import solve_mcp
 
@@ -50,12 +51,6 @@ def _swaps(worktree):
               for k in ("follow", "_correct", "residual")]
     swaps.append((H._Tracker, "_chord_dense", oh._Tracker._chord_dense, None))
     return swaps
-
-
-def _cases():
-    return ([c for c in bs._known_cases() if c.name in (
-        "cournot2", "kojshin", "double_root", "billups", "log_ncp", "boxvi")]
-        + bs._thesis_cases([10], [2], [1, 2]) + bs._thesis_cases([50], [2], [1]))
 
 
 def _order_table(rounds):
