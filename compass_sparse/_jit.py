@@ -25,8 +25,9 @@ call's arrays are small (at most ``INTERPRET_MAX_ENTRIES`` entries each) and les
 ``INTERPRET_WINDOW`` seconds have passed since the process first interpreted a kernel; the
 first call past either limit loads numba, and from then on every kernel is compiled.  A
 one-shot script solving a small model, or a fresh worker of a batch, answers without
-loading numba; a process that goes on solving interprets for the window only (its kernels
-and the Python around them, slower with the numpy scalars they return) and then compiles.
+loading numba; a process that goes on solving interprets for the window only and then
+compiles.  An interpreted kernel's numpy scalars are returned as the Python floats, ints
+and bools numba returns.
 The window is wall time, not kernel time: it bounds what the interpreted start can cost
 such a process whatever the share of the kernels (measured on 200 solves of one small
 problem: see benchmarks/bench_cold_start.py and small.md, round 12).  The interpreted and
@@ -103,15 +104,27 @@ def _small(args) -> bool:
     return True
 
 
+def _as_returned(value):
+    """A kernel's value as compiled code returns it: numpy scalars (what an interpreted
+    body reads out of arrays) become Python floats, ints and bools, in tuples too.  The
+    callers then see the types they see from numba, and their arithmetic on them runs at
+    Python's speed, not numpy scalars' (a few times slower)."""
+    if isinstance(value, np.generic):
+        return value.item()
+    if value.__class__ is tuple:
+        return tuple(v.item() if isinstance(v, np.generic) else v for v in value)
+    return value
+
+
 def _interpret(fn, args):
     """fn(*args) by the interpreter (the kernels it calls run interpreted inside it)."""
     local = _COLD.local
     if getattr(local, "depth", 0):
-        return fn(*args)
+        return _as_returned(fn(*args))
     local.depth = 1
     try:
         with np.errstate(all="ignore"):
-            return fn(*args)
+            return _as_returned(fn(*args))
     finally:
         local.depth = 0
 
