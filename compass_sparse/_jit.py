@@ -33,8 +33,9 @@ such a process whatever the share of the kernels (measured on 200 solves of one 
 problem: see benchmarks/bench_cold_start.py and small.md, round 12).  The interpreted and
 compiled kernels compute the same formulas in the same order; their last bits may differ
 where numba's LAPACK or math functions differ from numpy's and Python's (math.hypot, for
-one).  The environment variable ``COMPASS_SPARSE_JIT=always`` (read at import) compiles
-from the first call.
+one), and since the switch comes after a time, which solves of a long run are interpreted
+depends on the machine's speed.  The environment variable ``COMPASS_SPARSE_JIT=always``
+(read at import) compiles from the first call: runs that must repeat bit for bit set it.
 """
 from __future__ import annotations
 
