@@ -35,8 +35,7 @@ import scipy.sparse as sp
 
 from ._eval_kernels import top_abs_distinct
 from ._merit_kernels import (csc_rmatvec, fb_diagonals_kernel, fb_directional_kernel,
-                              fb_gradient_kernel,
-                             fb_phi_kernel, max_abs_kernel, normal_map_kernel,
+                             fb_gradient_kernel, fb_phi_kernel, max_abs_kernel, normal_map_kernel,
                              residual_maxima_kernel)
 
 __all__ = [
@@ -219,14 +218,20 @@ def max_abs_diff(x, y) -> float:
     return max_abs(np.asarray(x, dtype=float) - np.asarray(y, dtype=float))
 
 
+def _kernel_gradient_args(z, J, phi) -> bool:
+    """Whether Phi and J are what the compiled gradient takes, beside the solver's float
+    vectors z, f, l, u: Phi a float vector like z, J a square float64 CSC matrix."""
+    return (float_vector(phi) and phi.shape == z.shape and sp.issparse(J)
+            and J.format == "csc" and J.shape == (z.shape[0],) * 2
+            and J.data.dtype == np.float64)
+
+
 def fb_gradient(z, f, J, lb, ub, phi=None):
     """grad Psi(z) = H^T Phi with H = diag(da) + diag(db) J."""
     if phi is None:
         phi = fb_phi(z, f, lb, ub)
     vectors = _solver_vectors(z, f, lb, ub)
-    if (vectors and float_vector(phi) and phi.shape == z.shape
-            and sp.issparse(J) and J.format == "csc" and J.shape == (z.shape[0],) * 2
-            and J.data.dtype == np.float64):
+    if vectors and _kernel_gradient_args(z, J, phi):
         # the solver's own vectors and J (the descent test of every major iteration)
         g = np.empty(z.shape[0])
         fb_gradient_kernel(z, f, lb, ub, phi, J.indptr, J.indices, J.data, g)
@@ -251,10 +256,8 @@ def fb_directional(z, f, J, lb, ub, phi, zc) -> float:
     compiled call for the solver's own vectors and J (the descent test of a major
     iteration: the gradient, the difference and the product were three calls and three
     arrays)."""
-    if (_solver_vectors(z, f, lb, ub) and float_vector(phi) and float_vector(zc)
-            and phi.shape == z.shape and zc.shape == z.shape and sp.issparse(J)
-            and J.format == "csc" and J.shape == (z.shape[0],) * 2
-            and J.data.dtype == np.float64):
+    if (_solver_vectors(z, f, lb, ub) and _kernel_gradient_args(z, J, phi)
+            and float_vector(zc) and zc.shape == z.shape):
         w = np.empty((2, z.shape[0]))  # g and zc - z: one allocation, C rows
         return float(fb_directional_kernel(z, f, lb, ub, phi, J.indptr, J.indices, J.data,
                                            zc, w[0], w[1]))
