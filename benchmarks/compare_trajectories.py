@@ -2,14 +2,19 @@
 line each, for comparing two revisions of the solver (a change meant to save time should
 leave these alone).
 
-    python3 benchmarks/compare_trajectories.py . > new.txt
+    python3 benchmarks/compare_trajectories.py . [--bits] > new.txt
     python3 benchmarks/compare_trajectories.py /path/to/worktree/of/old > old.txt
     diff old.txt new.txt
+
+With ``--bits`` each line also holds the F and J counts and the md5 of the returned x: a
+change meant to leave every point alone must leave these identical too (run both sides
+with COMPASS_SPARSE_JIT=always, so that no kernel is interpreted).
 
 The argument is the repository root whose ``compass_sparse`` (and ``tests``) are imported.
 Problems: every start of the known-problem runs of the test suite, billups, double_root,
 sqrt_ncp, and the COMPASS thesis families 1 and 2 at n = 10, 20, 50, seeds 1-7.
 """
+import hashlib
 import os
 import sys
 
@@ -29,9 +34,15 @@ end_cold_start()  # timings of compiled kernels (compass_sparse._jit: "Cold star
 EXTRA = {"billups": kp.billups, "double_root": kp.degenerate_root, "sqrt_ncp": kp.sqrt_ncp}
 
 
+BITS = "--bits" in sys.argv[2:]
+
+
 def line(label, r):
-    return (f"{label:14s} {r.status.name:14s} nit {r.nit:3d} piv {r.minor_iterations:4d} "
+    text = (f"{label:14s} {r.status.name:14s} nit {r.nit:3d} piv {r.minor_iterations:4d} "
             f"rst {r.restarts:2d} nat {r.residual.natural:.1e}")
+    if BITS:
+        text += f" nfev {r.nfev:4d} njev {r.njev:4d} x {hashlib.md5(r.x.tobytes()).hexdigest()}"
+    return text
 
 
 def main():
