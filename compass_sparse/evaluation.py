@@ -138,11 +138,6 @@ def all_finite(x) -> bool:
     return bool(np.isfinite(x).all())
 
 
-def _entries_finite(J) -> bool:
-    """Whether every stored entry of the sparse matrix J is finite."""
-    return all_finite(J.data)
-
-
 class _Memo:
     """The last point and its value, plus one pinned point (the start point, asked for
     again by the preprocessor, its reduced problem and every restart).
@@ -177,11 +172,6 @@ class _Memo:
             return x.shape, y.tobytes(), nan
         y = x + 0.0
         return x.shape, y.tobytes(), bool(np.isnan(y).any())
-
-    @staticmethod
-    def storable(x, k):
-        """The probe key k of x as a key to store: None when x has a NaN."""
-        return None if k[2] else k
 
     def get(self, x, k=None):
         """The value at x, or None; ``k``: _key(x) when the caller has it."""
@@ -463,13 +453,16 @@ class Evaluator:
         """F(x); raises what the user's F raises.  (``_k``: the memo key of x, when the
         caller has made it.)"""
         x = np.asarray(x, dtype=float)
-        # one key for the look-up and, on a miss, the store (NaN-tested only then)
+        # one key for the look-up and, on a miss, the store (NaN-tested only then); the
+        # memo's get() written out (a call per evaluation of every point)
         k = _k if _k is not None else _Memo.probe(x)
-        f = self._mf.get(x, k)
+        memo = self._mf
+        f = memo.value if k == memo.key else memo.pvalue if k == memo.pkey else None
         if f is None:
             f, J = self._call_F(x)
-            k = _k if _k is not None else _Memo.storable(x, k)
-            self._mf.put(x, f, k)
+            if _k is None and k[2]:  # (a point with a NaN is not stored)
+                k = None
+            memo.put(x, f, k)
             if J is not None:
                 self._mj.put(x, (J, False), k)  # counted when used
         return f.copy()  # callers may write into their F values; the memo stays intact
@@ -479,7 +472,8 @@ class Evaluator:
         reuse it).  (``_k``: the memo key of x, when the caller has made it.)"""
         x = np.asarray(x, dtype=float)
         k = _k if _k is not None else _Memo.probe(x)
-        hit = self._mj.get(x, k)
+        memo = self._mj
+        hit = memo.value if k == memo.key else memo.pvalue if k == memo.pkey else None
         if hit is not None:
             J, counted = hit
             if J.nnz != self._pattern.nnz:  # kept from before an undeclared pattern grew
@@ -488,7 +482,8 @@ class Evaluator:
                 self.counters.njev += 1
                 self._mj.put(x, (J, True), k)  # (k matched a stored key: no NaN)
             return J
-        k = _k if _k is not None else _Memo.storable(x, k)
+        if _k is None and k[2]:  # (a point with a NaN is not stored)
+            k = None
         if self._user_jac is True:  # one call gives both; F's memo takes the new f too
             f, J = self._call_F(x)
             self._mf.put(x, f, k)
@@ -525,14 +520,8 @@ class Evaluator:
     def guarded(self, call, finite, what):
         """call(), or None when it raised or its value is not ``finite`` (the point is
         rejected and counted as a domain error; the solver's errors and Ctrl-C pass)."""
-        return self._guarded(call, (), finite, what)
-
-    def _guarded(self, fn, args, finite, what):
-        """guarded() of fn(*args): the evaluations of every point of a solve pass their
-        method and arguments, not a closure made per call (~2 us of a small model's
-        evaluation)."""
         try:
-            v = fn(*args)
+            v = call()
         except (CompassError, KeyboardInterrupt):
             raise
         except Exception as exc:  # the user's function failed here: reject the point
@@ -541,22 +530,40 @@ class Evaluator:
             return self._reject(f"{what} returned NaN/Inf")
         return v
 
+    # f, f_once and jac are guarded() of F, of _call_F and of J written out: they evaluate
+    # every point of a solve, and the general helper's indirection cost two Python calls
+    # per evaluation (benchmarks/small.md, round 13).
     def f(self, x, _k=None):
         """F(x), or None when F raised or returned NaN/Inf there (counted)."""
-        return self._guarded(self.F, (x, _k), all_finite, "F")
+        try:
+            v = self.F(x, _k)
+        except (CompassError, KeyboardInterrupt):
+            raise
+        except Exception as exc:  # the user's function failed here: reject the point
+            return self._reject(repr(exc))
+        return v if all_finite(v) else self._reject("F returned NaN/Inf")
 
     def f_once(self, x):
         """:meth:`f` at a point the solver will not ask about again (the homotopy's
         corrector iterates): counted and guarded the same, without the memo's look-up and
         store (~3 us of a small problem's evaluation, the memo would never be hit)."""
-        return self._guarded(self._F_value, (x,), all_finite, "F")
-
-    def _F_value(self, x):
-        return self._call_F(np.asarray(x, dtype=float))[0]
+        try:
+            v = self._call_F(np.asarray(x, dtype=float))[0]
+        except (CompassError, KeyboardInterrupt):
+            raise
+        except Exception as exc:
+            return self._reject(repr(exc))
+        return v if all_finite(v) else self._reject("F returned NaN/Inf")
 
     def jac(self, x, f=None, _k=None):
         """J(x), or None when J raised or returned NaN/Inf there (counted)."""
-        return self._guarded(self.J, (x, f, _k), _entries_finite, "J")
+        try:
+            J = self.J(x, f, _k)
+        except (CompassError, KeyboardInterrupt):
+            raise
+        except Exception as exc:
+            return self._reject(repr(exc))
+        return J if all_finite(J.data) else self._reject("J returned NaN/Inf")
 
     def fj(self, x):
         """(f, J), or (None, None) when either is rejected (the memo key of x is made

@@ -341,6 +341,9 @@ class _Tracker:
         self.newton_iterations = 0
         self.dense = None
         self._dx, self._dmu = np.empty(self.n), np.empty(self.n)  # the corrector's work
+        #: (y, p) of the dense corrector's converged point: p = p_mu(x), and dp/dx and
+        #: dp/dmu there in the work arrays above, until the next projection
+        self._corrected = None
         self.best = None  # (z, psi) of the lowest merit seen
         width = self.ub - self.lb
         width = np.sort(width[np.isfinite(width)])
@@ -375,7 +378,12 @@ class _Tracker:
         """H(y), and with want_jac the pieces of DH: (H, Hx, Hlam).  Points where the
         Jacobian is evaluated (the accepted ones) are offered as candidate best points."""
         x, lam = y[:-1], y[-1]
-        p, dx, dmu = self.smooth.project(x, self._mu(lam))
+        if want_jac and self._corrected is not None and self._corrected[0] is y:
+            # the corrector's last chord step projected this point already (chord_step:
+            # the same kernel with the same mu(lam)) into p and the work arrays
+            p, dx, dmu = self._corrected[1], self._dx, self._dmu
+        else:
+            p, dx, dmu = self.smooth.project(x, self._mu(lam))
         if want_jac:
             f, J = self.ev.fj(p)
         else:
@@ -531,6 +539,7 @@ class _Tracker:
         """Chord iterations with the factorization Bf.  Returns ((y, step factor), ok): the
         factor by which the next step is divided, from the contraction ratio kappa and the
         first correction delta relative to the step h (both grow like h)."""
+        self._corrected = None  # (the work arrays are about to change)
         y = yp.copy()
         h = max(dot_norm(yp - self._y), 1e-300)
         first = prev = None
@@ -583,6 +592,7 @@ class _Tracker:
             if dn <= tol_y or (CORRECTOR_ESTIMATE and prev is not None
                                and dn * dn <= tol_y * (prev - dn)):
                 factor = max(kappa / KAPPA_NOMINAL, first / (DISTANCE_NOMINAL * h))
+                self._corrected = (y, p) if fast else None
                 return (y, min(max(float(factor), 1.0 / STEP_GROWTH_MAX), 2.0)), True
             prev = dn
         return None, False

@@ -743,3 +743,26 @@ def test_homotopy_pass_limits_blas_threads_only_from_blas_limit_min_n(monkeypatc
     r = solve_mcp(thesis_family(n, 2, 1).problem, options={"homotopy": "only"})
     assert r.passes["homotopy"].ran
     assert len(entered) == (1 if n >= BLAS_LIMIT_MIN_N else 0)
+
+
+def test_accepted_point_reuses_the_correctors_projection_bit_for_bit(monkeypatch):
+    """An accepted point's smoothed projection is the one the corrector's last chord step
+    made (no second projection): p, dp/dx and dp/dmu are the bits a fresh projection at
+    that point gives, on every accepted point of a homotopy-only solve."""
+    g = thesis_family(10, 2, 1)
+    inner = hom._Tracker.residual
+    reused = []
+
+    def checked(self, y, a, want_jac):
+        if want_jac and self._corrected is not None and self._corrected[0] is y:
+            n = self.n
+            p, dx, dmu = self.smooth.project(y[:n], self._mu(y[n]))
+            assert np.array_equal(self._corrected[1], p)
+            assert np.array_equal(self._dx, dx) and np.array_equal(self._dmu, dmu)
+            reused.append(True)
+        return inner(self, y, a, want_jac)
+
+    monkeypatch.setattr(hom._Tracker, "residual", checked)
+    r = solve_mcp(g.problem, options={"homotopy": "only"})
+    assert r.success
+    assert len(reused) >= 5  # the dense route accepted several points with it
