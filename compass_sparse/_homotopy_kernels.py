@@ -11,8 +11,10 @@ expressions' order of operations.
 """
 import math
 
+import numpy as np
+
 from ._jit import njit
-from ._merit_kernels import csc_matvec
+from ._merit_kernels import csc_matvec, max_abs_kernel
 
 
 @njit(cache=True, inline="always")
@@ -205,3 +207,230 @@ def bordered_values(f, x, p, a, lam, G, H, indptr, indices, data, dx, dmu, mu0, 
     homotopy_values(f, x, p, a, lam, G, H)
     dense_bordered(indptr, indices, data, dx, dmu, lam, mu0, G, x, a, B, work)
 
+
+
+# ------------------------------------------------------------------ the compiled tracker
+# LAPACK's getrf for compiled code: numba's own binding of scipy's LAPACK, the library that
+# scipy.linalg.lapack's getrf calls, so the factors are the same bits.  It is bound when a
+# tracker first needs it (importing numba), never at import, and the kernels that call it
+# are never interpreted (the tracker takes its Python route during the cold start).
+_XXGETRF = None
+_KIND_D = ord("d")
+
+
+def bind_lapack() -> bool:
+    """Bind getrf for :func:`dense_getrf`; False when this numba has no such binding
+    (it is numba's internal interface: the tracker then keeps its Python route)."""
+    global _XXGETRF
+    if _XXGETRF is None:
+        try:
+            import numba
+            from numba.np.linalg import _LAPACK
+
+            _XXGETRF = _LAPACK().numba_xxgetrf(numba.types.float64)
+        except (ImportError, AttributeError, TypeError):
+            return False
+    return True
+
+
+@njit(cache=True)
+def dense_getrf(B, piv):
+    """LU of the square Fortran-ordered B in place by LAPACK's getrf, with its row
+    interchanges in ``piv`` made 0-based, as scipy returns them; getrf's info (> 0: an
+    exactly zero pivot)."""
+    n = B.shape[0]
+    info = _XXGETRF(_KIND_D, n, n, B.ctypes, n, piv.ctypes)
+    for i in range(n):
+        piv[i] -= 1
+    return info
+
+
+# Requests of follow_dense to its caller, and the ends of a path it reports.
+NEED_F = 1  #: F at p (a corrector iterate); answer with f, or failed
+NEED_FJ = 2  #: F and J at p (the start or an accepted point); answer with f and J
+END_GAME = 3  #: lam reached lam_end: the end game runs, then follow_dense again
+SINGULAR = 4
+STEP_TOO_SMALL = 5
+DIVERGED = 6
+RETURNED = 7
+STEP_LIMIT = 8
+LAPACK_ERROR = 9  #: getrf reported an illegal argument
+
+# Rows of the tracker's float work area W ((15, n + 1)); rows 6 ... 14 hold n entries.
+W_Y, W_V, W_TAU, W_YP, W_YC, W_RHS = 0, 1, 2, 3, 4, 5
+W_P, W_DX, W_DMU, W_A, W_LB, W_UB, W_G, W_H, W_WORK = 6, 7, 8, 9, 10, 11, 12, 13, 14
+W_ROWS = 15
+
+# Scalars of a path: sf (floats) and si (ints); the first ones are set by the caller.
+(F_H, F_HMIN, F_BOUND, F_LAM_END, F_MU0, F_HMAX, F_TOL, F_CONTRACTION, F_DISTANCE,
+ F_KAPPA_NOM, F_DISTANCE_NOM, F_GROWTH, F_END_GAP, F_HC, F_TOL_Y, F_KAPPA, F_FIRST,
+ F_PREV) = range(18)
+F_SIZE = 18
+(I_PHASE, I_STEP_LIMIT, I_CORRECTOR_ITERATIONS, I_ESTIMATE, I_LOOPS, I_STEPS, I_REJECTED,
+ I_TURNS, I_FACTORIZATIONS, I_RETRIED, I_ITERATION, I_HAS_PREV, I_AT_START) = range(13)
+I_SIZE = 13
+# phases: what the next call of follow_dense receives
+P_START, P_VALUES, P_STEP, P_CHORD = 0, 1, 2, 3
+
+
+@njit(cache=True)
+def _predict(sf, si, W, n):
+    """The predictor y + h tau (not past lam = 1), the corrector's start at it and the
+    smoothed projection of its point: W[W_P] is where F is wanted next."""
+    y, tau, yp, yc, t = W[W_Y], W[W_TAU], W[W_YP], W[W_YC], W[W_RHS]
+    h = sf[F_H]
+    for i in range(n + 1):
+        yp[i] = y[i] + h * tau[i]
+    if yp[n] > 1.0:  # do not step past the end: mu(lam) must stay >= 0
+        hh = (1.0 - y[n]) / tau[n] if tau[n] > 0 else h
+        s = hh if hh < h else h  # (Python's min(h, hh))
+        for i in range(n + 1):
+            yp[i] = y[i] + s * tau[i]
+    # the corrector's start, as _Tracker._correct: its distances are BLAS products as
+    # merit.dot_norm takes them
+    for i in range(n + 1):
+        yc[i] = yp[i]
+        t[i] = yp[i] - y[i]
+    hc = math.sqrt(np.dot(t, t))
+    sf[F_HC] = 1e-300 if 1e-300 > hc else hc
+    sf[F_TOL_Y] = sf[F_TOL] * (1.0 + math.sqrt(np.dot(yp, yp)))
+    sf[F_KAPPA] = 0.0
+    si[I_HAS_PREV] = 0
+    si[I_ITERATION] = 0
+    c = 1.0 - yc[n]
+    smoothed_projection(yc[:n], sf[F_MU0] * (0.0 if 0.0 > c else c), W[W_LB, :n],
+                        W[W_UB, :n], W[W_P, :n], W[W_DX, :n], W[W_DMU, :n])
+    si[I_PHASE] = P_CHORD
+    return NEED_F
+
+
+@njit(cache=True)
+def _reject(sf, si, W, n):
+    """A failed corrector: the step is halved and predicted again, or the path ends."""
+    si[I_REJECTED] += 1
+    si[I_RETRIED] = 1
+    sf[F_H] *= 0.5
+    if sf[F_H] < sf[F_HMIN]:
+        return STEP_TOO_SMALL
+    return _predict(sf, si, W, n)
+
+
+@njit(cache=True)
+def _step(sf, si, W, B, piv, n):
+    """The top of a step: the factors of the bordered matrix of the accepted point (its
+    first n rows made by bordered_values, the last the previous tangent), the unit
+    tangent, and the first prediction."""
+    if si[I_LOOPS] >= si[I_STEP_LIMIT]:
+        return STEP_LIMIT
+    si[I_LOOPS] += 1
+    si[I_FACTORIZATIONS] += 1
+    v = W[W_V]
+    for j in range(n + 1):
+        B[n, j] = v[j]
+    if dense_getrf(B, piv) < 0:
+        return LAPACK_ERROR
+    if not bordered_pivots_ok(B):
+        return SINGULAR
+    turned = unit_tangent(B, piv, v, W[W_TAU])
+    if turned < 0:
+        return SINGULAR
+    si[I_TURNS] += turned
+    si[I_RETRIED] = 0
+    return _predict(sf, si, W, n)
+
+
+@njit(cache=True)
+def follow_dense(sf, si, W, B, piv, f, indptr, indices, data, failed):
+    """The dense route of ``_Tracker.follow`` from one evaluation of the user's F (or F and
+    J) to the next, by reverse communication: the call runs until it needs F at W[W_P]
+    (NEED_F: the next call brings f, or ``failed`` when F was rejected there), F and J
+    there (NEED_FJ: the next call brings both; the caller offers the point as a candidate
+    first), the end game (END_GAME) or an end of the path (SINGULAR ... STEP_LIMIT).  The
+    path's state is in sf, si (scalars), W (vectors), B and piv (the bordered matrix and
+    its factors).  The same steps and formulas as the Python route, in its order: the
+    same bits (a test follows both routes)."""
+    n = W.shape[1] - 1
+    y = W[W_Y]
+    phase = si[I_PHASE]
+    if phase == P_START:  # the projection of the path's start y = (a, 0)
+        c = 1.0 - y[n]
+        smoothed_projection(y[:n], sf[F_MU0] * (0.0 if 0.0 > c else c), W[W_LB, :n],
+                            W[W_UB, :n], W[W_P, :n], W[W_DX, :n], W[W_DMU, :n])
+        si[I_AT_START] = 1
+        si[I_PHASE] = P_VALUES
+        return NEED_FJ
+    if phase == P_VALUES:  # F and J at the projection of the start or an accepted point
+        lam = y[n]
+        bordered_values(f, y[:n], W[W_P, :n], W[W_A, :n], lam, W[W_G, :n], W[W_H, :n],
+                        indptr, indices, data, W[W_DX, :n], W[W_DMU, :n], sf[F_MU0], B,
+                        W[W_WORK, :n])
+        si[I_PHASE] = P_STEP
+        if si[I_AT_START] == 0 and (lam >= sf[F_LAM_END] or lam >= 1.0 - sf[F_END_GAP]):
+            return END_GAME
+        return _step(sf, si, W, B, piv, n)
+    if phase == P_STEP:  # after the end game
+        return _step(sf, si, W, B, piv, n)
+    # P_CHORD: F at the corrector's iterate
+    if failed:
+        return _reject(sf, si, W, n)
+    yc = W[W_YC]
+    dn = chord_step(f, yc, W[W_YP], W[W_P, :n], W[W_A, :n], W[W_V], B, piv, W[W_RHS],
+                    sf[F_MU0], W[W_LB, :n], W[W_UB, :n], W[W_DX, :n], W[W_DMU, :n])
+    if dn < 0.0:  # a non-finite correction
+        return _reject(sf, si, W, n)
+    hc = sf[F_HC]
+    tol_y = sf[F_TOL_Y]
+    prev = sf[F_PREV]
+    if si[I_HAS_PREV]:
+        r = dn / (1e-300 if 1e-300 > prev else prev)
+        if r > sf[F_KAPPA]:  # (Python's max(kappa, r))
+            sf[F_KAPPA] = r
+        if sf[F_KAPPA] > sf[F_CONTRACTION]:
+            return _reject(sf, si, W, n)
+    else:
+        sf[F_FIRST] = dn
+        lim = sf[F_DISTANCE] * hc
+        t = 10.0 * tol_y
+        if dn > (t if t > lim else lim):
+            return _reject(sf, si, W, n)
+    if dn <= tol_y or (si[I_ESTIMATE] and si[I_HAS_PREV] and dn * dn <= tol_y * (prev - dn)):
+        # converged: the step factor, then the accepted point (follow's step control)
+        k = sf[F_KAPPA] / sf[F_KAPPA_NOM]
+        d = sf[F_FIRST] / (sf[F_DISTANCE_NOM] * hc)
+        factor = d if d > k else k
+        lo = 1.0 / sf[F_GROWTH]
+        factor = lo if lo > factor else factor
+        factor = 2.0 if 2.0 < factor else factor
+        if si[I_RETRIED] and 1.0 > factor:  # no growth right after a rejection
+            factor = 1.0
+        si[I_STEPS] += 1
+        x_max = max_abs_kernel(yc[:n], yc[:n], False)
+        t = W[W_RHS]
+        for i in range(n + 1):
+            t[i] = yc[i] - y[i]
+        hn = math.sqrt(np.dot(t, t))
+        h = sf[F_H]
+        h = (hn if hn > h else h) / factor
+        cap = sf[F_HMAX] * (1.0 + x_max)
+        sf[F_H] = cap if cap < h else h
+        v, tau = W[W_V], W[W_TAU]
+        finite = True
+        for i in range(n + 1):
+            y[i] = yc[i]
+            v[i] = tau[i]
+            if not math.isfinite(y[i]):
+                finite = False
+        if not finite or x_max > sf[F_BOUND]:
+            return DIVERGED
+        if y[n] < -0.5:
+            return RETURNED
+        # F and J at the corrector's last projection, which is this point's
+        si[I_AT_START] = 0
+        si[I_PHASE] = P_VALUES
+        return NEED_FJ
+    sf[F_PREV] = dn
+    si[I_HAS_PREV] = 1
+    si[I_ITERATION] += 1
+    if si[I_ITERATION] >= si[I_CORRECTOR_ITERATIONS]:
+        return _reject(sf, si, W, n)
+    return NEED_F

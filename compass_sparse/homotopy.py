@@ -92,10 +92,12 @@ import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from . import _homotopy_kernels as hk
 from ._blas import BLAS_LIMIT_MIN_N, single_threaded_blas
 from ._homotopy_kernels import (bordered_pivots_ok, bordered_values, chord_step,
                                 homotopy_values, lu_solve, smoothed_projection,
                                 unit_tangent)
+from ._jit import cold_start
 from ._csc import csc_times
 from ._merit_kernels import csc_to_dense
 from .evaluation import all_finite
@@ -151,6 +153,11 @@ END_GAP = 1e-10
 """A path point with lam >= 1 - END_GAP is the end of the path."""
 NEWTON_STEP_MAX = 1.0
 """Longest end-game Newton step, relative to 1 + ||x||_inf."""
+COMPILED_TRACKER = True
+"""Dense problems (n <= DENSE_MAX_N) follow their paths in compiled calls between two
+evaluations (``_Tracker._follow_dense``, the same points bit for bit); False keeps the
+Python route, the reference of the tests (and the route during the cold start, before
+numba is loaded: see compass_sparse._jit)."""
 
 
 class HomotopyStatus(enum.Enum):
@@ -315,6 +322,14 @@ def _dense(J):
 
 
 # ------------------------------------------------------------------ the tracker
+_NO_VALUES = np.zeros(0)  # (the compiled tracker's arguments that a request leaves unused)
+_NO_INDICES = np.zeros(0, dtype=np.int32)
+_DENSE_ENDS = {hk.SINGULAR: HomotopyStatus.SINGULAR,
+               hk.STEP_TOO_SMALL: HomotopyStatus.STEP_TOO_SMALL,
+               hk.DIVERGED: HomotopyStatus.DIVERGED, hk.RETURNED: HomotopyStatus.RETURNED,
+               hk.STEP_LIMIT: HomotopyStatus.STEP_LIMIT}
+
+
 class _Stop(Exception):
     def __init__(self, status: HomotopyStatus, message: str):
         self.status = status
@@ -441,8 +456,28 @@ class _Tracker:
         return _Bordered(Hx, np.append(Hlam, 0.0), v, self.dense)
 
     # -------------------------------------------------------------- one path
+    def _end(self, status, y, h=0.0, bound=0.0):
+        """(status, message, y) of a path that ended without reaching lam = 1."""
+        text = {HomotopyStatus.SINGULAR: f"singular augmented Jacobian at lam = {y[-1]:.6f}",
+                HomotopyStatus.STEP_TOO_SMALL: f"corrector failed at step {h:.1e} "
+                                               f"(lam = {y[-1]:.6f})",
+                HomotopyStatus.DIVERGED: f"||x|| exceeded {bound:.3g} at lam = {y[-1]:.6f}",
+                HomotopyStatus.RETURNED: "the path returned below lam = 0",
+                HomotopyStatus.EVALUATION_ERROR: "F or J undefined on the path",
+                HomotopyStatus.STEP_LIMIT: f"{self.opt.homotopy_step_limit} steps without "
+                                           "reaching lam = 1"}
+        return status, text[status], y
+
+    def _log_step(self, lam, h, x):
+        if self.log is not None and self.steps % 20 == 0:
+            self.log(f"homotopy step {self.steps:5d} lam {lam:.6f} h {h:9.2e} "
+                     f"|x| {np.linalg.norm(x, np.inf):9.2e}")
+
     def follow(self, a, polish=None):
         """Track gamma_a from (a, 0).  Returns (status, message, last point (x, lam))."""
+        if (COMPILED_TRACKER and self.n <= DENSE_MAX_N and not cold_start()["interpreting"]
+                and hk.bind_lapack()):
+            return self._follow_dense(a, polish)
         opt = self.opt
         n = self.n
         y = np.append(a, 0.0)
@@ -465,8 +500,7 @@ class _Tracker:
                 Bf = self.factor(Hx, Hlam, v)
                 tau, turned = self._tangent(Bf, v)
             except (np.linalg.LinAlgError, RuntimeError):
-                return (HomotopyStatus.SINGULAR,
-                        f"singular augmented Jacobian at lam = {y[-1]:.6f}", y)
+                return self._end(HomotopyStatus.SINGULAR, y)
             self.turning_points += turned
             # --- predictor-corrector with step control
             retried = False
@@ -483,8 +517,7 @@ class _Tracker:
                 retried = True
                 h *= 0.5
                 if h < hmin:
-                    return (HomotopyStatus.STEP_TOO_SMALL,
-                            f"corrector failed at step {h:.1e} (lam = {y[-1]:.6f})", y)
+                    return self._end(HomotopyStatus.STEP_TOO_SMALL, y, h=h)
             yn, factor = yn
             if retried:  # do not grow right after a rejection (avoids oscillating)
                 factor = max(factor, 1.0)
@@ -495,28 +528,118 @@ class _Tracker:
             y, v = yn, tau
             self._y = y
             lam = y[-1]
-            if self.log is not None and self.steps % 20 == 0:
-                self.log(f"homotopy step {self.steps:5d} lam {lam:.6f} h {h:9.2e} "
-                         f"|x| {np.linalg.norm(y[:-1], np.inf):9.2e}")
+            self._log_step(lam, h, y[:-1])
             if not all_finite(y) or x_max > bound:
-                return (HomotopyStatus.DIVERGED,
-                        f"||x|| exceeded {bound:.3g} at lam = {lam:.6f}", y)
+                return self._end(HomotopyStatus.DIVERGED, y, bound=bound)
             if lam < -0.5:
-                return HomotopyStatus.RETURNED, "the path returned below lam = 0", y
+                return self._end(HomotopyStatus.RETURNED, y)
             out = self.residual(y, a, True)
             if out is None:
-                return HomotopyStatus.EVALUATION_ERROR, "F or J undefined on the path", y
+                return self._end(HomotopyStatus.EVALUATION_ERROR, y)
             H, Hx, Hlam = out
             if lam >= lam_end or lam >= 1.0 - END_GAP:
                 z_end = self.end_game(y[:-1])  # raises _Stop(SOLVED) on success
                 if lam >= 1.0 - END_GAP:
-                    if polish is not None and z_end is not None:
-                        polish(z_end)
-                    return (HomotopyStatus.END_REACHED,
-                            "lam = 1 reached; Newton's method missed the tolerance", y)
+                    return self._end_reached(z_end, polish, y)
                 lam_end = 1.0 - 0.1 * (1.0 - lam)
-        return (HomotopyStatus.STEP_LIMIT,
-                f"{opt.homotopy_step_limit} steps without reaching lam = 1", y)
+        return self._end(HomotopyStatus.STEP_LIMIT, y)
+
+    def _end_reached(self, z_end, polish, y):
+        if polish is not None and z_end is not None:
+            polish(z_end)
+        return (HomotopyStatus.END_REACHED,
+                "lam = 1 reached; Newton's method missed the tolerance", y)
+
+    def _follow_dense(self, a, polish):
+        """:meth:`follow` of a dense problem: everything between two evaluations of the
+        user's functions in one compiled call (``_homotopy_kernels.follow_dense``, which
+        says what it needs next); here only the evaluations, the candidate points, the
+        time limit, the log and the end game.  The Python route's steps in its order: the
+        same points bit for bit, without its ~50 us of Python per accepted step."""
+        opt, n = self.opt, self.n
+        self.dense = True
+        W = np.zeros((hk.W_ROWS, n + 1))
+        W[hk.W_Y, :n] = a  # y = (a, 0)
+        W[hk.W_V, n] = 1.0
+        W[hk.W_A, :n] = a
+        W[hk.W_LB, :n] = self.lb
+        W[hk.W_UB, :n] = self.ub
+        B = np.empty((n + 1, n + 1), order="F")  # (getrf factors it in place)
+        piv = np.empty(n + 1, dtype=np.int32)
+        a_max = max_abs(a)
+        sf = np.zeros(hk.F_SIZE)
+        sf[hk.F_H] = opt.homotopy_initial_step * (1.0 + a_max)
+        sf[hk.F_HMIN] = opt.homotopy_step_minimum * (1.0 + a_max)
+        sf[hk.F_BOUND] = bound = opt.homotopy_divergence_bound * (1.0 + a_max)
+        sf[hk.F_LAM_END] = opt.homotopy_end_lambda
+        sf[hk.F_MU0] = self.mu0
+        sf[hk.F_HMAX] = opt.homotopy_maximum_step
+        # the module's constants as they are now (a test may change them)
+        sf[hk.F_TOL] = CORRECTOR_TOLERANCE
+        sf[hk.F_CONTRACTION] = CONTRACTION_MAX
+        sf[hk.F_DISTANCE] = DISTANCE_MAX
+        sf[hk.F_KAPPA_NOM] = KAPPA_NOMINAL
+        sf[hk.F_DISTANCE_NOM] = DISTANCE_NOMINAL
+        sf[hk.F_GROWTH] = STEP_GROWTH_MAX
+        sf[hk.F_END_GAP] = END_GAP
+        si = np.zeros(hk.I_SIZE, dtype=np.int64)
+        si[hk.I_STEP_LIMIT] = opt.homotopy_step_limit
+        si[hk.I_CORRECTOR_ITERATIONS] = CORRECTOR_ITERATIONS
+        si[hk.I_ESTIMATE] = CORRECTOR_ESTIMATE
+        keys = (hk.I_STEPS, hk.I_REJECTED, hk.I_TURNS, hk.I_FACTORIZATIONS)
+        synced = [0, 0, 0, 0]  # si's counts already added to the tracker's
+        p_row = W[hk.W_P, :n]
+        y = W[hk.W_Y]
+        follow = hk.follow_dense
+        none, no_index = _NO_VALUES, _NO_INDICES
+        logged = 0
+
+        def sync():  # the tracker's counts (the end game's factorizations too) get the path's
+            d = [int(si[k]) - c for k, c in zip(keys, synced)]
+            synced[:] = [int(si[k]) for k in keys]
+            self.steps += d[0]
+            self.rejected += d[1]
+            self.turning_points += d[2]
+            self.factorizations += d[3]
+
+        try:
+            code = follow(sf, si, W, B, piv, none, no_index, no_index, none, False)
+            while True:
+                if si[hk.I_STEPS] != logged:  # a step was accepted
+                    logged = si[hk.I_STEPS]
+                    sync()
+                    self._log_step(y[n], sf[hk.F_H], y[:n])
+                if code == hk.NEED_F:
+                    self._check_time()
+                    f = self.ev.f_once(p_row.copy())
+                    code = (follow(sf, si, W, B, piv, none, no_index, no_index, none, True)
+                            if f is None else
+                            follow(sf, si, W, B, piv, f, no_index, no_index, none, False))
+                elif code == hk.NEED_FJ:
+                    self._check_time()
+                    p = p_row.copy()
+                    f, J = self.ev.fj(p)
+                    if f is None:
+                        if si[hk.I_AT_START]:
+                            raise _Stop(HomotopyStatus.EVALUATION_ERROR,
+                                        "F or J undefined at the start of the path")
+                        return self._end(HomotopyStatus.EVALUATION_ERROR, y.copy())
+                    self._offer(p, f)
+                    J = _float_csc(J)
+                    code = follow(sf, si, W, B, piv, f, J.indptr, J.indices, J.data, False)
+                elif code == hk.END_GAME:
+                    lam = y[n]
+                    z_end = self.end_game(y[:n].copy())  # raises _Stop(SOLVED) on success
+                    if lam >= 1.0 - END_GAP:
+                        return self._end_reached(z_end, polish, y.copy())
+                    sf[hk.F_LAM_END] = 1.0 - 0.1 * (1.0 - lam)
+                    code = follow(sf, si, W, B, piv, none, no_index, no_index, none, False)
+                elif code == hk.LAPACK_ERROR:
+                    raise ValueError("illegal argument of getrf")
+                else:
+                    return self._end(_DENSE_ENDS[code], y.copy(), h=sf[hk.F_H], bound=bound)
+        finally:
+            sync()
 
     def _tangent(self, Bf, v):
         """(tau, 1 if lam turned else 0): the unit tangent at the last accepted point from

@@ -1,6 +1,8 @@
 """The probability-one homotopy pass (compass_sparse.homotopy): the smoothed projection,
 path tracking to a solution where the stabilized Newton method stalls at a stationary
 point of its merit function, the divergence and time-limit statuses, and the pass table."""
+import copy
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -326,6 +328,9 @@ def test_a_non_finite_correction_shortens_the_step_instead_of_failing_the_solve(
     # solves in the compiled chord step (-1 for a non-finite correction), the array route
     # through _Bordered.solve.
     calls = {"n": 0}
+    # (the Python route's dense corrector: the compiled tracker calls chord_step inside
+    # compiled code, test_compiled_tracker_carries_on_past_rejected_corrector_points)
+    monkeypatch.setattr(hom, "COMPILED_TRACKER", False)
     if route == "compiled":
         chord = hom.chord_step
 
@@ -664,6 +669,9 @@ def test_corrector_points_are_within_the_tolerance_of_the_curve(monkeypatch, fam
     the distances stay within twice CORRECTOR_TOLERANCE (1 + ||y||) (measured: at most
     0.96 times it on these instances), most within it."""
     assert hom.CORRECTOR_ESTIMATE
+    # the Python route's corrector, instrumented (the compiled tracker's points are its
+    # bits: test_compiled_tracker_follows_the_python_routes_points_bit_for_bit)
+    monkeypatch.setattr(hom, "COMPILED_TRACKER", False)
     orig = hom._Tracker._correct
     seen = []
 
@@ -750,6 +758,7 @@ def test_accepted_point_reuses_the_correctors_projection_bit_for_bit(monkeypatch
     made (no second projection): p, dp/dx and dp/dmu are the bits a fresh projection at
     that point gives, on every accepted point of a homotopy-only solve."""
     g = thesis_family(10, 2, 1)
+    monkeypatch.setattr(hom, "COMPILED_TRACKER", False)  # (the Python route's residual)
     inner = hom._Tracker.residual
     reused = []
 
@@ -766,3 +775,105 @@ def test_accepted_point_reuses_the_correctors_projection_bit_for_bit(monkeypatch
     r = solve_mcp(g.problem, options={"homotopy": "only"})
     assert r.success
     assert len(reused) >= 5  # the dense route accepted several points with it
+
+
+def _route_runs():
+    g = [(f"thesis {fam} n{n} s{seed}", thesis_family(n, fam, seed).problem)
+         for fam in (1, 2) for n in (10, 20) for seed in (1, 2, 3)]
+    runs = [(name, (p,), {"homotopy": "only"}) for name, p in g]
+    runs += [(name + " auto", (p,), {}) for name, p in g[:3]]
+    F, J, lb, ub, x0 = _stationary_problem()
+    runs.append(("stationary", (F, J, lb, ub, x0), {"homotopy": "only"}))
+    runs.append(("stationary, tight tracking", (F, J, lb, ub, x0),
+                 {"homotopy": "only", "homotopy_initial_step": 1e-3}))
+    return runs
+
+
+def _record(res):
+    hp = res.passes["homotopy"]
+    return (res.status, res.nit, res.nfev, res.njev, res.domain_errors, hp.iterations,
+            hp.factorizations, hp.reason, res.x.tobytes())
+
+
+def test_compiled_tracker_follows_the_python_routes_points_bit_for_bit(monkeypatch, caplog):
+    """The compiled tracker (reverse communication: one compiled call between two
+    evaluations) against the Python route it replaces on dense problems: the same statuses,
+    evaluations, steps, factorizations, pass reasons, log lines and bits of x."""
+    import logging
+
+    calls = {"n": 0}
+    dense = hom.hk.follow_dense
+
+    def counted(*args):
+        calls["n"] += 1
+        return dense(*args)
+
+    monkeypatch.setattr(hom.hk, "follow_dense", counted)
+    out = {}
+    for compiled in (False, True):
+        monkeypatch.setattr(hom, "COMPILED_TRACKER", compiled)
+        records = []
+        for _, args, opts in _route_runs():
+            caplog.clear()
+            with caplog.at_level(logging.INFO, logger="compass_sparse"):
+                res = solve_mcp(*args, options={**opts, "verbosity": 2, "time_limit": 60})
+            records.append(_record(res) + (tuple(r.getMessage() for r in caplog.records
+                                                 if r.getMessage().startswith("homotopy ")),))
+        out[compiled] = records
+        assert (calls["n"] > 0) is compiled
+    for (name, *_), a, b in zip(_route_runs(), out[False], out[True]):
+        assert a == b, (name, [(u, w) for u, w in zip(a, b) if u != w])
+    assert sum(r[0] is Status.SOLVED for r in out[True]) >= 12
+    assert any("homotopy step" in line for r in out[True] for line in r[-1])
+
+
+def test_compiled_tracker_carries_on_past_rejected_corrector_points(monkeypatch):
+    """F rejected at every third corrector iterate (an exception or NaN there): the
+    compiled tracker halves the step and goes on, as the Python route does, to the same
+    points."""
+    def run(compiled):
+        monkeypatch.setattr(hom, "COMPILED_TRACKER", compiled)
+        calls = {"n": 0}
+        once = hom._Tracker.__init__
+
+        def init(self, evalr, *args, **kw):
+            once(self, evalr, *args, **kw)
+            inner = evalr.f_once
+
+            def flaky(x):
+                calls["n"] += 1
+                if calls["n"] % 3 == 0:
+                    return evalr._reject("ValueError('flaky')")
+                return inner(x)
+
+            self.ev = copy.copy(evalr)
+            self.ev.f_once = flaky
+
+        monkeypatch.setattr(hom._Tracker, "__init__", init)
+        res = solve_mcp(thesis_family(10, 2, 1).problem, options={"homotopy": "only"})
+        return res, calls["n"]
+
+    (a, na), (b, nb) = run(False), run(True)
+    assert nb >= 3 and na == nb
+    assert _record(a) == _record(b)
+    assert b.domain_errors >= 1 and b.passes["homotopy"].ran
+    assert b.success or b.status is Status.NO_PROGRESS
+
+
+def test_dense_getrf_gives_scipys_factors_bit_for_bit():
+    """The compiled tracker's getrf (numba's binding of scipy's LAPACK) against
+    scipy.linalg.lapack.dgetrf: the same factors and 0-based pivots, and info > 0 at an
+    exactly zero pivot."""
+    import scipy.linalg as sla
+
+    assert hom.hk.bind_lapack()
+    rng = np.random.default_rng(5)
+    for n in (1, 2, 3, 7, 11, 31, 64, 301):
+        A = np.asfortranarray(rng.standard_normal((n, n)))
+        lu, piv, info = sla.lapack.dgetrf(A)
+        B = A.copy(order="F")
+        p = np.empty(n, dtype=np.int32)
+        assert hom.hk.dense_getrf(B, p) == info == 0
+        assert np.array_equal(B, lu) and np.array_equal(p, piv)
+    S = np.asfortranarray([[1.0, 2.0], [2.0, 4.0]])
+    assert hom.hk.dense_getrf(S, np.empty(2, dtype=np.int32)) > 0
