@@ -7,8 +7,9 @@ Round 13 changed, on the solver's path: the guarded evaluations (``Evaluator.f``
 ``f_once`` and ``jac`` call F, the user's F and J without the general ``guarded`` helper
 between them, and ``F`` and ``J`` read the memo without its ``get`` call) and the
 homotopy's accepted points (``_Tracker.residual`` takes the smoothed projection that the
-corrector's last chord step made, ``_Tracker._correct`` keeps it).  Here they are
-swapped, in this process, for their versions in an older worktree (``--old``, a checkout
+corrector's last chord step made, ``_Tracker._correct`` keeps it), and the compiled
+tracker (``homotopy.COMPILED_TRACKER``: a dense problem's path in one compiled call
+between two evaluations; round 12 had the Python route only).  Here they are swapped, in this process, for their versions in an older worktree (``--old``, a checkout
 of bdfbf13, round 12's last revision); everything else is the same code in both
 variants.
 
@@ -38,6 +39,7 @@ def _swaps(worktree):
               for k in ("_guarded", "_F_value")]
     swaps += [(H._Tracker, k, getattr(oh._Tracker, k), getattr(H._Tracker, k))
               for k in ("residual", "_correct")]
+    swaps.append((H, "COMPILED_TRACKER", False, True))
     return swaps
 
 
