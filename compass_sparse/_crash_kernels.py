@@ -17,10 +17,13 @@ from __future__ import annotations
 
 import numpy as np
 
+import math
+
 from ._eval_kernels import free_block
 from ._jit import njit
 from ._matching import _augmenting_matching
-from ._merit_kernels import crash_active_set, csc_diagonal, csc_to_dense
+from ._merit_kernels import (crash_active_set, csc_diagonal, csc_to_dense, fb_phi_kernel,
+                             max_abs_kernel, normal_map_kernel)
 
 __all__ = ["dense_crash_step", "dense_perturbed_solve", "dense_solve_or_none",
            "initial_shift", "structurally_singular"]
@@ -171,3 +174,210 @@ def dense_crash_step(indptr, indices, data, z, f, lb, ub, prev_free, has_prev,
                 d[i] = di[p]
                 p += 1
     return 0, free, d, changes, m, eps, nf, found
+
+
+# ------------------------------------------------------------------ the compiled crash
+# Requests of crash_dense to its caller: J at z (the next call brings it, or J_FAILED),
+# F at zt (F_GIVEN or F_FAILED; the caller offers the point first), or the end.
+NEED_J, NEED_F, DONE = 1, 2, 3
+# What a call brings (``arg``)
+NOTHING, J_GIVEN, J_FAILED, F_GIVEN, F_FAILED, STOP = 0, 1, 2, 3, 4, 5
+# Stop reasons (crash.py's texts, in this order)
+(R_ITERATION_LIMIT, R_CONVERGED, R_DOMAIN_J, R_NO_CHANGE, R_SINGULAR, R_NO_PROGRESS,
+ R_TIME) = range(7)
+# Rows of the work area W ((CW_ROWS, n)): the current point z, F(z) and its normal-map
+# point x, the step d, the trial point and its normal-map values, the best point, the box
+# and the line search's segment and Phi.
+(CW_Z, CW_F, CW_X, CW_D, CW_ZT, CW_XT, CW_NM, CW_BZ, CW_BF, CW_BX, CW_LB, CW_UB, CW_SEG,
+ CW_PHI) = range(14)
+CW_ROWS = 14
+# Scalars: sf (floats), si (ints); the options first, set by the caller.
+(CF_SIGMA, CF_MIN_STEP, CF_TOL, CF_EPS_SCALE, CF_STEP_LIMIT, CF_START_FACTOR, CF_NM,
+ CF_BEST, CF_ALPHA, CF_FB, CF_NMT, CF_REC) = range(12)
+CRASH_RECENT = 4  # (crash.CRASH_MEMORY: sf[CF_REC:CF_REC + 4] holds the recent norms)
+CF_SIZE = CF_REC + CRASH_RECENT
+(CI_PHASE, CI_LIMIT, CI_NBCHANGE, CI_PERTURB, CI_ATTEMPTS, CI_LINE, CI_IT, CI_NREC,
+ CI_HAS_PREV, CI_REASON, CI_NFACT, CI_CHANGES, CI_NINACT, CI_K, CI_K_FB, CI_K_BEST,
+ CI_ACCEPTED, CI_ROW_IT) = range(18)
+CI_SIZE = 18
+_C_START, _C_TOP, _C_J, _C_F = 0, 1, 2, 3  # phases: what the next call receives
+
+
+@njit(cache=True, inline="always")
+def _np_max(a, b):
+    """np.maximum(a, b) of two floats, b not NaN: b on a tie, as numpy (0.0 and -0.0)."""
+    return a if (a > b or a != a) else b
+
+
+@njit(cache=True, inline="always")
+def _np_min(a, b):
+    """np.minimum(a, b) of two floats, b not NaN: b on a tie, as numpy."""
+    return a if (a < b or a != a) else b
+
+
+@njit(cache=True)
+def _crash_done(sf, si, W, reason, back):
+    """The end of the crash: the stop reason, the iteration count (one less when the
+    loop stopped inside an iteration), the best point when the last steps climbed from
+    it, and ||Phi|| of the point handed on (the value taken at the last step's start when
+    it is that point)."""
+    si[CI_REASON] = reason
+    if back:
+        si[CI_IT] -= 1
+    n = W.shape[1]
+    k = si[CI_K]
+    if sf[CF_BEST] < sf[CF_NM]:
+        sf[CF_NM] = sf[CF_BEST]
+        for i in range(n):
+            W[CW_Z, i] = W[CW_BZ, i]
+            W[CW_F, i] = W[CW_BF, i]
+            W[CW_X, i] = W[CW_BX, i]
+        k = si[CI_K_BEST]
+    if si[CI_K_FB] != k:
+        phi = W[CW_PHI]
+        fb_phi_kernel(W[CW_Z], W[CW_F], W[CW_LB], W[CW_UB], phi)
+        sf[CF_FB] = math.sqrt(np.dot(phi, phi))
+    return DONE
+
+
+@njit(cache=True)
+def _crash_trial(sf, si, W):
+    """The next point of the search (alpha as it is now), or the end of the search."""
+    alpha = sf[CF_ALPHA]
+    if not alpha >= sf[CF_MIN_STEP]:
+        return _crash_done(sf, si, W, R_NO_PROGRESS, True)
+    n = W.shape[1]
+    z, d, seg, zt = W[CW_Z], W[CW_D], W[CW_SEG], W[CW_ZT]
+    lb, ub = W[CW_LB], W[CW_UB]
+    for i in range(n):
+        t = z[i] - alpha * d[i] if si[CI_LINE] == 0 else z[i] + alpha * seg[i]
+        zt[i] = _np_min(_np_max(t, lb[i]), ub[i])
+    si[CI_PHASE] = _C_F
+    return NEED_F
+
+
+@njit(cache=True)
+def _crash_direction(sf, si, W, prev_free, indptr, indices, data):
+    """The crash step's direction at z with J = J(z) (dense_crash_step), then the first
+    trial point."""
+    n = W.shape[1]
+    z, f = W[CW_Z], W[CW_F]
+    nm = sf[CF_NM]
+    eps0 = sf[CF_EPS_SCALE] * (nm if nm > 1.0 else 1.0)  # (Python's max(1.0, nm))
+    limit = sf[CF_STEP_LIMIT] * (1.0 + max_abs_kernel(z, z, False))
+    code, free, d, changes, ninact, eps, nf, found = dense_crash_step(
+        indptr, indices, data, z, f, W[CW_LB], W[CW_UB], prev_free, si[CI_HAS_PREV] != 0,
+        si[CI_NBCHANGE], si[CI_PERTURB] != 0, eps0, si[CI_ATTEMPTS], limit)
+    if code == NO_BASIS_CHANGE:
+        return _crash_done(sf, si, W, R_NO_CHANGE, True)
+    for i in range(n):
+        prev_free[i] = free[i]
+    si[CI_HAS_PREV] = 1
+    si[CI_NFACT] += nf
+    if not found:
+        return _crash_done(sf, si, W, R_SINGULAR, True)
+    si[CI_CHANGES] = changes
+    si[CI_NINACT] = ninact
+    lb, ub = W[CW_LB], W[CW_UB]
+    for i in range(n):
+        W[CW_D, i] = d[i]
+        if si[CI_LINE] != 0:  # the segment to the projected Newton point
+            W[CW_SEG, i] = _np_min(_np_max(z[i] - d[i], lb[i]), ub[i]) - z[i]
+    sf[CF_ALPHA] = 1.0
+    return _crash_trial(sf, si, W)
+
+
+@njit(cache=True)
+def _crash_top(sf, si, W, prev_free, indptr, indices, data, have_j):
+    """The start of an iteration: ||Phi(z)||, the convergence test, then J (asked for
+    unless given) and the direction."""
+    if si[CI_IT] >= si[CI_LIMIT]:
+        return _crash_done(sf, si, W, R_ITERATION_LIMIT, False)
+    si[CI_IT] += 1
+    phi = W[CW_PHI]
+    fb_phi_kernel(W[CW_Z], W[CW_F], W[CW_LB], W[CW_UB], phi)
+    fb = math.sqrt(np.dot(phi, phi))
+    sf[CF_FB] = fb
+    si[CI_K_FB] = si[CI_K]
+    if fb <= sf[CF_TOL]:
+        return _crash_done(sf, si, W, R_CONVERGED, True)
+    if not have_j:
+        si[CI_PHASE] = _C_J
+        return NEED_J
+    return _crash_direction(sf, si, W, prev_free, indptr, indices, data)
+
+
+@njit(cache=True)
+def crash_dense(sf, si, W, prev_free, ft, indptr, indices, data, arg):
+    """The dense route of ``crash._crash`` from one evaluation of the user's F or J to the
+    next, by reverse communication: the call runs until it needs J at W[CW_Z] (NEED_J;
+    the next call brings it, J_GIVEN, or says it failed, J_FAILED), F at the trial point
+    W[CW_ZT] (NEED_F; the caller offers the point first, then brings F_GIVEN with ``ft``
+    or F_FAILED) or the end (DONE; the stop reason in si[CI_REASON], the point handed on
+    in W's first rows).  STOP ends the crash at a time limit.  The steps and formulas of
+    the Python route in its order, its norms as BLAS products: the same bits."""
+    n = W.shape[1]
+    phase = si[CI_PHASE]
+    if phase == _C_START:  # the start: its normal-map point and norm, the first memory
+        normal_map_kernel(W[CW_Z], W[CW_F], W[CW_LB], W[CW_UB], W[CW_X], W[CW_NM])
+        nm = W[CW_NM]
+        sf[CF_NM] = math.sqrt(np.dot(nm, nm))
+        sf[CF_REC] = sf[CF_START_FACTOR] * sf[CF_NM]
+        si[CI_NREC] = 1
+        sf[CF_BEST] = sf[CF_NM]
+        for i in range(n):
+            W[CW_BZ, i] = W[CW_Z, i]
+            W[CW_BF, i] = W[CW_F, i]
+            W[CW_BX, i] = W[CW_X, i]
+        si[CI_K] = 0
+        si[CI_K_BEST] = 0
+        si[CI_K_FB] = -1
+        if arg == STOP:
+            return _crash_done(sf, si, W, R_TIME, False)
+        return _crash_top(sf, si, W, prev_free, indptr, indices, data, arg == J_GIVEN)
+    if arg == STOP:  # the time limit: before J, an iteration not made; in the search,
+        # a search without progress (as the Python route's loops stop)
+        return _crash_done(sf, si, W, R_TIME if phase == _C_J else R_NO_PROGRESS, True)
+    if phase == _C_J:
+        if arg == J_FAILED:
+            return _crash_done(sf, si, W, R_DOMAIN_J, True)
+        return _crash_direction(sf, si, W, prev_free, indptr, indices, data)
+    # _C_F: F at the trial point
+    alpha = sf[CF_ALPHA]
+    if arg == F_GIVEN:
+        normal_map_kernel(W[CW_ZT], ft, W[CW_LB], W[CW_UB], W[CW_XT], W[CW_NM])
+        nm = W[CW_NM]
+        nmt = math.sqrt(np.dot(nm, nm))
+        k = si[CI_NREC]
+        top = sf[CF_REC]
+        for j in range(1, k):  # (Python's max over the list: the first largest)
+            if sf[CF_REC + j] > top:
+                top = sf[CF_REC + j]
+        if nmt <= (1.0 - sf[CF_SIGMA] * alpha) * top:
+            # accepted: the trial point becomes z (its F and x too), the memory moves on
+            sf[CF_NMT] = nmt
+            si[CI_ACCEPTED] += 1
+            si[CI_ROW_IT] = si[CI_IT]
+            for i in range(n):
+                W[CW_Z, i] = W[CW_ZT, i]
+                W[CW_F, i] = ft[i]
+                W[CW_X, i] = W[CW_XT, i]
+            sf[CF_NM] = nmt
+            si[CI_K] += 1
+            if k < CRASH_RECENT:
+                sf[CF_REC + k] = nmt
+                si[CI_NREC] = k + 1
+            else:
+                for j in range(CRASH_RECENT - 1):
+                    sf[CF_REC + j] = sf[CF_REC + j + 1]
+                sf[CF_REC + CRASH_RECENT - 1] = nmt
+            if nmt < sf[CF_BEST]:
+                sf[CF_BEST] = nmt
+                si[CI_K_BEST] = si[CI_K]
+                for i in range(n):
+                    W[CW_BZ, i] = W[CW_Z, i]
+                    W[CW_BF, i] = W[CW_F, i]
+                    W[CW_BX, i] = W[CW_X, i]
+            return _crash_top(sf, si, W, prev_free, indptr, indices, data, False)
+    sf[CF_ALPHA] = alpha * 0.5
+    return _crash_trial(sf, si, W)

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from . import _crash_kernels as ck
 from ._crash_kernels import (NO_BASIS_CHANGE, dense_crash_step, dense_perturbed_solve,
                              initial_shift)
 from ._merit_kernels import crash_active_set, csc_diagonal, csc_to_dense
@@ -85,6 +86,17 @@ regular), then eps0 = 1e-8 max(1, ||F_B||) growing tenfold, so up to eps0 * 1e6 
 (Jumping straight to the eps that brings a runaway step to the limit, ~eps ||d|| / limit,
 was tried: at kojshin's start it stopped at eps ~ 0.1, whose step the search rejects, where
 tenfold growth passes on to eps ~ 1.)"""
+
+
+COMPILED_CRASH = True
+"""A problem whose crash blocks are all dense (n <= ``DENSE_SOLVE_MAX_N``) runs its crash in
+compiled calls between two evaluations (:func:`_crash_dense`, the same points bit for
+bit); False keeps the Python route, the reference of the tests."""
+
+_REASONS = ("iteration limit", "converged", "domain error in J", "no basis change",
+            "singular reduced Jacobian", "no progress", "time limit")  # (ck.R_* order)
+_NO_VALUES = np.zeros(0)
+_NO_INDICES = np.zeros(0, dtype=np.int32)
 
 
 def _klu_suits(Jii, lu) -> bool:
@@ -233,6 +245,10 @@ def _crash(evalr, z0, lb, ub, options, *, f0, J0, tol, deadline, log, on_point,
     opt = options
     tol = opt.convergence_tolerance if tol is None else tol
     z = np.asarray(z0, dtype=float)
+    if (COMPILED_CRASH and f0 is not None and 0 < z.size <= DENSE_SOLVE_MAX_N
+            and _solver_vectors(z, f0, lb, ub)):
+        return _crash_dense(evalr, z, f0, J0, lb, ub, opt, tol, deadline, log, on_point,
+                            stats, t0)
     f = evalr.f(z) if f0 is None else f0
     if f is None:
         return CrashResult(z, np.full(z.size, np.nan), z, 0, np.inf, "domain error at start",
@@ -403,3 +419,100 @@ def _crash(evalr, z0, lb, ub, options, *, f0, J0, tol, deadline, log, on_point,
         fb = dot_norm(fb_phi(z, f, lb, ub))
     return CrashResult(z, f, x, max(it, 0), fb, reason, time.perf_counter() - t0, nfact, rows,
                        factors, reused)
+
+
+def _csc(J):
+    """J as the compiled crash reads it: a float64 CSC matrix (the evaluator's J is)."""
+    if sp.issparse(J) and J.format == "csc" and J.data.dtype == np.float64:
+        return J
+    return sp.csc_matrix(J, dtype=np.float64)
+
+
+def _crash_dense(evalr, z, f0, J0, lb, ub, opt, tol, deadline, log, on_point, stats, t0):
+    """:func:`crash` of a problem whose blocks are all dense: everything between two
+    evaluations of the user's F or J in one compiled call (``_crash_kernels.crash_dense``,
+    which says what it needs next); here only the evaluations, the trial points offered
+    to ``on_point``, the time limit, the counts and the log.  The Python route's steps in
+    its order: the same points bit for bit."""
+    n = z.size
+    W = np.empty((ck.CW_ROWS, n))
+    W[ck.CW_Z] = z
+    W[ck.CW_F] = f0
+    W[ck.CW_LB] = lb
+    W[ck.CW_UB] = ub
+    prev_free = np.zeros(n, dtype=np.bool_)
+    sf = np.zeros(ck.CF_SIZE)
+    sf[ck.CF_SIGMA] = opt.crash_sigma
+    sf[ck.CF_MIN_STEP] = opt.crash_stepsize_minimum
+    sf[ck.CF_TOL] = tol
+    sf[ck.CF_EPS_SCALE] = 1e-8  # (the Python route's eps_scale)
+    sf[ck.CF_STEP_LIMIT] = CRASH_STEP_LIMIT
+    sf[ck.CF_START_FACTOR] = CRASH_START_FACTOR
+    si = np.zeros(ck.CI_SIZE, dtype=np.int64)
+    si[ck.CI_LIMIT] = opt.crash_iteration_limit
+    si[ck.CI_NBCHANGE] = opt.crash_nbchange_limit
+    si[ck.CI_PERTURB] = bool(opt.crash_perturb)
+    si[ck.CI_ATTEMPTS] = PERTURB_ATTEMPTS
+    si[ck.CI_LINE] = opt.crash_searchtype == "line"
+    rows = []
+    seen = [0, 0]  # accepted steps and factorizations already counted in stats
+
+    def late():
+        return deadline is not None and time.perf_counter() > deadline
+
+    step = ck.crash_dense
+    none, no_index = _NO_VALUES, _NO_INDICES
+    if late():
+        code = step(sf, si, W, prev_free, none, no_index, no_index, none, ck.STOP)
+    elif J0 is not None:
+        J = _csc(J0)
+        code = step(sf, si, W, prev_free, none, J.indptr, J.indices, J.data, ck.J_GIVEN)
+    else:
+        code = step(sf, si, W, prev_free, none, no_index, no_index, none, ck.NOTHING)
+    while True:
+        # what the call did: factorizations made, a step accepted (counted as they happen,
+        # so that a stop raised by on_point reports them)
+        if stats is not None and si[ck.CI_NFACT] != seen[1]:
+            stats.factorizations += int(si[ck.CI_NFACT]) - seen[1]
+            seen[1] = int(si[ck.CI_NFACT])
+        if si[ck.CI_ACCEPTED] != seen[0]:
+            seen[0] = int(si[ck.CI_ACCEPTED])
+            row = (int(si[ck.CI_ROW_IT]), int(si[ck.CI_CHANGES]), int(si[ck.CI_NINACT]),
+                   float(sf[ck.CF_NMT]), float(sf[ck.CF_ALPHA]))
+            rows.append(row)
+            if stats is not None:
+                stats.iterations += 1
+            if log is not None:
+                log(f"{row[0]:5d} {row[1]:8d} {row[2]:9d} {row[3]:12.4e} {row[4]:9.2e}")
+        if code == ck.DONE:
+            break
+        if late():
+            code = step(sf, si, W, prev_free, none, no_index, no_index, none, ck.STOP)
+        elif code == ck.NEED_J:
+            J = evalr.jac(W[ck.CW_Z], W[ck.CW_F])
+            if J is None:
+                code = step(sf, si, W, prev_free, none, no_index, no_index, none,
+                            ck.J_FAILED)
+            else:
+                J = _csc(J)
+                code = step(sf, si, W, prev_free, none, J.indptr, J.indices, J.data,
+                            ck.J_GIVEN)
+        else:  # NEED_F at the trial point
+            zt = W[ck.CW_ZT].copy()
+            ft = evalr.f(zt)
+            if ft is None:
+                code = step(sf, si, W, prev_free, none, no_index, no_index, none,
+                            ck.F_FAILED)
+                continue
+            if on_point is not None:
+                try:
+                    on_point(zt, ft)
+                except BaseException:
+                    if stats is not None:  # this step reached the point that stops
+                        stats.iterations += 1
+                    raise
+            code = step(sf, si, W, prev_free, ft, no_index, no_index, none, ck.F_GIVEN)
+    return CrashResult(W[ck.CW_Z].copy(), W[ck.CW_F].copy(), W[ck.CW_X].copy(),
+                       max(int(si[ck.CI_IT]), 0), float(sf[ck.CF_FB]),
+                       _REASONS[int(si[ck.CI_REASON])], time.perf_counter() - t0,
+                       int(si[ck.CI_NFACT]), rows)

@@ -380,6 +380,36 @@ def test_crash_factors_small_sparse_blocks_by_klu_and_large_ones_by_superlu(monk
         assert held_s is not None and (held is None) == klu_available()
 
 
+def _crash_problems(trials):
+    """The known small problems and ``trials`` random ones: singular and structurally
+    singular reduced blocks, points at bounds, box constraints, a runaway-step limit."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    import known_problems as kp
+
+    problems = [cs.MCP(q.F, q.J, q.lb, q.ub, q.x0) for q in (
+        kp.kojima_shindo(), kp.josephy(), kp.mathiesen(), kp.nash_cournot_mss(),
+        kp.separable_box_vi())]
+    rng = np.random.default_rng(7)
+    for trial in range(trials):
+        n = int(rng.integers(1, 60))
+        A = sp.random(n, n, density=rng.choice([0.1, 0.4]), random_state=rng, format="csc")
+        if trial % 3:
+            A = A + sp.eye(n) * rng.choice([0.0, 1.0, 3.0])
+        A = sp.csc_matrix(A)
+        A.sum_duplicates()
+        b = rng.normal(size=n)
+        lb = rng.choice([-np.inf, 0.0, -1.0], n)
+        ub = np.where((rng.random(n) < 0.3) & np.isfinite(lb), lb + 2.0, np.inf)
+        x0 = np.clip(rng.normal(size=n), lb, ub)
+        problems.append(cs.MCP(lambda x, A=A, b=b: A @ x + b + 0.1 * x ** 3,
+                               lambda x, A=A: sp.csc_matrix(A + sp.diags(0.3 * x ** 2)),
+                               lb, ub, x0))
+    return problems
+
+
 def _crash_both_ways(p, opt, monkeypatch):
     """The crash with its one-call dense step, and with the general route (the same
     kernels called one by one from Python)."""
@@ -406,32 +436,8 @@ def test_one_call_dense_crash_step_gives_the_general_routes_steps_bit_for_bit(mo
     problems -- singular and structurally singular reduced blocks, points at bounds,
     box constraints, a runaway-step limit -- it gives the steps, points, factorizations
     and stop reasons of the route that calls its kernels one by one."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).parent))
-    import known_problems as kp
-
-    problems = [cs.MCP(q.F, q.J, q.lb, q.ub, q.x0) for q in (
-        kp.kojima_shindo(), kp.josephy(), kp.mathiesen(), kp.nash_cournot_mss(),
-        kp.separable_box_vi())]
-    rng = np.random.default_rng(7)
-    for trial in range(40):
-        n = int(rng.integers(1, 60))
-        A = sp.random(n, n, density=rng.choice([0.1, 0.4]), random_state=rng, format="csc")
-        if trial % 3:
-            A = A + sp.eye(n) * rng.choice([0.0, 1.0, 3.0])
-        A = sp.csc_matrix(A)
-        A.sum_duplicates()
-        b = rng.normal(size=n)
-        lb = rng.choice([-np.inf, 0.0, -1.0], n)
-        ub = np.where((rng.random(n) < 0.3) & np.isfinite(lb), lb + 2.0, np.inf)
-        x0 = np.clip(rng.normal(size=n), lb, ub)
-        problems.append(cs.MCP(lambda x, A=A, b=b: A @ x + b + 0.1 * x ** 3,
-                               lambda x, A=A: sp.csc_matrix(A + sp.diags(0.3 * x ** 2)),
-                               lb, ub, x0))
     steps = factored = 0
-    for p in problems:
+    for p in _crash_problems(40):
         for opt in (cs.Options(), cs.Options(crash_nbchange_limit=3, crash_perturb=False)):
             fast, slow = _crash_both_ways(p, opt, monkeypatch)
             steps += fast.one_call_steps
@@ -441,3 +447,84 @@ def test_one_call_dense_crash_step_gives_the_general_routes_steps_bit_for_bit(mo
             assert (fast.iterations, fast.factorizations, fast.stop_reason, fast.log) == \
                 (slow.iterations, slow.factorizations, slow.stop_reason, slow.log)
     assert steps > 50 and factored > 3
+
+
+def _domain_problems():
+    """Problems whose F or J fail away from the start: trial points rejected, and a J that
+    cannot be evaluated at the crash's next point."""
+    A = sp.csc_matrix(np.array([[2.0, 1.0, 0.0], [1.0, 3.0, 1.0], [0.0, 1.0, 4.0]]))
+    b = np.array([-8.0, 1.0, -2.0])
+
+    def F(x):
+        if x[0] > 2.5:  # (the full Newton step overshoots into this region)
+            raise ValueError("outside the domain")
+        return A @ x + b + 0.1 * x ** 3
+
+    def J(x):
+        return sp.csc_matrix(A + sp.diags(0.3 * x ** 2))
+
+    def J_fails(x):
+        if np.any(x != 0.0):
+            return sp.csc_matrix(np.full((3, 3), np.nan))
+        return J(x)
+
+    x0 = np.zeros(3)
+    return [cs.MCP(F, J, -np.inf, np.inf, x0),
+            cs.MCP(lambda x: A @ x + b + 0.1 * x ** 3, J_fails, -np.inf, np.inf, x0)]
+
+
+def test_compiled_crash_gives_the_python_routes_points_bit_for_bit(monkeypatch):
+    """The compiled crash (reverse communication: one compiled call between two
+    evaluations) against the Python route it replaces, on the known and random problems
+    and on F and J that fail at some points, with every crash option that changes its
+    path: the same points (z, F, x), iterations, norms, stop reasons, factorizations,
+    log rows and lines, counts, evaluations and trial points offered, bit for bit."""
+    import compass_sparse.crash as C
+    from compass_sparse.result import PassStats
+
+    used = []
+    real = C.ck.crash_dense
+    monkeypatch.setattr(C.ck, "crash_dense", lambda *a: used.append(1) or real(*a))
+    options = (cs.Options(), cs.Options(crash_nbchange_limit=3, crash_perturb=False),
+               cs.Options(crash_searchtype="line"), cs.Options(crash_iteration_limit=1),
+               cs.Options(crash_stepsize_minimum=0.3), cs.Options(crash_iteration_limit=0))
+    reasons = set()
+    for p in _crash_problems(12) + _domain_problems():
+        f0, J0 = p.evaluator.fj(p.x0)
+        for opt in options:
+            for J_start in (J0, None):
+                out = {}
+                for compiled in (False, True):
+                    monkeypatch.setattr(C, "COMPILED_CRASH", compiled)
+                    p.evaluator.forget()
+                    p.evaluator.counters.reset()
+                    st, lines, offered = PassStats(), [], []
+                    cr = crash(p.evaluator, p.x0, p.lb, p.ub, opt, f0=f0, J0=J_start,
+                               stats=st, log=lines.append,
+                               on_point=lambda z, f: offered.append(z.tobytes() + f.tobytes()))
+                    c = p.evaluator.counters
+                    out[compiled] = (cr.z.tobytes(), cr.f.tobytes(), cr.x.tobytes(),
+                                     cr.iterations, cr.fb_norm, cr.stop_reason,
+                                     cr.factorizations, cr.log, st.iterations,
+                                     st.factorizations, lines, offered, c.nfev, c.njev,
+                                     c.domain_errors)
+                assert out[False] == out[True]
+                reasons.add(cr.stop_reason)
+    assert len(used) > 500
+    assert {"converged", "no basis change", "no progress", "iteration limit",
+            "domain error in J"} <= reasons
+
+
+def test_compiled_crash_stops_at_the_time_limit_as_the_python_route():
+    """A deadline already past: no step, the reason "time limit", the start handed on."""
+    import time
+
+    import compass_sparse.crash as C
+
+    p = _crash_problems(0)[0]
+    f0, J0 = p.evaluator.fj(p.x0)
+    assert C.COMPILED_CRASH
+    cr = crash(p.evaluator, p.x0, p.lb, p.ub, cs.Options(), f0=f0, J0=J0,
+               deadline=time.perf_counter() - 1.0)
+    assert (cr.iterations, cr.stop_reason) == (0, "time limit")
+    assert cr.z.tobytes() == p.x0.tobytes() and cr.f.tobytes() == f0.tobytes()
