@@ -381,13 +381,7 @@ def _crash(evalr, z0, lb, ub, options, *, f0, J0, tol, deadline, log, on_point,
             zt = project(z - alpha * d if seg is None else z + alpha * seg, lb, ub)
             ft = evalr.f(zt)
             if ft is not None:
-                if on_point is not None:
-                    try:
-                        on_point(zt, ft)
-                    except BaseException:
-                        if stats is not None:  # this step reached the point that stops
-                            stats.iterations += 1
-                        raise
+                _offer(on_point, stats, zt, ft)
                 xt, nmt = normal_map_at(zt, ft, lb, ub)
                 nmt_norm = dot_norm(nmt)
                 if nmt_norm <= (1.0 - opt.crash_sigma * alpha) * max(recent):
@@ -419,6 +413,18 @@ def _crash(evalr, z0, lb, ub, options, *, f0, J0, tol, deadline, log, on_point,
         fb = dot_norm(fb_phi(z, f, lb, ub))
     return CrashResult(z, f, x, max(it, 0), fb, reason, time.perf_counter() - t0, nfact, rows,
                        factors, reused)
+
+
+def _offer(on_point, stats, zt, ft):
+    """A trial point where F was evaluated, offered to the caller (who may stop the crash
+    by raising: the step that reached the point is counted then)."""
+    if on_point is not None:
+        try:
+            on_point(zt, ft)
+        except BaseException:
+            if stats is not None:
+                stats.iterations += 1
+            raise
 
 
 def _csc(J):
@@ -504,13 +510,7 @@ def _crash_dense(evalr, z, f0, J0, lb, ub, opt, tol, deadline, log, on_point, st
                 code = step(sf, si, W, prev_free, none, no_index, no_index, none,
                             ck.F_FAILED)
                 continue
-            if on_point is not None:
-                try:
-                    on_point(zt, ft)
-                except BaseException:
-                    if stats is not None:  # this step reached the point that stops
-                        stats.iterations += 1
-                    raise
+            _offer(on_point, stats, zt, ft)
             code = step(sf, si, W, prev_free, ft, no_index, no_index, none, ck.F_GIVEN)
     return CrashResult(W[ck.CW_Z].copy(), W[ck.CW_F].copy(), W[ck.CW_X].copy(),
                        max(int(si[ck.CI_IT]), 0), float(sf[ck.CF_FB]),
