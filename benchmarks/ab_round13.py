@@ -8,8 +8,9 @@ Round 13 changed, on the solver's path: the guarded evaluations (``Evaluator.f``
 between them, and ``F`` and ``J`` read the memo without its ``get`` call) and the
 homotopy's accepted points (``_Tracker.residual`` takes the smoothed projection that the
 corrector's last chord step made, ``_Tracker._correct`` keeps it), and the compiled
-tracker (``homotopy.COMPILED_TRACKER``: a dense problem's path in one compiled call
-between two evaluations; round 12 had the Python route only).  Here they are swapped, in this process, for their versions in an older worktree (``--old``, a checkout
+tracker and crash (``homotopy.COMPILED_TRACKER``, ``crash.COMPILED_CRASH``: a dense
+problem's homotopy path and crash in one compiled call between two evaluations; round
+12 had the Python routes only).  Here they are swapped, in this process, for their versions in an older worktree (``--old``, a checkout
 of bdfbf13, round 12's last revision); everything else is the same code in both
 variants.
 
@@ -29,6 +30,7 @@ from ab_round11 import _cases  # the same problems as rounds 11 and 12
 
 def _swaps(worktree):
     """[(owner, attribute, old value, current value)] of the functions round 13 changed."""
+    import compass_sparse.crash as C
     import compass_sparse.evaluation as E
     import compass_sparse.homotopy as H
 
@@ -40,6 +42,7 @@ def _swaps(worktree):
     swaps += [(H._Tracker, k, getattr(oh._Tracker, k), getattr(H._Tracker, k))
               for k in ("residual", "_correct")]
     swaps.append((H, "COMPILED_TRACKER", False, True))
+    swaps.append((C, "COMPILED_CRASH", False, True))
     return swaps
 
 
