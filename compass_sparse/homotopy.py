@@ -94,11 +94,11 @@ import scipy.sparse.linalg as spla
 
 from . import _homotopy_kernels as hk
 from ._blas import BLAS_LIMIT_MIN_N, single_threaded_blas
+from ._csc import csc_times
 from ._homotopy_kernels import (bordered_pivots_ok, bordered_values, chord_step,
                                 homotopy_values, lu_solve, smoothed_projection,
                                 unit_tangent)
 from ._jit import cold_start
-from ._csc import csc_times
 from ._merit_kernels import csc_to_dense
 from .evaluation import all_finite
 from .merit import dot_norm, fb_phi, fb_psi, float_vector, max_abs, project
@@ -457,16 +457,22 @@ class _Tracker:
 
     # -------------------------------------------------------------- one path
     def _end(self, status, y, h=0.0, bound=0.0):
-        """(status, message, y) of a path that ended without reaching lam = 1."""
-        text = {HomotopyStatus.SINGULAR: f"singular augmented Jacobian at lam = {y[-1]:.6f}",
-                HomotopyStatus.STEP_TOO_SMALL: f"corrector failed at step {h:.1e} "
-                                               f"(lam = {y[-1]:.6f})",
-                HomotopyStatus.DIVERGED: f"||x|| exceeded {bound:.3g} at lam = {y[-1]:.6f}",
-                HomotopyStatus.RETURNED: "the path returned below lam = 0",
-                HomotopyStatus.EVALUATION_ERROR: "F or J undefined on the path",
-                HomotopyStatus.STEP_LIMIT: f"{self.opt.homotopy_step_limit} steps without "
-                                           "reaching lam = 1"}
-        return status, text[status], y
+        """(status, message, y) of a path that ended without reaching lam = 1 (both
+        routes' messages)."""
+        S = HomotopyStatus
+        if status is S.SINGULAR:
+            text = f"singular augmented Jacobian at lam = {y[-1]:.6f}"
+        elif status is S.STEP_TOO_SMALL:
+            text = f"corrector failed at step {h:.1e} (lam = {y[-1]:.6f})"
+        elif status is S.DIVERGED:
+            text = f"||x|| exceeded {bound:.3g} at lam = {y[-1]:.6f}"
+        elif status is S.RETURNED:
+            text = "the path returned below lam = 0"
+        elif status is S.EVALUATION_ERROR:
+            text = "F or J undefined on the path"
+        else:
+            text = f"{self.opt.homotopy_step_limit} steps without reaching lam = 1"
+        return status, text, y
 
     def _log_step(self, lam, h, x):
         if self.log is not None and self.steps % 20 == 0:
