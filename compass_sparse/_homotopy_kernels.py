@@ -228,7 +228,7 @@ def bind_lapack() -> bool:
             from numba.np.linalg import _LAPACK
 
             _XXGETRF = _LAPACK().numba_xxgetrf(numba.types.float64)
-        except (ImportError, AttributeError, TypeError):
+        except Exception:  # (ImportError, AttributeError, ... of another numba)
             return False
     return True
 

@@ -877,3 +877,16 @@ def test_dense_getrf_gives_scipys_factors_bit_for_bit():
         assert np.array_equal(B, lu) and np.array_equal(p, piv)
     S = np.asfortranarray([[1.0, 2.0], [2.0, 4.0]])
     assert hom.hk.dense_getrf(S, np.empty(2, dtype=np.int32)) > 0
+
+
+def test_tracker_keeps_its_python_route_when_numba_offers_no_getrf(monkeypatch):
+    """getrf is bound through numba's internal LAPACK interface; a numba without it (the
+    binding fails) leaves the tracker on its Python route, with the same points."""
+    g = thesis_family(10, 2, 1).problem
+    ref = solve_mcp(g, options={"homotopy": "only"})
+    calls = []
+    monkeypatch.setattr(hom.hk, "bind_lapack", lambda: calls.append(1) or False)
+    monkeypatch.setattr(hom.hk, "follow_dense", lambda *a: 1 / 0)
+    res = solve_mcp(g, options={"homotopy": "only"})
+    assert calls and res.success
+    assert _record(res) == _record(ref)
