@@ -22,14 +22,13 @@ Usage:  PYTHONPATH=. python3 benchmarks/ab_round11.py --old <worktree> [--rounds
 """
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 
 sys.path[:0] = [os.path.dirname(__file__), os.path.join(os.path.dirname(__file__), "..", "tests")]
 
 import bench_small as bs
-from ab_round8 import _print, ab, ab_swapped, old_module
+from ab_round8 import _print, ab, old_module, round_main
 
 
 def _swaps(worktree):
@@ -70,23 +69,16 @@ def _cases():
         + bs._thesis_cases([10], [2], [1, 2]) + bs._thesis_cases([50], [2], [1]))
 
 
+def _stall_table(rounds):
+    rows = ab(_cases(), {"limit 3": (lambda: None, {"homotopy_stationary_limit": 3}),
+                         "limit 2": (lambda: None, {"homotopy_stationary_limit": 2})},
+              rounds)
+    _print("homotopy_stationary_limit 2 against 3 (solver time per solve)", rows,
+           "limit 3", "limit 2", rounds)
+
+
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--old")
-    ap.add_argument("--stall", action="store_true")
-    ap.add_argument("--rounds", type=int, default=20)
-    a = ap.parse_args(argv)
-    if a.stall:
-        rows = ab(_cases(), {"limit 3": (lambda: None, {"homotopy_stationary_limit": 3}),
-                             "limit 2": (lambda: None, {"homotopy_stationary_limit": 2})},
-                  a.rounds)
-        _print("homotopy_stationary_limit 2 against 3 (solver time per solve)", rows,
-               "limit 3", "limit 2", a.rounds)
-        return
-    if a.old is None:
-        ap.error("--old <worktree> is required (or --stall)")
-    ab_swapped(_cases(), _swaps(a.old), ("round 10", "round 11"), a.rounds,
-               "Round 11's changes against round 10's functions (solver time per solve)")
+    round_main(__doc__, 11, _cases, _swaps, argv, extra=("--stall", _stall_table))
 
 
 if __name__ == "__main__":

@@ -20,7 +20,6 @@ Usage:  PYTHONPATH=. python3 benchmarks/ab_round12.py --old <worktree> [--rounds
 """
 from __future__ import annotations
 
-import argparse
 import os
 import statistics
 import sys
@@ -29,7 +28,7 @@ import time
 sys.path[:0] = [os.path.dirname(__file__), os.path.join(os.path.dirname(__file__), "..", "tests")]
 
 import bench_small as bs
-from ab_round8 import ab_swapped, old_module
+from ab_round8 import old_module, round_main
 from ab_round11 import _cases  # the same problems as round 11's A/B
 
 from compass_sparse import solve_mcp
@@ -86,18 +85,8 @@ def _order_table(rounds):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--old")
-    ap.add_argument("--order", action="store_true")
-    ap.add_argument("--rounds", type=int, default=20)
-    a = ap.parse_args(argv)
-    if a.order:
-        _order_table(max(1, a.rounds // 10))
-        return
-    if a.old is None:
-        ap.error("--old <worktree> is required (or --order)")
-    ab_swapped(_cases(), _swaps(a.old), ("round 11", "round 12"), a.rounds,
-               "Round 12's changes against round 11's functions (solver time per solve)")
+    round_main(__doc__, 12, _cases, _swaps, argv,
+               extra=("--order", lambda rounds: _order_table(max(1, rounds // 10))))
 
 
 if __name__ == "__main__":

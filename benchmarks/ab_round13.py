@@ -18,13 +18,12 @@ Usage:  PYTHONPATH=. python3 benchmarks/ab_round13.py --old <worktree> [--rounds
 """
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 
 sys.path[:0] = [os.path.dirname(__file__), os.path.join(os.path.dirname(__file__), "..", "tests")]
 
-from ab_round8 import ab_swapped, old_module
+from ab_round8 import old_module, round_main
 from ab_round11 import _cases  # the same problems as rounds 11 and 12
 
 
@@ -47,12 +46,7 @@ def _swaps(worktree):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--old", required=True, help="worktree of round 12's revision")
-    ap.add_argument("--rounds", type=int, default=20)
-    a = ap.parse_args(argv)
-    ab_swapped(_cases(), _swaps(a.old), ("round 12", "round 13"), a.rounds,
-               "Round 13's changes against round 12's functions (solver time per solve)")
+    round_main(__doc__, 13, _cases, _swaps, argv)
 
 
 if __name__ == "__main__":

@@ -90,6 +90,28 @@ def ab_swapped(cases, swaps, labels, rounds, title):
     _print(title, rows, labels[0], labels[1], rounds)
 
 
+def round_main(doc, round_no, cases, swaps, argv=None, extra=None):
+    """The command line of a round's A/B (``ab_round<N>.py``): ``--old <worktree>`` of
+    the previous round and ``--rounds``; ``extra`` = (flag, run): a second table that
+    ``--flag`` prints instead, ``run(rounds)``."""
+    ap = argparse.ArgumentParser(description=doc.split("\n")[0])
+    ap.add_argument("--old", help=f"worktree of round {round_no - 1}'s revision")
+    ap.add_argument("--rounds", type=int, default=20)
+    if extra is not None:
+        ap.add_argument(extra[0], action="store_true")
+    a = ap.parse_args(argv)
+    if extra is not None and getattr(a, extra[0].lstrip("-")):
+        extra[1](a.rounds)
+        return
+    if a.old is None:
+        ap.error("--old <worktree> is required"
+                 + (f" (or {extra[0]})" if extra is not None else ""))
+    labels = (f"round {round_no - 1}", f"round {round_no}")
+    ab_swapped(cases(), swaps(a.old), labels, a.rounds,
+               f"Round {round_no}'s changes against round {round_no - 1}'s functions "
+               "(solver time per solve)")
+
+
 def old_module(worktree, name):
     """The module ``name`` of the package in an older worktree, loaded beside the current
     one (as ``compass_sparse.<name>_old``, once per process)."""
