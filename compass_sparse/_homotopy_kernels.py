@@ -274,6 +274,15 @@ P_START, P_VALUES, P_STEP, P_CHORD = 0, 1, 2, 3
 
 
 @njit(cache=True)
+def _project_point(sf, W, y, n):
+    """p_mu(x) of y = (x, lam) into W's rows P, DX and DMU, with mu = mu0 max(1 - lam, 0)
+    (Python's max, as the tracker's mu(lam))."""
+    c = 1.0 - y[n]
+    smoothed_projection(y[:n], sf[F_MU0] * (0.0 if 0.0 > c else c), W[W_LB, :n],
+                        W[W_UB, :n], W[W_P, :n], W[W_DX, :n], W[W_DMU, :n])
+
+
+@njit(cache=True)
 def _predict(sf, si, W, n):
     """The predictor y + h tau (not past lam = 1), the corrector's start at it and the
     smoothed projection of its point: W[W_P] is where F is wanted next."""
@@ -297,9 +306,7 @@ def _predict(sf, si, W, n):
     sf[F_KAPPA] = 0.0
     si[I_HAS_PREV] = 0
     si[I_ITERATION] = 0
-    c = 1.0 - yc[n]
-    smoothed_projection(yc[:n], sf[F_MU0] * (0.0 if 0.0 > c else c), W[W_LB, :n],
-                        W[W_UB, :n], W[W_P, :n], W[W_DX, :n], W[W_DMU, :n])
+    _project_point(sf, W, yc, n)
     si[I_PHASE] = P_CHORD
     return NEED_F
 
@@ -353,9 +360,7 @@ def follow_dense(sf, si, W, B, piv, f, indptr, indices, data, failed):
     y = W[W_Y]
     phase = si[I_PHASE]
     if phase == P_START:  # the projection of the path's start y = (a, 0)
-        c = 1.0 - y[n]
-        smoothed_projection(y[:n], sf[F_MU0] * (0.0 if 0.0 > c else c), W[W_LB, :n],
-                            W[W_UB, :n], W[W_P, :n], W[W_DX, :n], W[W_DMU, :n])
+        _project_point(sf, W, y, n)
         si[I_AT_START] = 1
         si[I_PHASE] = P_VALUES
         return NEED_FJ

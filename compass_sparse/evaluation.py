@@ -453,11 +453,10 @@ class Evaluator:
         """F(x); raises what the user's F raises.  (``_k``: the memo key of x, when the
         caller has made it.)"""
         x = np.asarray(x, dtype=float)
-        # one key for the look-up and, on a miss, the store (NaN-tested only then); the
-        # memo's get() written out (a call per evaluation of every point)
+        # one key for the look-up and, on a miss, the store (NaN-tested only then)
         k = _k if _k is not None else _Memo.probe(x)
         memo = self._mf
-        f = memo.value if k == memo.key else memo.pvalue if k == memo.pkey else None
+        f = memo.get(x, k)
         if f is None:
             f, J = self._call_F(x)
             if _k is None and k[2]:  # (a point with a NaN is not stored)
@@ -472,8 +471,7 @@ class Evaluator:
         reuse it).  (``_k``: the memo key of x, when the caller has made it.)"""
         x = np.asarray(x, dtype=float)
         k = _k if _k is not None else _Memo.probe(x)
-        memo = self._mj
-        hit = memo.value if k == memo.key else memo.pvalue if k == memo.pkey else None
+        hit = self._mj.get(x, k)
         if hit is not None:
             J, counted = hit
             if J.nnz != self._pattern.nnz:  # kept from before an undeclared pattern grew
