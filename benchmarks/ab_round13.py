@@ -5,7 +5,8 @@ without the user's F and J).
 
 Round 13 changed, on the solver's path: the guarded evaluations (``Evaluator.f``,
 ``f_once`` and ``jac`` call F, the user's F and J without the general ``guarded`` helper
-between them, and ``F`` and ``J`` read the memo without its ``get`` call) and the
+between them; the memo's look-up, inlined in the measured code, is ``_Memo.get`` again
+since the final review, and round 12's is swapped in whole) and the
 homotopy's accepted points (``_Tracker.residual`` takes the smoothed projection that the
 corrector's last chord step made, ``_Tracker._correct`` keeps it), and the compiled
 tracker and crash (``homotopy.COMPILED_TRACKER``, ``crash.COMPILED_CRASH``: a dense
