@@ -45,7 +45,7 @@ import scipy.sparse as sp
 from ._csc import trusted_csc
 from ._eval_kernels import csc_same_pattern, free_block
 from ._jit import njit
-from ._merit_kernels import csc_is_canonical
+from ._merit_kernels import csc_is_canonical, max_abs_kernel, newton_linearization
 from ._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
 from ._slot_kernels import components, start_basis
 from .basis.types import BasisOptions
@@ -266,6 +266,28 @@ def _dense_direct_from(indptr, indices, data, q, lb, ub, x, r, previous, use_pre
     res, mz, nf = _dense_direct(indptr, indices, data, q, lb, ub, basic.astype(np.int64), zt,
                                 wt, vt, tol, rank_tol)
     return 1, res, mz, nf, guessed
+
+
+@njit(cache=True)
+def dense_newton_direct(jdata, pos_j, scatter, pos_d, eps, indptr, indices, zk, fk, x, lb,
+                        ub, previous, use_previous, mdata, q, r, z, w, v, basic, slack, zt,
+                        wt, vt, tol, rank_tol, res_tol):
+    """A major iteration's linear MCP and its path's start and dense direct step, in one
+    compiled call: :func:`~compass_sparse._merit_kernels.newton_linearization` (M's
+    entries into ``mdata``, q, r at z_k = ``zk``, F(z_k) = ``fk``), then
+    :func:`_dense_direct_from` on that M, then the test of :func:`_accepted`.  Returns
+    (code, |F|, accepted): code 0 when r = 0, 1 after a direct step, which ``accepted``
+    says ends the path.  The same bits as the three steps called one by one."""
+    newton_linearization(jdata, pos_j, scatter, pos_d, eps, indptr, indices, zk, fk, x, mdata,
+                         q, r)
+    code, res, mz, nf, guessed = _dense_direct_from(
+        indptr, indices, mdata, q, lb, ub, x, r, previous, use_previous, z, w, v, basic,
+        slack, zt, wt, vt, tol, rank_tol)
+    accepted = False
+    if code == 1 and res >= 0.0:
+        qmax = max_abs_kernel(q, q, False)
+        accepted = res <= res_tol * (1.0 + mz + qmax)  # (NaN fails, as in _accepted)
+    return code, nf, accepted
 
 
 def dense_direct_path(M, q, lb, ub, x, r, previous, factors: DirectFactors):

@@ -48,10 +48,12 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from . import _nms_kernels as nk
 from ._csc import trusted_csc
+from ._jit import cold_start
 from ._merit_kernels import csc_matvec, newton_linearization
 from .acceptance import Acceptance
-from .crash import crash
+from .crash import _NO_INDICES, _NO_VALUES, crash
 from .direct_step import (DIRECT_MIN_N, REUSE_BEATS_REFACTOR_NNZ, DirectFactors,
                           direct_step_applies)
 from .evaluation import all_finite
@@ -59,7 +61,7 @@ from .exceptions import FactorBudgetError
 from .fallback import gradient_steps, lm_step
 from .merit import (_solver_vectors, fb_directional, fb_phi, fb_psi, max_abs_diff,
                     normal_map_at, project)
-from .path import LinearCode, WarmBasis, solve_linear_mcp
+from .path import LinearCode, WarmBasis, dense_newton_result, solve_linear_mcp
 from .progress import ProgressLine
 from .restarts import FROM_RANDOM, FROM_START, RestartSchedule, near_point, random_point
 from .result import Iteration, PassStats, Status
@@ -72,6 +74,10 @@ __all__ = ["NMSSolver", "Outcome", "Linearizer"]
 LOCAL_FACTOR = 1e-3
 """Below this fraction of a run's starting residual the NMS accepts only steps that do not
 raise the merit (d-steps included); larger steps go to the watchdog's backtracking."""
+
+COMPILED_NMS = True
+"""Run the major iterations' bookkeeping in compiled calls (:meth:`NMSSolver._run_compiled`)
+where it applies; False keeps the Python loop (the reference of the tests)."""
 
 FLAT_REJECTION_LIMIT = 10
 """Points with a residual below the tolerance that the scale test (see
@@ -327,20 +333,25 @@ class NMSSolver:
         small = verdict.small_residual if verdict is not None else \
             self.acceptance.small(z, f, phi, psi)
         if small:
-            v = verdict if verdict is not None else self.acceptance.judge(
-                z, f, jac=lambda y: self.ev.jac(y, f), phi=phi, small=True)
-            if v.solved:
-                self.best = Point(z.copy(), f.copy(), phi.copy(), psi)
-                self.verdict = v
-                raise _Stop(Status.SOLVED, "solution found")
-            if v.small_residual and v.flat_row >= 0:
-                # A flat tail: keep going (a genuine solution may still be reached), but
-                # not for ever along a tail that leads nowhere.
-                self.flat_rejections += 1
-                if self.flat_rejections >= FLAT_REJECTION_LIMIT:
-                    raise _Stop(Status.FLAT_RESIDUAL, v.flat_message(self.p.row_label))
+            self._judge(z, f, phi, psi, verdict)
         if self._past_deadline():
             raise _Stop(Status.TIME_LIMIT, "time limit reached")
+
+    def _judge(self, z, f, phi, psi, verdict=None):
+        """The acceptance test of a point whose residuals are small (``verdict``: its
+        verdict, when known): a solution stops the solve; a flat tail is counted."""
+        v = verdict if verdict is not None else self.acceptance.judge(
+            z, f, jac=lambda y: self.ev.jac(y, f), phi=phi, small=True)
+        if v.solved:
+            self.best = Point(z.copy(), f.copy(), phi.copy(), psi)
+            self.verdict = v
+            raise _Stop(Status.SOLVED, "solution found")
+        if v.small_residual and v.flat_row >= 0:
+            # A flat tail: keep going (a genuine solution may still be reached), but
+            # not for ever along a tail that leads nowhere.
+            self.flat_rejections += 1
+            if self.flat_rejections >= FLAT_REJECTION_LIMIT:
+                raise _Stop(Status.FLAT_RESIDUAL, v.flat_message(self.p.row_label))
 
     def _consider_trial(self, z, f):
         """A crash trial point (F evaluated there) may be the best point too."""
@@ -396,9 +407,43 @@ class NMSSolver:
             return None, None, LinearCode.ERROR
         if self.linearizer is None or self.linearizer.nnz_J != J.nnz:
             self.linearizer = Linearizer(J)  # first J, or an undeclared pattern grew
-        # M = J + eps I, q = f - M z and r = f + x - z (r: the normal map of the
-        # linearization at x)
-        M, q, r = self.linearizer.linearize(J, eps, cur.z, cur.f, x)
+        start_ray = opt.lemke_start == "always" or (opt.lemke_start == "first" and self.nit == 0)
+        t0 = time.perf_counter()
+        M = res = None
+        if (self.bm is not None and self._direct is not None and self._crash_factors is None
+                and not start_ray and self.log_minor is None):
+            # A small dense problem's linear MCP and its dense direct step in one compiled
+            # call; when the step ends the path, solve_linear_mcp below is not needed.
+            M, q, r, res = dense_newton_result(self.linearizer, J, eps, cur.z, cur.f, x,
+                                               self.lb, self.ub, self.bm, self.basis,
+                                               self._direct)
+        if M is None:
+            # M = J + eps I, q = f - M z and r = f + x - z (r: the normal map of the
+            # linearization at x)
+            M, q, r = self.linearizer.linearize(J, eps, cur.z, cur.f, x)
+        if res is not None:
+            self.bm.set_matrix(M)
+        else:
+            res = self._solve_linear(M, q, r, x, start_ray, opt)
+        if res.direct_lu_nnz >= REUSE_BEATS_REFACTOR_NNZ and opt.factor_reuse and \
+                not getattr(self.bm, "runs_paths", False):
+            # factors this large are cheaper to reuse (the sparse basis' GMRES) than to
+            # compute afresh in every major iteration
+            self._direct = None
+        st = self.passes["path"]
+        st.ran = True
+        st.time += time.perf_counter() - t0
+        st.pivots += res.pivots
+        st.factorizations += res.factorizations
+        st.iterations += 1
+        self.minor += res.pivots
+        if res.code is LinearCode.SOLVED or res.t > 0:
+            self.basis = res.basis
+        return res, J, res.code
+
+    def _solve_linear(self, M, q, r, x, start_ray, opt):
+        """The pivotal path of the major iteration's linear MCP (M, q) from x (the basis
+        manager made on the first one)."""
         if self.bm is None:
             self.bm = self.manager_factory(M)
             if direct_step_applies(M, opt):
@@ -419,29 +464,11 @@ class NMSSolver:
                 # step's factorization, and reuse its own factors after that
                 self._direct = None
         self._crash_factors = None
-        limit = opt.minor_limit(self.n)
-        t0 = time.perf_counter()
-        start_ray = opt.lemke_start == "always" or (opt.lemke_start == "first" and self.nit == 0)
         # A warm path that stalls before half-way is retried from the Lemke start.
-        res = solve_linear_mcp(M, q, self.lb, self.ub, self.bm, opt, x, warm=self.basis, r=r,
-                               ray_start=start_ray, retry_below=0.5, minor_limit=limit,
-                               deadline=self.deadline, log=self.log_minor,
-                               direct=self._direct)
-        if res.direct_lu_nnz >= REUSE_BEATS_REFACTOR_NNZ and opt.factor_reuse and \
-                not getattr(self.bm, "runs_paths", False):
-            # factors this large are cheaper to reuse (the sparse basis' GMRES) than to
-            # compute afresh in every major iteration
-            self._direct = None
-        st = self.passes["path"]
-        st.ran = True
-        st.time += time.perf_counter() - t0
-        st.pivots += res.pivots
-        st.factorizations += res.factorizations
-        st.iterations += 1
-        self.minor += res.pivots
-        if res.code is LinearCode.SOLVED or res.t > 0:
-            self.basis = res.basis
-        return res, J, res.code
+        return solve_linear_mcp(M, q, self.lb, self.ub, self.bm, opt, x, warm=self.basis, r=r,
+                                ray_start=start_ray, retry_below=0.5,
+                                minor_limit=opt.minor_limit(self.n), deadline=self.deadline,
+                                log=self.log_minor, direct=self._direct)
 
     # ------------------------------------------------------------------ fallbacks
     def _fallback(self, opt):
@@ -526,6 +553,8 @@ class NMSSolver:
             ckpt=(cur, x),
             delta=10.0 * max(1.0, float(np.max(np.abs(cur.z))) if cur.z.size else 1.0),
             eps=opt.proximal_perturbation, best_seen=self.best.psi, fbn_start=cur.fbn)
+        if self._compiled_applies():
+            return self._run_compiled(st, opt, stall_limit)
         while True:
             self._check_limits(opt)
             self._callback(st.cur)
@@ -605,6 +634,140 @@ class NMSSolver:
                 if st.stall >= stall_limit:
                     return f"no progress in {st.stall} major iterations"
 
+    def _compiled_applies(self) -> bool:
+        """Whether the major iterations run in compiled calls (:meth:`_run_compiled`): on
+        the user's problem unscaled, without a callback or a log of the iterations, and
+        once numba is loaded (during the cold start the Python loop is the faster)."""
+        return (COMPILED_NMS and self.callback is None and self.log_major is None
+                and self.acceptance.row is None and self.n > 0
+                and _solver_vectors(self.lb, self.ub, self.lb, self.ub)  # float vectors
+                and not cold_start()["interpreting"])
+
+    def _run_compiled(self, st, opt, stall_limit):
+        """The major iterations of :meth:`_run` from the state ``st``, their bookkeeping
+        in compiled calls (``_nms_kernels.nms_dense``, which says what it needs next);
+        here the Newton point, the evaluations, the acceptance test, the fallback, the
+        limits and the history.  The Python loop's steps in its order: the same points
+        bit for bit, without its ~50 us of Python per major iteration."""
+        n = self.n
+        W = np.empty((nk.W_ROWS, n))
+        cur = st.cur
+        for row, v in ((nk.W_CZ, cur.z), (nk.W_CF, cur.f), (nk.W_CPHI, cur.phi),
+                       (nk.W_CX, st.x), (nk.W_KZ, cur.z), (nk.W_KX, st.x), (nk.W_LB, self.lb),
+                       (nk.W_UB, self.ub)):
+            W[row] = v
+        mem = np.empty(st.memory_size)
+        mem[:len(st.memory)] = st.memory
+        sf = np.zeros(nk.S_SIZE)
+        for k, v in ((nk.S_CPSI, cur.psi), (nk.S_KPSI, cur.psi), (nk.S_DELTA, st.delta),
+                     (nk.S_EPS, st.eps), (nk.S_BEST_SEEN, st.best_seen),
+                     (nk.S_FBN_START, st.fbn_start), (nk.S_SIGMA, opt.nms_sigma),
+                     (nk.S_DELTA_SHRINK, opt.nms_delta_shrink_factor),
+                     (nk.S_DELTA_MIN, opt.nms_delta_min),
+                     (nk.S_PROX_SHRINK, opt.proximal_shrink_factor),
+                     (nk.S_PROX_INCREASE, opt.proximal_increase_factor),
+                     (nk.S_STEP_MIN, opt.nms_stepsize_minimum),
+                     (nk.S_SHRINK, opt.nms_shrink_factor), (nk.S_TOL, self.acceptance.tol),
+                     (nk.S_LOCAL, LOCAL_FACTOR)):
+            sf[k] = v
+        si = np.zeros(nk.I_SIZE, dtype=np.int64)
+        for k, v in ((nk.I_NMEM, len(st.memory)), (nk.I_MEMSIZE, st.memory_size),
+                     (nk.I_MONOTONE, not opt.nms), (nk.I_MSTEP_FREQ, opt.nms_mstep_frequency),
+                     (nk.I_MAX_WATCHDOGS, opt.nms_maximum_watchdogs),
+                     (nk.I_STALL_LIMIT, stall_limit), (nk.I_CUR_IS_CKPT, 1),
+                     (nk.I_LINE, opt.nms_searchtype == "line")):
+            si[k] = v
+        owner = [True]  # whether the best point is the kernel's (rows W_B*) now
+
+        def take_best():  # the solver's best point goes to the kernel
+            b = self.best
+            W[nk.W_BZ], W[nk.W_BF], W[nk.W_BPHI] = b.z, b.f, b.phi
+            sf[nk.S_BPSI] = b.psi
+            si[nk.I_BEST_NEW] = 0
+            owner[0] = True
+
+        def hand_best():  # ... and back to the solver, before Python reads it
+            if owner[0] and si[nk.I_BEST_NEW]:
+                self.best = Point(W[nk.W_BZ].copy(), W[nk.W_BF].copy(), W[nk.W_BPHI].copy(),
+                                  float(sf[nk.S_BPSI]))
+            owner[0] = False
+
+        def fallback():  # (on the solver's best point, which it may replace)
+            hand_best()
+            fb, letter = self._fallback(opt)
+            if fb is not None:
+                take_best()
+                W[nk.W_TZ], W[nk.W_TF], W[nk.W_TPHI] = fb.z, fb.f, fb.phi
+                sf[nk.S_TPSI] = fb.psi
+            return fb, letter
+
+        take_best()
+        kernel = nk.nms_dense
+        none = jx = _NO_VALUES  # (the arguments a call leaves unused)
+        ip = ix = _NO_INDICES
+        cur_J, res, f = cur.J, None, None
+        try:
+            code = kernel(sf, si, W, mem, none, ip, ix, jx, nk.A_START, False)
+            while True:
+                if si[nk.I_LOG]:  # a finished major iteration
+                    self._record(res.code, nk.LETTERS[si[nk.I_LOG]], float(sf[nk.S_LOG_FBN]),
+                                 res.pivots, float(sf[nk.S_EPS]))
+                    si[nk.I_LOG] = 0
+                if code == nk.NEED_NEWTON:
+                    self._check_limits(opt)
+                    if self.progress.enabled:
+                        self.progress.update(self.nit, self.minor, math.sqrt(2.0 * sf[nk.S_CPSI]),
+                                             math.sqrt(2.0 * sf[nk.S_BPSI]), self.restarts)
+                    cur = Point(W[nk.W_CZ].copy(), W[nk.W_CF].copy(), W[nk.W_CPHI].copy(),
+                                float(sf[nk.S_CPSI]), cur_J)
+                    cur_J = None  # (only the run's start point comes with its J)
+                    res, J, lcode = self._newton_point(cur, W[nk.W_CX].copy(),
+                                                       float(sf[nk.S_EPS]), opt)
+                    self.nit += 1
+                    if res is None:  # J could not be evaluated at z_k
+                        fb, letter = fallback()
+                        if fb is None:
+                            return "evaluation failure and no fallback progress"
+                        self._record(lcode, letter, fb.fbn, 0, float(sf[nk.S_EPS]))
+                        code = kernel(sf, si, W, mem, none, ip, ix, jx, nk.A_FRESH_J, False)
+                        continue
+                    W[nk.W_RZ], W[nk.W_RW], W[nk.W_RV] = res.z, res.w, res.v
+                    solved = res.code is LinearCode.SOLVED
+                    si[nk.I_USABLE] = solved or (res.t > 1e-8 and bool(np.any(res.z != cur.z)))
+                    si[nk.I_RES_SOLVED] = solved
+                    si[nk.I_RES_MOVED] = res.t > 0
+                    ip, ix, jx = J.indptr, J.indices, J.data
+                    code = kernel(sf, si, W, mem, none, ip, ix, jx, nk.A_NEWTON, False)
+                elif code == nk.NEED_F_CAND or code == nk.NEED_F_TRIAL:
+                    if code == nk.NEED_F_TRIAL and self._past_deadline():
+                        raise _Stop(Status.TIME_LIMIT, "time limit reached")
+                    f = self.ev.f(res.z if code == nk.NEED_F_CAND else W[nk.W_TZ])
+                    code = (kernel(sf, si, W, mem, none, ip, ix, jx, nk.A_F_FAILED, False)
+                            if f is None else
+                            kernel(sf, si, W, mem, f, ip, ix, jx, nk.A_F_GIVEN,
+                                   self._past_deadline()))
+                elif code == nk.JUDGE:
+                    hand_best()  # (a solution found here becomes the best point)
+                    self._judge(W[nk.W_TZ].copy(), f, W[nk.W_TPHI].copy(),
+                                float(sf[nk.S_TPSI]))
+                    owner[0] = True
+                    code = kernel(sf, si, W, mem, none, ip, ix, jx, nk.A_JUDGED,
+                                  self._past_deadline())
+                elif code == nk.NEED_FALLBACK:
+                    fb, letter = fallback()
+                    if fb is None:
+                        self._record(res.code, "G", self.best.fbn, res.pivots,
+                                     float(sf[nk.S_EPS]))
+                        return "no descent from the best point"
+                    self._record(res.code, letter, fb.fbn, res.pivots, float(sf[nk.S_EPS]))
+                    code = kernel(sf, si, W, mem, none, ip, ix, jx, nk.A_FRESH, False)
+                elif code == nk.TIME_UP:
+                    raise _Stop(Status.TIME_LIMIT, "time limit reached")
+                else:  # STALLED
+                    return f"no progress in {int(si[nk.I_STALL])} major iterations"
+        finally:
+            hand_best()
+
     def _descent_ok(self, cur, cand, R, opt):
         # The directional derivative of Psi at z_k uses the Jacobian of this major iteration.
         J = self._last_J
@@ -647,11 +810,16 @@ class NMSSolver:
         if self.log_major is not None:
             self.log_major("crash " + line)
 
+    def _record(self, code, step, fbn, pivots, eps):
+        """The history's record of this major iteration; returns the path's code letter."""
+        c = code.value if hasattr(code, "value") else str(code)
+        self.history.append(Iteration(self.nit, fbn, f"{c}{step}", pivots, eps,
+                                      time.perf_counter() - self._t_start))
+        return c
+
     def _log(self, code, step, cur, eps, res):
         pivots = res.pivots if res is not None else 0
-        c = code.value if hasattr(code, "value") else str(code)
-        self.history.append(Iteration(self.nit, cur.fbn, f"{c}{step}", pivots, eps,
-                                      time.perf_counter() - self._t_start))
+        c = self._record(code, step, cur.fbn, pivots, eps)
         if self.log_major is None:
             return
         idx = int(np.argmax(np.abs(cur.phi))) if cur.phi.size else 0

@@ -78,11 +78,12 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _path_kernels as _PK
-from ._csc import csc_times
+from ._csc import csc_times, trusted_csc
 from ._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
 from ._slot_kernels import lemke_start, slot_basis, slot_point, slot_table, start_basis
 from .basis import KIND_DENSE, KIND_M, KIND_UNIT, FactorReuseFailed, UpdateStatus
-from .direct_step import DirectFactors, dense_direct_path, direct_step
+from .direct_step import (FEASIBILITY_TOLERANCE, RESIDUAL_TOLERANCE, DirectFactors,
+                          dense_direct_path, dense_newton_direct, direct_step)
 from .exceptions import ShapeError, SingularBasisError
 from .merit import max_abs
 
@@ -250,24 +251,67 @@ def _dense_direct_result(M, q, lb, ub, manager, options, x, r, warm, direct, kw)
     if out is None:
         return None
     kind, end, basic, nnz_lu = out
+    if kind != "path":
+        return _decided_result(kind, end, basic, nnz_lu, manager, direct, t0)
+    # the step failed: the path runs from the start the call computed
+    if nnz_lu:
+        manager.stats.record_direct_lu(nnz_lu, time.perf_counter() - t0, direct.method)
+    res = PivotalPath(M, q, lb, ub, manager, options, **kw).run(x, warm=warm, r=r, start=end)
+    # the failed step's factorization counts in the path's, as inside run()
+    res.factorizations += 1 if nnz_lu else 0
+    res.direct_lu_nnz = nnz_lu
+    res.time = time.perf_counter() - t0
+    return res
+
+
+def _decided_result(kind, end, basic, nnz_lu, manager, direct, t0):
+    """The PathResult of a path that its start ends (``kind`` "start": r = 0) or its dense
+    direct step ends ("direct": the step's LU, ``nnz_lu`` entries, is counted)."""
     if kind == "start":
         res = PathResult(LinearCode.SOLVED, *end, 1.0, basis=WarmBasis(basic),
                          ray_start=False)
-        res.time = time.perf_counter() - t0
-        return res
-    if nnz_lu:
-        manager.stats.record_direct_lu(nnz_lu, time.perf_counter() - t0, direct.method)
-    if kind == "direct":
+    else:
+        if nnz_lu:
+            manager.stats.record_direct_lu(nnz_lu, time.perf_counter() - t0, direct.method)
         res = PathResult(LinearCode.SOLVED, *end, 1.0, factorizations=1,
                          basis=WarmBasis(basic), ray_start=False, direct_lu_nnz=nnz_lu)
-    else:  # the step failed: the path runs from the start the call computed
-        res = PivotalPath(M, q, lb, ub, manager, options, **kw).run(x, warm=warm, r=r,
-                                                                    start=end)
-        # the failed step's factorization counts in the path's, as inside run()
-        res.factorizations += 1 if nnz_lu else 0
-        res.direct_lu_nnz = nnz_lu
     res.time = time.perf_counter() - t0
     return res
+
+
+def dense_newton_result(lin, J, eps, zk, fk, x, lb, ub, manager, warm, direct):
+    """(M, q, r, res): the linear MCP of a major iteration, ``lin.linearize(J, eps, zk, fk,
+    x)``, and what ``solve_linear_mcp(M, q, lb, ub, manager, ..., x, warm=warm, r=r,
+    direct=direct)`` returns when the path's start or its dense direct step decides it
+    (res None when the path must run: the caller runs it), in one compiled call for a
+    small dense problem (:func:`~compass_sparse.direct_step.dense_newton_direct`): the
+    same values, counts and bits.  All None when the arguments are not that call's."""
+    n = zk.shape[0]
+    if not (direct.dense and J.data.dtype == np.float64 and J.data.shape[0] == J.nnz
+            and _floats(n, zk, fk, x, lb, ub) and n == lin.n
+            and (warm is None or warm.basic.shape == (n,))):
+        return None, None, None, None
+    t0 = time.perf_counter()
+    P = lin.M
+    mdata = np.empty(P.data.shape[0])
+    q, r = np.empty((2, n))
+    z, w, v, zt, wt, vt = np.empty((6, n))  # (rows of one allocation: C vectors)
+    basic, slack = np.empty((2, n), dtype=np.int8)
+    scatter = lin.pos_J is not None
+    use_previous = warm is not None
+    code, nf, accepted = dense_newton_direct(
+        J.data, lin.pos_J if scatter else lin.pos_D, scatter, lin.pos_D, float(eps),
+        P.indptr, P.indices, zk, fk, x, lb, ub, warm.basic if use_previous else basic,
+        use_previous, mdata, q, r, z, w, v, basic, slack, zt, wt, vt, FEASIBILITY_TOLERANCE,
+        direct.rank_tolerance, RESIDUAL_TOLERANCE)
+    M = trusted_csc(mdata, P.indices, P.indptr, P.shape)
+    if code == 0:
+        return M, q, r, _decided_result("start", (z, w, v), basic, 0, manager, direct, t0)
+    direct.method = ("dense", "partial pivoting")
+    direct.lu_nnz = nnz_lu = nf * nf
+    if not accepted:
+        return M, q, r, None
+    return M, q, r, _decided_result("direct", (zt, wt, vt), basic, nnz_lu, manager, direct, t0)
 
 
 @dataclass

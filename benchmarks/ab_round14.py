@@ -1,0 +1,43 @@
+"""One-process A/B measurement of round 14 of the small-problem work (benchmarks/small.md,
+"Round 14"), with the harness of ``ab_round8.py`` (variants alternated batch by batch in
+one process, the order flipped every round; medians of the solver's time per solve
+without the user's F and J).
+
+Round 14 changed, on the solver's path: the major iteration's Newton point
+(``NMSSolver._newton_point``: from the second major iteration of a small dense problem
+on, the linear MCP and its dense direct step are one compiled call,
+``path.dense_newton_result``, and ``solve_linear_mcp`` runs only when the step fails).
+Here it is swapped, in this process, for its version in an older worktree (``--old``, a
+checkout of c27967c, round 13's last revision); everything else is the same code in both
+variants.
+
+Usage:  PYTHONPATH=. python3 benchmarks/ab_round14.py --old <worktree> [--rounds 20]
+"""
+from __future__ import annotations
+
+import os
+import sys
+
+sys.path[:0] = [os.path.dirname(__file__), os.path.join(os.path.dirname(__file__), "..", "tests")]
+
+from ab_round8 import old_module, round_main
+from ab_round11 import _cases  # the same problems as rounds 11 to 13
+
+
+def _swaps(worktree):
+    """[(owner, attribute, old value, current value)] of the functions round 14 changed."""
+    import compass_sparse.nms as N
+
+    on = old_module(worktree, "nms")
+    for k in ("Point", "_Stop", "NMSState"):  # the old methods make and catch today's
+        setattr(on, k, getattr(N, k))
+    return [(N.NMSSolver, k, getattr(on.NMSSolver, k), getattr(N.NMSSolver, k))
+            for k in ("_newton_point", "_run")]
+
+
+def main(argv=None):
+    round_main(__doc__, 14, _cases, _swaps, argv)
+
+
+if __name__ == "__main__":
+    main()
