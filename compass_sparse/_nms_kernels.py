@@ -8,8 +8,11 @@ compiled call between two requests to the Python driver (``NMSSolver._run_compil
 by reverse communication as the crash and the homotopy's tracker do:
 
 - NEED_NEWTON: the Newton point of the current iterate (rows W_CZ, W_CF, W_CX, the
-  proximal eps in sf[S_EPS]).  The driver checks the limits, runs the linear solve
-  (``_newton_point``: its Jacobian, its path, its counts) and brings the path's end
+  proximal eps in sf[S_EPS]).  The driver checks the limits.  On a small dense problem
+  it brings J (A_J), and the call makes the linear MCP and its dense direct step; when
+  the step fails it asks for the path (NEED_PATH).  Otherwise, or then, the driver runs
+  the linear solve (``_newton_point``: its Jacobian, its path, its counts) and brings
+  the path's end
   (z, w, v) in rows W_RZ, W_RW, W_RV with A_NEWTON (whether it is usable, solved the
   linear problem, reached t > 0: si[I_USABLE], si[I_RES_SOLVED], si[I_RES_MOVED]), or,
   when J failed there, the
@@ -43,32 +46,38 @@ import numpy as np
 from ._crash_kernels import _np_max, _np_min
 from ._jit import njit
 from ._merit_kernels import (fb_directional_kernel, fb_phi_kernel, max_abs_kernel,
-                             min_map_within, normal_map_kernel)
+                             min_map_within, newton_linearization, normal_map_kernel)
+from .direct_step import _dense_direct_from
 
 # requests (returns)
-NEED_NEWTON, NEED_F_CAND, NEED_F_TRIAL, JUDGE, NEED_FALLBACK, TIME_UP, STALLED = range(7)
+NEED_NEWTON, NEED_F_CAND, NEED_F_TRIAL, JUDGE, NEED_FALLBACK, TIME_UP, STALLED, NEED_PATH = \
+    range(8)
 # answers (arg)
-A_START, A_NEWTON, A_F_GIVEN, A_F_FAILED, A_JUDGED, A_FRESH, A_FRESH_J = range(7)
+A_START, A_NEWTON, A_F_GIVEN, A_F_FAILED, A_JUDGED, A_FRESH, A_FRESH_J, A_J = range(8)
 # log letters (si[I_LOG]); 0: no record pending
 LOG_D, LOG_M, LOG_O, LOG_W = 1, 2, 3, 4
 LETTERS = ("", "D", "M", "O", "W")
 
 # W rows (length n): the current iterate and its normal-map point, the checkpoint's z and
 # x, the checkpoint's Newton point, the path's end and its x, the point being tried, the
-# best point, the box, two work rows
+# best point, the box, two work rows, the linear MCP's q and r and its path's start
 (W_CZ, W_CF, W_CPHI, W_CX, W_KZ, W_KX, W_NZ, W_NX, W_RZ, W_RW, W_RV, W_RX, W_TZ, W_TF,
- W_TPHI, W_TX, W_BZ, W_BF, W_BPHI, W_LB, W_UB, W_G, W_D) = range(23)
-W_ROWS = 23
+ W_TPHI, W_TX, W_BZ, W_BF, W_BPHI, W_LB, W_UB, W_G, W_D, W_Q, W_R, W_LZ, W_LW,
+ W_LV) = range(28)
+W_ROWS = 28
 # float scalars
 (S_CPSI, S_KPSI, S_TPSI, S_BPSI, S_DELTA, S_EPS, S_BEST_SEEN, S_FBN_START, S_R, S_ALPHA,
  S_LOG_FBN, S_SIGMA, S_DELTA_SHRINK, S_DELTA_MIN, S_PROX_SHRINK, S_PROX_INCREASE,
- S_STEP_MIN, S_SHRINK, S_TOL, S_LOCAL) = range(20)
-S_SIZE = 20
+ S_STEP_MIN, S_SHRINK, S_TOL, S_LOCAL, S_FEASIBILITY, S_RANK, S_RESIDUAL) = range(23)
+S_SIZE = 23
 # int scalars
 (I_PHASE, I_ND, I_WATCHDOGS, I_STALL, I_NMEM, I_MEMSIZE, I_MONOTONE, I_MSTEP_FREQ,
  I_MAX_WATCHDOGS, I_STALL_LIMIT, I_NEWTON_SET, I_NEWTON_OK, I_CUR_IS_CKPT, I_LINE, I_LOG,
- I_USABLE, I_RES_SOLVED, I_RES_MOVED, I_BEST_NEW) = range(19)
-I_SIZE = 19
+ I_USABLE, I_RES_SOLVED, I_RES_MOVED, I_BEST_NEW, I_HAS_WARM, I_BASIS_NEW, I_DIRECT,
+ I_NF, I_SCATTER) = range(24)
+I_SIZE = 24
+# rows of the int8 array B: the warm basis (the last path's), the start basis, its slack
+B_WARM, B_BASIC, B_SLACK = range(3)
 # phases: what the next call receives
 _P_NEWTON, _P_CAND_F, _P_CAND_JUDGE, _P_TRIAL_F, _P_TRIAL_JUDGE, _P_FALLBACK = range(6)
 
@@ -290,12 +299,52 @@ def _trial_test(sf, si, W, mem):
 
 
 @njit(cache=True)
-def nms_dense(sf, si, W, mem, ft, indptr, indices, data, arg, late):
+def _dense_newton(sf, si, W, B, mdata, indptr, indices, data, pos_j, pos_d, m_indptr,
+                  m_indices):
+    """The Newton point of a small dense problem from J (``indptr``, ``indices``,
+    ``data``): the linear MCP (M's entries into ``mdata`` on the pattern ``m_indptr``,
+    ``m_indices``, J's entries at ``pos_j`` when si[I_SCATTER], the diagonal at
+    ``pos_d``: the linearizer's maps), its path's start and the dense direct step (path.dense_newton_result).  True
+    when the start or the step ends the path (its end in the R rows, its basis the warm
+    one, si[I_DIRECT]: whether the step was made, si[I_NF] its order); False when the
+    path must run (q and r in rows W_Q, W_R)."""
+    scatter = si[I_SCATTER] != 0
+    newton_linearization(data, pos_j, scatter, pos_d, sf[S_EPS],
+                         m_indptr, m_indices, W[W_CZ], W[W_CF], W[W_CX], mdata, W[W_Q],
+                         W[W_R])
+    code, res, mz, nf, guessed = _dense_direct_from(
+        m_indptr, m_indices, mdata, W[W_Q], W[W_LB], W[W_UB], W[W_CX], W[W_R], B[B_WARM],
+        si[I_HAS_WARM] != 0, W[W_LZ], W[W_LW], W[W_LV], B[B_BASIC], B[B_SLACK], W[W_RZ],
+        W[W_RW], W[W_RV], sf[S_FEASIBILITY], sf[S_RANK])
+    si[I_NF] = nf
+    si[I_DIRECT] = code
+    if code == 0:  # r = 0: the start solves the linear problem
+        _copy(W, W_RZ, W_LZ)
+        _copy(W, W_RW, W_LW)
+        _copy(W, W_RV, W_LV)
+    elif not (res >= 0.0 and res <= sf[S_RESIDUAL] * (1.0 + mz + max_abs_kernel(
+            W[W_Q], W[W_Q], False))):  # (direct_step._accepted; NaN fails)
+        return False
+    for i in range(W.shape[1]):
+        B[B_WARM, i] = B[B_BASIC, i]
+    si[I_HAS_WARM] = 1
+    si[I_BASIS_NEW] = 1
+    si[I_USABLE] = 1  # (a solved linear problem, t = 1)
+    si[I_RES_SOLVED] = 1
+    si[I_RES_MOVED] = 1
+    return True
+
+
+@njit(cache=True)
+def nms_dense(sf, si, W, mem, B, mdata, ft, indptr, indices, data, pos_j, pos_d, m_indptr,
+              m_indices, arg, late):
     """NMSSolver._run's major iterations from one request to the driver to the next (see
     the module's description of the requests and answers).  ``ft``: F at the point asked
     for (A_F_GIVEN); ``indptr``, ``indices``, ``data``: J of the current major iteration
-    (its descent test); ``late``: the time limit passed (read after a considered point's
-    tests)."""
+    (its Newton point with A_J, its descent test); ``B``, ``mdata``, ``pos_j``,
+    ``pos_d``, ``m_indptr``, ``m_indices``: the warm basis and the work of the dense
+    Newton point (:func:`_dense_newton`); ``late``: the time limit passed (read after a
+    considered point's tests)."""
     if arg == A_START:
         si[I_PHASE] = _P_NEWTON
         return NEED_NEWTON
@@ -311,7 +360,10 @@ def nms_dense(sf, si, W, mem, ft, indptr, indices, data, arg, late):
         si[I_WATCHDOGS] = 0
         return _end_major(sf, si)
     phase = si[I_PHASE]
-    if phase == _P_NEWTON:  # A_NEWTON: the path's end (z, w, v)
+    if arg == A_J and not _dense_newton(sf, si, W, B, mdata, indptr, indices, data, pos_j,
+                                        pos_d, m_indptr, m_indices):
+        return NEED_PATH
+    if phase == _P_NEWTON:  # the path's end (z, w, v)
         for i in range(W.shape[1]):
             W[W_RX, i] = W[W_RZ, i] - W[W_RW, i] + W[W_RV, i]
         if si[I_CUR_IS_CKPT] != 0:

@@ -316,8 +316,7 @@ def dense_direct_path(M, q, lb, ub, x, r, previous, factors: DirectFactors):
         wt, vt, FEASIBILITY_TOLERANCE, factors.rank_tolerance)
     if code == 0:
         return "start", (z, w, v), basic, 0
-    factors.method = ("dense", "partial pivoting")
-    factors.lu_nnz = nnz_lu = nf * nf
+    nnz_lu = factors.dense_done(nf)
     end, _ = _accepted(res, mz, q, zt, wt, vt, nnz_lu)
     if end is None:
         return "path", (z, w, v, basic, slack if guessed else None), basic, nnz_lu
@@ -366,6 +365,12 @@ class DirectFactors:
         self.lu_nnz = 0
         self.method = ("", "")
         self._held = None  # (indptr, indices, kvxopt matrix, KLU symbolic) of the last block
+
+    def dense_done(self, nf: int) -> int:
+        """Record a dense direct step on a block of order ``nf``; returns its LU's entries."""
+        self.method = ("dense", "partial pivoting")
+        self.lu_nnz = nf * nf
+        return self.lu_nnz
 
     def solve(self, K, rhs):
         """x with K x = rhs, or None when K is singular (as the factorization finds)."""
@@ -611,9 +616,7 @@ def direct_step(M, q, lb, ub, z, basic, factors: DirectFactors | None = None):
         res, mz, nf = _dense_direct(M.indptr, M.indices, M.data, q, lb, ub,
                                     basic.astype(np.int64), zt, w, v, FEASIBILITY_TOLERANCE,
                                     factors.rank_tolerance)
-        factors.method = ("dense", "partial pivoting")
-        factors.lu_nnz = nnz_lu = nf * nf
-        return _accepted(res, mz, q, zt, w, v, nnz_lu)
+        return _accepted(res, mz, q, zt, w, v, factors.dense_done(nf))
     free = basic == VAR_Z
     nnz_lu = 0
     if free.any():

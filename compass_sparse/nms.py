@@ -54,7 +54,8 @@ from ._jit import cold_start
 from ._merit_kernels import csc_matvec, newton_linearization
 from .acceptance import Acceptance
 from .crash import _NO_INDICES, _NO_VALUES, crash
-from .direct_step import (DIRECT_MIN_N, REUSE_BEATS_REFACTOR_NNZ, DirectFactors,
+from .direct_step import (DIRECT_MIN_N, FEASIBILITY_TOLERANCE, RESIDUAL_TOLERANCE,
+                          REUSE_BEATS_REFACTOR_NNZ, DirectFactors,
                           direct_step_applies)
 from .evaluation import all_finite
 from .exceptions import FactorBudgetError
@@ -78,6 +79,8 @@ raise the merit (d-steps included); larger steps go to the watchdog's backtracki
 COMPILED_NMS = True
 """Run the major iterations' bookkeeping in compiled calls (:meth:`NMSSolver._run_compiled`)
 where it applies; False keeps the Python loop (the reference of the tests)."""
+
+_NO_POSITIONS = np.zeros(0, dtype=np.int64)  # (the linearizer's maps before one is made)
 
 FLAT_REJECTION_LIMIT = 10
 """Points with a residual below the tolerance that the scale test (see
@@ -400,18 +403,32 @@ class NMSSolver:
             raise _Stop(Status.CALLBACK_STOP, "stopped by the callback")
 
     # ------------------------------------------------------------------ Newton point
-    def _newton_point(self, cur: Point, x, eps, opt):
+    def _jacobian_at(self, cur: Point):
+        """J at the current iterate (the run's start point brings its own), None when it
+        cannot be evaluated; the linearizer made for its pattern."""
         J = cur.J if cur.J is not None else self.ev.jac(cur.z, cur.f)
         self._last_J = J
+        if J is not None and (self.linearizer is None or self.linearizer.nnz_J != J.nnz):
+            self.linearizer = Linearizer(J)  # first J, or an undeclared pattern grew
+        return J
+
+    def _start_ray(self, opt) -> bool:
+        return opt.lemke_start == "always" or (opt.lemke_start == "first" and self.nit == 0)
+
+    def _dense_lane(self, opt) -> bool:
+        """Whether a small dense problem's linear MCP and its dense direct step are one
+        compiled call (from the second major iteration: the basis manager and the direct
+        step's factors are made on the first)."""
+        return (self.bm is not None and self._direct is not None and self._crash_factors is None
+                and self.log_minor is None and not self._start_ray(opt))
+
+    def _newton_point(self, cur: Point, x, eps, opt):
+        J = self._jacobian_at(cur)
         if J is None:
             return None, None, LinearCode.ERROR
-        if self.linearizer is None or self.linearizer.nnz_J != J.nnz:
-            self.linearizer = Linearizer(J)  # first J, or an undeclared pattern grew
-        start_ray = opt.lemke_start == "always" or (opt.lemke_start == "first" and self.nit == 0)
         t0 = time.perf_counter()
         M = res = None
-        if (self.bm is not None and self._direct is not None and self._crash_factors is None
-                and not start_ray and self.log_minor is None):
+        if self._dense_lane(opt):
             # A small dense problem's linear MCP and its dense direct step in one compiled
             # call; when the step ends the path, solve_linear_mcp below is not needed.
             M, q, r, res = dense_newton_result(self.linearizer, J, eps, cur.z, cur.f, x,
@@ -424,7 +441,12 @@ class NMSSolver:
         if res is not None:
             self.bm.set_matrix(M)
         else:
-            res = self._solve_linear(M, q, r, x, start_ray, opt)
+            res = self._solve_linear(M, q, r, x, self._start_ray(opt), opt)
+        self._path_done(res, t0, opt)
+        return res, J, res.code
+
+    def _path_done(self, res, t0, opt):
+        """The counts of a major iteration's linear solve (started at ``t0``), its basis."""
         if res.direct_lu_nnz >= REUSE_BEATS_REFACTOR_NNZ and opt.factor_reuse and \
                 not getattr(self.bm, "runs_paths", False):
             # factors this large are cheaper to reuse (the sparse basis' GMRES) than to
@@ -439,7 +461,6 @@ class NMSSolver:
         self.minor += res.pivots
         if res.code is LinearCode.SOLVED or res.t > 0:
             self.basis = res.basis
-        return res, J, res.code
 
     def _solve_linear(self, M, q, r, x, start_ray, opt):
         """The pivotal path of the major iteration's linear MCP (M, q) from x (the basis
@@ -646,9 +667,10 @@ class NMSSolver:
     def _run_compiled(self, st, opt, stall_limit):
         """The major iterations of :meth:`_run` from the state ``st``, their bookkeeping
         in compiled calls (``_nms_kernels.nms_dense``, which says what it needs next);
-        here the Newton point, the evaluations, the acceptance test, the fallback, the
-        limits and the history.  The Python loop's steps in its order: the same points
-        bit for bit, without its ~50 us of Python per major iteration."""
+        here the evaluations, the paths that the dense direct step does not end, the
+        acceptance test, the fallback, the limits, the counts and the history.  The
+        Python loop's steps in its order: the same points bit for bit, without its ~80 us
+        of Python per major iteration of a small problem."""
         n = self.n
         W = np.empty((nk.W_ROWS, n))
         cur = st.cur
@@ -668,7 +690,8 @@ class NMSSolver:
                      (nk.S_PROX_INCREASE, opt.proximal_increase_factor),
                      (nk.S_STEP_MIN, opt.nms_stepsize_minimum),
                      (nk.S_SHRINK, opt.nms_shrink_factor), (nk.S_TOL, self.acceptance.tol),
-                     (nk.S_LOCAL, LOCAL_FACTOR)):
+                     (nk.S_LOCAL, LOCAL_FACTOR), (nk.S_FEASIBILITY, FEASIBILITY_TOLERANCE),
+                     (nk.S_RESIDUAL, RESIDUAL_TOLERANCE)):
             sf[k] = v
         si = np.zeros(nk.I_SIZE, dtype=np.int64)
         for k, v in ((nk.I_NMEM, len(st.memory)), (nk.I_MEMSIZE, st.memory_size),
@@ -677,6 +700,7 @@ class NMSSolver:
                      (nk.I_STALL_LIMIT, stall_limit), (nk.I_CUR_IS_CKPT, 1),
                      (nk.I_LINE, opt.nms_searchtype == "line")):
             si[k] = v
+        B = np.zeros((3, n), dtype=np.int8)  # the warm basis, the start basis and its slack
         owner = [True]  # whether the best point is the kernel's (rows W_B*) now
 
         def take_best():  # the solver's best point goes to the kernel
@@ -692,7 +716,18 @@ class NMSSolver:
                                   float(sf[nk.S_BPSI]))
             owner[0] = False
 
-        def fallback():  # (on the solver's best point, which it may replace)
+        def take_basis():  # the last path's basis (the warm start of the next) ...
+            if self.basis is not None:
+                B[nk.B_WARM] = self.basis.basic
+            si[nk.I_HAS_WARM] = self.basis is not None
+            si[nk.I_BASIS_NEW] = 0
+
+        def hand_basis():  # ... and back to the solver
+            if si[nk.I_BASIS_NEW]:
+                self.basis = WarmBasis(B[nk.B_WARM].copy())
+                si[nk.I_BASIS_NEW] = 0
+
+        def fallback():  # (from the solver's best point, which it may replace)
             hand_best()
             fb, letter = self._fallback(opt)
             if fb is not None:
@@ -701,72 +736,137 @@ class NMSSolver:
                 sf[nk.S_TPSI] = fb.psi
             return fb, letter
 
+        def path_end(res):  # a path's end for the kernel
+            W[nk.W_RZ], W[nk.W_RW], W[nk.W_RV] = res.z, res.w, res.v
+            solved = res.code is LinearCode.SOLVED
+            si[nk.I_USABLE] = solved or (res.t > 1e-8 and bool(np.any(res.z != W[nk.W_CZ])))
+            si[nk.I_RES_SOLVED] = solved
+            si[nk.I_RES_MOVED] = res.t > 0
+            return res.code, res.pivots
+
         take_best()
+        take_basis()
         kernel = nk.nms_dense
-        none = jx = _NO_VALUES  # (the arguments a call leaves unused)
-        ip = ix = _NO_INDICES
-        cur_J, res, f = cur.J, None, None
+        none = jx = mdata = _NO_VALUES  # (the arguments a call leaves unused)
+        ip = ix = mp = mi = _NO_INDICES
+        pj = pd = _NO_POSITIONS
+        cur_J, f = cur.J, None
+        code_res = pivots = None  # the last linear solve's code and pivots (the log's)
         try:
-            code = kernel(sf, si, W, mem, none, ip, ix, jx, nk.A_START, False)
+            code = kernel(sf, si, W, mem, B, mdata, none, ip, ix, jx, pj, pd, mp, mi,
+                          nk.A_START, False)
             while True:
                 if si[nk.I_LOG]:  # a finished major iteration
-                    self._record(res.code, nk.LETTERS[si[nk.I_LOG]], float(sf[nk.S_LOG_FBN]),
-                                 res.pivots, float(sf[nk.S_EPS]))
+                    self._record(code_res, nk.LETTERS[si[nk.I_LOG]], float(sf[nk.S_LOG_FBN]),
+                                 pivots, float(sf[nk.S_EPS]))
                     si[nk.I_LOG] = 0
                 if code == nk.NEED_NEWTON:
                     self._check_limits(opt)
                     if self.progress.enabled:
                         self.progress.update(self.nit, self.minor, math.sqrt(2.0 * sf[nk.S_CPSI]),
                                              math.sqrt(2.0 * sf[nk.S_BPSI]), self.restarts)
-                    cur = Point(W[nk.W_CZ].copy(), W[nk.W_CF].copy(), W[nk.W_CPHI].copy(),
-                                float(sf[nk.S_CPSI]), cur_J)
-                    cur_J = None  # (only the run's start point comes with its J)
-                    res, J, lcode = self._newton_point(cur, W[nk.W_CX].copy(),
-                                                       float(sf[nk.S_EPS]), opt)
-                    self.nit += 1
+                    J_given, cur_J = cur_J, None  # (only the run's start comes with its J)
+                    res = J = None
+                    code_res = LinearCode.ERROR
+                    direct = self._dense_lane(opt) and self._direct.dense
+                    if direct:
+                        J = self._jacobian_at(Point(W[nk.W_CZ], W[nk.W_CF], None, 0.0, J_given))
+                        if J is not None and not (J.data.dtype == np.float64
+                                                  and J.data.shape[0] == J.nnz):
+                            direct, J_given = False, J  # (the Python route, with this J)
+                    if direct and J is not None:  # the linear MCP and its direct step
+                        lin = self.linearizer
+                        if mdata.shape[0] != lin.M.data.shape[0]:
+                            mdata = np.empty(lin.M.data.shape[0])
+                        si[nk.I_SCATTER] = lin.pos_J is not None
+                        pj, pd = (lin.pos_J if lin.pos_J is not None else lin.pos_D), lin.pos_D
+                        mp, mi = lin.M.indptr, lin.M.indices
+                        ip, ix, jx = J.indptr, J.indices, J.data
+                        sf[nk.S_RANK] = self._direct.rank_tolerance
+                        t0 = time.perf_counter()
+                        code = kernel(sf, si, W, mem, B, mdata, none, ip, ix, jx, pj, pd, mp,
+                                      mi, nk.A_J, False)
+                        self.nit += 1
+                        if code != nk.NEED_PATH:
+                            self._dense_step_done(si[nk.I_DIRECT], si[nk.I_NF], t0)
+                            code_res, pivots = LinearCode.SOLVED, 0
+                            continue
+                        # the step failed: the path, on the call's linear MCP
+                        P = lin.M
+                        hand_basis()
+                        res = self._solve_linear(
+                            trusted_csc(mdata.copy(), P.indices, P.indptr, P.shape),
+                            W[nk.W_Q].copy(), W[nk.W_R].copy(), W[nk.W_CX].copy(), False, opt)
+                        self._path_done(res, t0, opt)
+                        take_basis()
+                    elif direct:  # (J could not be evaluated)
+                        self.nit += 1
+                    else:
+                        hand_basis()
+                        cur = Point(W[nk.W_CZ].copy(), W[nk.W_CF].copy(),
+                                    W[nk.W_CPHI].copy(), float(sf[nk.S_CPSI]), J_given)
+                        res, J, code_res = self._newton_point(cur, W[nk.W_CX].copy(),
+                                                              float(sf[nk.S_EPS]), opt)
+                        self.nit += 1
+                        take_basis()
                     if res is None:  # J could not be evaluated at z_k
                         fb, letter = fallback()
                         if fb is None:
                             return "evaluation failure and no fallback progress"
-                        self._record(lcode, letter, fb.fbn, 0, float(sf[nk.S_EPS]))
-                        code = kernel(sf, si, W, mem, none, ip, ix, jx, nk.A_FRESH_J, False)
+                        self._record(code_res, letter, fb.fbn, 0, float(sf[nk.S_EPS]))
+                        code = kernel(sf, si, W, mem, B, mdata, none, ip, ix, jx, pj, pd, mp,
+                                      mi, nk.A_FRESH_J, False)
                         continue
-                    W[nk.W_RZ], W[nk.W_RW], W[nk.W_RV] = res.z, res.w, res.v
-                    solved = res.code is LinearCode.SOLVED
-                    si[nk.I_USABLE] = solved or (res.t > 1e-8 and bool(np.any(res.z != cur.z)))
-                    si[nk.I_RES_SOLVED] = solved
-                    si[nk.I_RES_MOVED] = res.t > 0
+                    code_res, pivots = path_end(res)
                     ip, ix, jx = J.indptr, J.indices, J.data
-                    code = kernel(sf, si, W, mem, none, ip, ix, jx, nk.A_NEWTON, False)
+                    code = kernel(sf, si, W, mem, B, mdata, none, ip, ix, jx, pj, pd, mp, mi,
+                                  nk.A_NEWTON, False)
                 elif code == nk.NEED_F_CAND or code == nk.NEED_F_TRIAL:
                     if code == nk.NEED_F_TRIAL and self._past_deadline():
                         raise _Stop(Status.TIME_LIMIT, "time limit reached")
-                    f = self.ev.f(res.z if code == nk.NEED_F_CAND else W[nk.W_TZ])
-                    code = (kernel(sf, si, W, mem, none, ip, ix, jx, nk.A_F_FAILED, False)
+                    f = self.ev.f(W[nk.W_RZ] if code == nk.NEED_F_CAND else W[nk.W_TZ])
+                    code = (kernel(sf, si, W, mem, B, mdata, none, ip, ix, jx, pj, pd, mp, mi,
+                                   nk.A_F_FAILED, False)
                             if f is None else
-                            kernel(sf, si, W, mem, f, ip, ix, jx, nk.A_F_GIVEN,
-                                   self._past_deadline()))
+                            kernel(sf, si, W, mem, B, mdata, f, ip, ix, jx, pj, pd, mp, mi,
+                                   nk.A_F_GIVEN, self._past_deadline()))
                 elif code == nk.JUDGE:
                     hand_best()  # (a solution found here becomes the best point)
                     self._judge(W[nk.W_TZ].copy(), f, W[nk.W_TPHI].copy(),
                                 float(sf[nk.S_TPSI]))
                     owner[0] = True
-                    code = kernel(sf, si, W, mem, none, ip, ix, jx, nk.A_JUDGED,
-                                  self._past_deadline())
+                    code = kernel(sf, si, W, mem, B, mdata, none, ip, ix, jx, pj, pd, mp, mi,
+                                  nk.A_JUDGED, self._past_deadline())
                 elif code == nk.NEED_FALLBACK:
                     fb, letter = fallback()
                     if fb is None:
-                        self._record(res.code, "G", self.best.fbn, res.pivots,
-                                     float(sf[nk.S_EPS]))
+                        self._record(code_res, "G", self.best.fbn, pivots, float(sf[nk.S_EPS]))
                         return "no descent from the best point"
-                    self._record(res.code, letter, fb.fbn, res.pivots, float(sf[nk.S_EPS]))
-                    code = kernel(sf, si, W, mem, none, ip, ix, jx, nk.A_FRESH, False)
+                    self._record(code_res, letter, fb.fbn, pivots, float(sf[nk.S_EPS]))
+                    code = kernel(sf, si, W, mem, B, mdata, none, ip, ix, jx, pj, pd, mp, mi,
+                                  nk.A_FRESH, False)
                 elif code == nk.TIME_UP:
                     raise _Stop(Status.TIME_LIMIT, "time limit reached")
                 else:  # STALLED
                     return f"no progress in {int(si[nk.I_STALL])} major iterations"
         finally:
             hand_best()
+            hand_basis()
+
+    def _dense_step_done(self, direct, nf, t0):
+        """The counts of a major iteration's linear MCP that the compiled call solved (its
+        path's start, or its dense direct step on a block of order ``nf`` when
+        ``direct``), as :meth:`_path_done` counts the same PathResult."""
+        st = self.passes["path"]
+        st.ran = True
+        dt = time.perf_counter() - t0
+        st.time += dt
+        st.iterations += 1
+        if direct:
+            st.factorizations += 1
+            nnz = self._direct.dense_done(int(nf))
+            if nnz:
+                self.bm.stats.record_direct_lu(nnz, dt, self._direct.method)
 
     def _descent_ok(self, cur, cand, R, opt):
         # The directional derivative of Psi at z_k uses the Jacobian of this major iteration.

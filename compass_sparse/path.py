@@ -307,8 +307,7 @@ def dense_newton_result(lin, J, eps, zk, fk, x, lb, ub, manager, warm, direct):
     M = trusted_csc(mdata, P.indices, P.indptr, P.shape)
     if code == 0:
         return M, q, r, _decided_result("start", (z, w, v), basic, 0, manager, direct, t0)
-    direct.method = ("dense", "partial pivoting")
-    direct.lu_nnz = nnz_lu = nf * nf
+    nnz_lu = direct.dense_done(nf)
     if not accepted:
         return M, q, r, None
     return M, q, r, _decided_result("direct", (zt, wt, vt), basic, nnz_lu, manager, direct, t0)

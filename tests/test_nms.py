@@ -202,9 +202,15 @@ def test_compiled_nms_gives_the_python_routes_points_bit_for_bit(monkeypatch):
     import compass_sparse._nms_kernels as nk
     import compass_sparse.nms as N
 
-    used = []
+    used, asked = [], []  # the answers given, the requests made
+
+    def counted(*a):
+        used.append(a[14])
+        asked.append(real(*a))
+        return asked[-1]
+
     real = nk.nms_dense
-    monkeypatch.setattr(nk, "nms_dense", lambda *a: used.append(a[8]) or real(*a))
+    monkeypatch.setattr(nk, "nms_dense", counted)
     options = ({}, {"nms": False}, {"nms_memory_size": 2, "nms_mstep_frequency": 1},
                {"nms_searchtype": "arc"}, {"nms_maximum_watchdogs": 0},
                {"lm_fallback": False, "crash_method": "none"},
@@ -219,6 +225,34 @@ def test_compiled_nms_gives_the_python_routes_points_bit_for_bit(monkeypatch):
             assert out[False] == out[True], opt
             steps |= {h[2] for h in out[True][16]}
     assert len(used) > 2000
-    assert {nk.A_NEWTON, nk.A_F_GIVEN, nk.A_F_FAILED, nk.A_JUDGED, nk.A_FRESH,
+    assert {nk.A_NEWTON, nk.A_J, nk.A_F_GIVEN, nk.A_F_FAILED, nk.A_JUDGED, nk.A_FRESH,
             nk.A_FRESH_J} <= set(used)
+    assert {nk.NEED_PATH, nk.NEED_F_TRIAL, nk.NEED_FALLBACK, nk.JUDGE, nk.STALLED} <= set(asked)
     assert {"SD", "SM", "SO", "SW"} <= steps
+
+
+def test_compiled_nms_stops_at_the_time_limit_as_the_python_route(monkeypatch):
+    """The time limit passing after the K-th evaluation of F (a clock of the NMS module
+    that jumps then), for every K of the solves: both routes stop at the same point with
+    the same status, counts and history -- the compiled one reads the clock after a
+    considered point's tests and before a watchdog trial, as the Python loop does."""
+    import time
+    import types
+
+    import compass_sparse.nms as N
+
+    problems = _nms_problems(3)
+    picked = [problems[k] for k in (0, 5, 6, 8)] + problems[-9:-6]
+    stops = 0
+    for p in picked:
+        for K in range(1, 30):
+            fake = types.SimpleNamespace(perf_counter=lambda K=K, p=p: time.perf_counter() + (
+                1e6 if p.evaluator.counters.nfev >= K else 0.0))
+            out = {}
+            for compiled in (False, True):
+                monkeypatch.setattr(N, "COMPILED_NMS", compiled)
+                monkeypatch.setattr(N, "time", fake)
+                out[compiled] = _solve_record(p, {"time_limit": 1e3, "homotopy": "off"})
+            assert out[False] == out[True], K
+            stops += out[True][0] is cs.Status.TIME_LIMIT
+    assert stops > 40
