@@ -3,13 +3,14 @@
 one process, the order flipped every round; medians of the solver's time per solve
 without the user's F and J).
 
-Round 14 changed, on the solver's path: the major iteration's Newton point
-(``NMSSolver._newton_point``: from the second major iteration of a small dense problem
-on, the linear MCP and its dense direct step are one compiled call,
-``path.dense_newton_result``, and ``solve_linear_mcp`` runs only when the step fails).
-Here it is swapped, in this process, for its version in an older worktree (``--old``, a
-checkout of c27967c, round 13's last revision); everything else is the same code in both
-variants.
+Round 14 changed, on the solver's path: the major iterations (``NMSSolver._run``: their
+bookkeeping in compiled calls between the evaluations, ``_run_compiled``, with a small
+dense problem's Newton point -- its linear MCP and dense direct step -- inside them; the
+Python loop's ``_newton_point`` makes that Newton point in one compiled call too), and
+the homotopy's dense tracker (``_Tracker._follow_dense`` syncs its counts at the end
+instead of at every step when nothing logs them).  They are swapped, in this process,
+for their versions in an older worktree (``--old``, a checkout of c27967c, round 13's
+last revision); everything else is the same code in both variants.
 
 Usage:  PYTHONPATH=. python3 benchmarks/ab_round14.py --old <worktree> [--rounds 20]
 """
@@ -26,13 +27,17 @@ from ab_round11 import _cases  # the same problems as rounds 11 to 13
 
 def _swaps(worktree):
     """[(owner, attribute, old value, current value)] of the functions round 14 changed."""
+    import compass_sparse.homotopy as H
     import compass_sparse.nms as N
 
-    on = old_module(worktree, "nms")
+    on, oh = old_module(worktree, "nms"), old_module(worktree, "homotopy")
     for k in ("Point", "_Stop", "NMSState"):  # the old methods make and catch today's
         setattr(on, k, getattr(N, k))
-    return [(N.NMSSolver, k, getattr(on.NMSSolver, k), getattr(N.NMSSolver, k))
-            for k in ("_newton_point", "_run")]
+    oh._Stop = H._Stop
+    return ([(N.NMSSolver, k, getattr(on.NMSSolver, k), getattr(N.NMSSolver, k))
+             for k in ("_newton_point", "_run")]
+            + [(H._Tracker, "_follow_dense", oh._Tracker._follow_dense,
+                H._Tracker._follow_dense)])
 
 
 def main(argv=None):

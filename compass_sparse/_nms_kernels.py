@@ -74,8 +74,8 @@ S_SIZE = 23
 (I_PHASE, I_ND, I_WATCHDOGS, I_STALL, I_NMEM, I_MEMSIZE, I_MONOTONE, I_MSTEP_FREQ,
  I_MAX_WATCHDOGS, I_STALL_LIMIT, I_NEWTON_SET, I_NEWTON_OK, I_CUR_IS_CKPT, I_LINE, I_LOG,
  I_USABLE, I_RES_SOLVED, I_RES_MOVED, I_BEST_NEW, I_HAS_WARM, I_BASIS_NEW, I_DIRECT,
- I_NF, I_SCATTER) = range(24)
-I_SIZE = 24
+ I_NF, I_SCATTER, I_GUESSED) = range(25)
+I_SIZE = 25
 # rows of the int8 array B: the warm basis (the last path's), the start basis, its slack
 B_WARM, B_BASIC, B_SLACK = range(3)
 # phases: what the next call receives
@@ -307,7 +307,9 @@ def _dense_newton(sf, si, W, B, mdata, indptr, indices, data, pos_j, pos_d, m_in
     ``pos_d``: the linearizer's maps), its path's start and the dense direct step (path.dense_newton_result).  True
     when the start or the step ends the path (its end in the R rows, its basis the warm
     one, si[I_DIRECT]: whether the step was made, si[I_NF] its order); False when the
-    path must run (q and r in rows W_Q, W_R)."""
+    path must run: q and r in rows W_Q, W_R, its start (z, w, v) in the L rows, its
+    start basis in B[B_BASIC], and in B[B_SLACK] the basis before the inward guess when
+    si[I_GUESSED]."""
     scatter = si[I_SCATTER] != 0
     newton_linearization(data, pos_j, scatter, pos_d, sf[S_EPS],
                          m_indptr, m_indices, W[W_CZ], W[W_CF], W[W_CX], mdata, W[W_Q],
@@ -318,6 +320,7 @@ def _dense_newton(sf, si, W, B, mdata, indptr, indices, data, pos_j, pos_d, m_in
         W[W_RW], W[W_RV], sf[S_FEASIBILITY], sf[S_RANK])
     si[I_NF] = nf
     si[I_DIRECT] = code
+    si[I_GUESSED] = guessed
     if code == 0:  # r = 0: the start solves the linear problem
         _copy(W, W_RZ, W_LZ)
         _copy(W, W_RW, W_LW)

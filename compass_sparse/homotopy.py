@@ -598,7 +598,7 @@ class _Tracker:
         y = W[hk.W_Y]
         follow = hk.follow_dense
         none, no_index = _NO_VALUES, _NO_INDICES
-        logged = 0
+        logged, log = 0, self.log
 
         def sync():  # the tracker's counts (the end game's factorizations too) get the path's
             d = [int(si[k]) - c for k, c in zip(keys, synced)]
@@ -611,9 +611,9 @@ class _Tracker:
         try:
             code = follow(sf, si, W, B, piv, none, no_index, no_index, none, False)
             while True:
-                if si[hk.I_STEPS] != logged:  # a step was accepted
+                if log is not None and si[hk.I_STEPS] != logged:  # a step was accepted
                     logged = si[hk.I_STEPS]
-                    sync()
+                    sync()  # (the log reads the count; else it is synced at the end)
                     self._log_step(y[n], sf[hk.F_H], y[:n])
                 if code == hk.NEED_F:
                     self._check_time()

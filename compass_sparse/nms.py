@@ -462,9 +462,9 @@ class NMSSolver:
         if res.code is LinearCode.SOLVED or res.t > 0:
             self.basis = res.basis
 
-    def _solve_linear(self, M, q, r, x, start_ray, opt):
+    def _solve_linear(self, M, q, r, x, start_ray, opt, dense_start=None):
         """The pivotal path of the major iteration's linear MCP (M, q) from x (the basis
-        manager made on the first one)."""
+        manager made on the first one); ``dense_start``: as for solve_linear_mcp."""
         if self.bm is None:
             self.bm = self.manager_factory(M)
             if direct_step_applies(M, opt):
@@ -489,7 +489,8 @@ class NMSSolver:
         return solve_linear_mcp(M, q, self.lb, self.ub, self.bm, opt, x, warm=self.basis, r=r,
                                 ray_start=start_ray, retry_below=0.5,
                                 minor_limit=opt.minor_limit(self.n), deadline=self.deadline,
-                                log=self.log_minor, direct=self._direct)
+                                log=self.log_minor, direct=self._direct,
+                                dense_start=dense_start)
 
     # ------------------------------------------------------------------ fallbacks
     def _fallback(self, opt):
@@ -791,12 +792,19 @@ class NMSSolver:
                             self._dense_step_done(si[nk.I_DIRECT], si[nk.I_NF], t0)
                             code_res, pivots = LinearCode.SOLVED, 0
                             continue
-                        # the step failed: the path, on the call's linear MCP
+                        # the step failed: the path, on the call's linear MCP and from
+                        # its start (dense_direct_path's outcome)
                         P = lin.M
+                        basic = B[nk.B_BASIC].copy()
+                        start = ("path", (W[nk.W_LZ].copy(), W[nk.W_LW].copy(),
+                                          W[nk.W_LV].copy(), basic,
+                                          B[nk.B_SLACK].copy() if si[nk.I_GUESSED] else None),
+                                 basic, self._direct.dense_done(int(si[nk.I_NF])))
                         hand_basis()
                         res = self._solve_linear(
                             trusted_csc(mdata.copy(), P.indices, P.indptr, P.shape),
-                            W[nk.W_Q].copy(), W[nk.W_R].copy(), W[nk.W_CX].copy(), False, opt)
+                            W[nk.W_Q].copy(), W[nk.W_R].copy(), W[nk.W_CX].copy(), False, opt,
+                            start)
                         self._path_done(res, t0, opt)
                         take_basis()
                     elif direct:  # (J could not be evaluated)

@@ -206,7 +206,8 @@ def start_basis_with_guess(z, w, v, r, lb, ub, warm: WarmBasis | None = None):
 def solve_linear_mcp(M, q, lb, ub, basis, options, x, *, warm: WarmBasis | None = None,
                      r=None, ray_start: bool = False, retry_below: float = np.inf,
                      keep_ray: bool = False, minor_limit=None, deadline=None,
-                     log=None, direct: DirectFactors | None = None) -> PathResult:
+                     log=None, direct: DirectFactors | None = None,
+                     dense_start=None) -> PathResult:
     """One linear MCP by the pivotal path from x (warm-started from ``warm``), retried
     from the Lemke ray start when ``options.lemke_start`` is "automatic", the first path
     failed and reached only t < ``retry_below``.  The retry's result is kept when it
@@ -214,6 +215,9 @@ def solve_linear_mcp(M, q, lb, ub, basis, options, x, *, warm: WarmBasis | None 
     an infeasibility verdict needs; pivots and factorizations of both paths are counted.
     ``direct``: first try the path's end point by one sparse solve with these factors
     (:mod:`compass_sparse.direct_step`; the first path only, not the ray-start retry).
+    ``dense_start``: what :func:`~compass_sparse.direct_step.dense_direct_path` returns
+    for these arguments, when the caller has computed it (a failed step is not made
+    again).
     """
     kw = dict(minor_limit=minor_limit, deadline=deadline, log=log)
     res = None
@@ -222,7 +226,8 @@ def solve_linear_mcp(M, q, lb, ub, basis, options, x, *, warm: WarmBasis | None 
         # A small problem's start and dense direct step in one compiled call (the
         # Python of a path's set-up cost more than the step); the path runs only when
         # the step fails, then without trying it again.
-        res = _dense_direct_result(M, q, lb, ub, basis, options, x, r, warm, direct, kw)
+        res = _dense_direct_result(M, q, lb, ub, basis, options, x, r, warm, direct, kw,
+                                   dense_start)
     if res is None:
         res = PivotalPath(M, q, lb, ub, basis, options, direct=direct, **kw).run(
             x, warm=warm, ray_start=ray_start, r=r)
@@ -240,14 +245,15 @@ def solve_linear_mcp(M, q, lb, ub, basis, options, x, *, warm: WarmBasis | None 
     return res
 
 
-def _dense_direct_result(M, q, lb, ub, manager, options, x, r, warm, direct, kw):
+def _dense_direct_result(M, q, lb, ub, manager, options, x, r, warm, direct, kw, out=None):
     """What ``PivotalPath(..., direct=direct).run(x, warm=warm, r=r)`` returns, the same
     values and counts, with its start and direct step computed by
-    :func:`~compass_sparse.direct_step.dense_direct_path`; None when that call does not
-    apply."""
+    :func:`~compass_sparse.direct_step.dense_direct_path` (``out``: its outcome, when
+    the caller has it); None when that call does not apply."""
     t0 = time.perf_counter()
     M = M if (sp.issparse(M) and M.format == "csc") else sp.csc_matrix(M)
-    out = dense_direct_path(M, np.asarray(q, dtype=float), lb, ub, x, r, warm, direct)
+    if out is None:
+        out = dense_direct_path(M, np.asarray(q, dtype=float), lb, ub, x, r, warm, direct)
     if out is None:
         return None
     kind, end, basic, nnz_lu = out
