@@ -163,3 +163,13 @@ def clean_bounds(lo, hi, big):
         if not (a <= b and a < np.inf and b > -np.inf):  # (False on a NaN)
             ok = False
     return ok
+
+
+@njit(cache=True)
+def any_equal(a, b):
+    """Whether a_i == b_i for some i (a fixed variable, l_i = u_i: the preprocessor's test
+    in every solve, where (lb == ub).any() costs ~2.5 us on a short vector)."""
+    for i in range(a.shape[0]):
+        if a[i] == b[i]:
+            return True
+    return False

@@ -7,7 +7,8 @@ import difflib
 import functools
 import math
 import numbers
-from typing import Any, Mapping
+from collections.abc import Mapping  # (typing's alias costs ~3 us per isinstance)
+from typing import Any
 
 import numpy as np
 

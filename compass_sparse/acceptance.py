@@ -35,7 +35,7 @@ import scipy.sparse as sp
 from ._csc import without_duplicates
 from ._merit_kernels import (flat_step_kernel, min_map_within,
                              scale_test_kernel)
-from .merit import fb_jacobian_diagonals, fb_phi, min_map
+from .merit import fb_jacobian_diagonals, fb_phi, max_abs, min_map
 from .path import _floats
 from .scaling import scale_entries
 
@@ -95,7 +95,7 @@ def judge(z, f, lb, ub, tol, jac=None, phi=None, small=False) -> Verdict:
         phi = fb_phi(z, f, lb, ub)
     if not (small or residuals_small(z, f, lb, ub, tol, phi)):
         return Verdict(False, False)
-    if jac is None or not phi.any():
+    if jac is None or max_abs(phi) == 0.0:  # (phi.any() through numpy's wrapper: ~2 us)
         return Verdict(True, True)
     J = jac(z)
     if J is None:

@@ -617,7 +617,7 @@ class _Tracker:
                     self._log_step(y[n], sf[hk.F_H], y[:n])
                 if code == hk.NEED_F:
                     self._check_time()
-                    f = self.ev.f_once(p_row.copy())
+                    f = self.ev.f_once(p_row)  # (the user's F gets a copy: _call_F)
                     code = (follow(sf, si, W, B, piv, none, no_index, no_index, none, True)
                             if f is None else
                             follow(sf, si, W, B, piv, f, no_index, no_index, none, False))

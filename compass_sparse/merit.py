@@ -328,13 +328,14 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5,
     lb, ub = _broadcast_box(lb, ub, z)
     if phi is None:
         phi = fb_phi(z, f, lb, ub)
-    aphi = np.abs(phi)
+    aphi = None  # |Phi|, made only where a sort needs it
     if z.ndim == 1 and f.shape == z.shape:
         mm = np.empty_like(z)
         fb_inf, natural, nm_inf = residual_maxima_kernel(
             np.ascontiguousarray(z), np.ascontiguousarray(f), np.ascontiguousarray(lb),
             np.ascontiguousarray(ub), np.ascontiguousarray(phi), mm)
     else:
+        aphi = np.abs(phi)
         mm = np.abs(min_map(z, f, lb, ub))
         nm = normal_map_at_arrays(z, f, lb, ub)[1]
         fb_inf, natural, nm_inf = (float(np.max(aphi)), float(np.max(mm)),
@@ -344,6 +345,7 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5,
     # the k largest in one compiled pass when they are distinct (then the answer is
     # unique: the sorts below give it too); ties keep numpy's order
     if not (k > 0 and float_vector(phi) and top_abs_distinct(phi, idx)):
+        aphi = np.abs(phi) if aphi is None else aphi
         if k == z.size:
             # every row is listed (small problems): one sort, no partition first
             idx = np.argsort(-aphi, kind="stable")  # ties: the lower row first
@@ -356,7 +358,7 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5,
         label = names
     else:
         label = lambda i: str(names[i])  # noqa: E731
-    worst = [(label(i), float(aphi[i]), float(mm[i])) for i in idx.tolist()]
+    worst = [(label(i), abs(float(phi[i])), float(mm[i])) for i in idx.tolist()]
     return ResidualReport(
         fb_norm=_norm2(phi, fb_inf),
         fb_inf=float(fb_inf),

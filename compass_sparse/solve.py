@@ -11,6 +11,7 @@ exception of :mod:`compass_sparse.exceptions` before any work is done.
 from __future__ import annotations
 
 import logging
+import math
 import time
 
 import numpy as np
@@ -19,7 +20,7 @@ import scipy.sparse as sp
 from .acceptance import Acceptance, judge
 from .crash import crash
 from .exceptions import CompassError
-from .merit import dot_norm, fb_phi, fb_psi, normal_map_at, residual_report
+from .merit import dot_norm, fb_phi, fb_psi, float_vector, normal_map_at, residual_report
 from .nms import NMSSolver, Point
 from .options import Options
 from .exceptions import ShapeError
@@ -27,7 +28,7 @@ from .path import LinearCode, WarmBasis, default_basis, solve_linear_mcp
 from .problem import MCP
 from .result import Iteration, PassStats, PointStatus, Result, Status
 from ._blas import BLAS_LIMIT_MIN_N, single_threaded_blas
-from ._eval_kernels import csc_scaled_all_finite
+from ._eval_kernels import any_equal, csc_scaled_all_finite
 from .scaling import SPREAD_TRIGGER, equilibrate, scale_problem, spread
 
 logger = logging.getLogger("compass_sparse")
@@ -240,7 +241,9 @@ def _presolve_pass(problem, opt, f0, J0):
         return None, st
     # Every reduction but fixing l = u needs a row whose entries are all declared
     # constant; without one the pass would only cost time (17 s at n = 1e6, measured).
-    has_fixed = bool((problem.lb == problem.ub).any())
+    lb, ub = problem.lb, problem.ub
+    has_fixed = (any_equal(lb, ub) if float_vector(lb) and float_vector(ub)
+                 else bool((lb == ub).any()))
 
     def count_linear_rows():
         P = J0 if J0 is not None else problem.pattern  # J0 is stored on the pattern
@@ -319,7 +322,7 @@ def _solve_evaluated(problem: MCP, opt: Options, *, callback=None, basis=None) -
     basis = _check_basis(basis, problem.n)
     t0 = time.perf_counter()
     log_major, log_minor = _loggers(opt)
-    deadline = t0 + opt.time_limit if np.isfinite(opt.time_limit) else None
+    deadline = t0 + opt.time_limit if math.isfinite(opt.time_limit) else None
     passes = {}
     # F and J at the start point: one evaluation each (kept from the problem's start check
     # when it ran), handed down to the preprocessor, the crash and the first iteration.
@@ -609,7 +612,7 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     crash_its = 0
     x = normal_map_at(z, f, lb, ub)[0]
     st = PassStats()
-    deadline = t0 + opt.time_limit if np.isfinite(opt.time_limit) else None
+    deadline = t0 + opt.time_limit if math.isfinite(opt.time_limit) else None
     try:
         if opt.crash_method == "pnewton" and n >= opt.crash_minimum_dimension:
             tc = time.perf_counter()
@@ -639,7 +642,7 @@ def _lcp_path(problem, M, q, z, f, x, opt, t0, deadline, passes, st, crash_its, 
         return _result(problem, Status.SOLVED, "solved by the crash", z, f, opt, t0,
                        passes=passes, crash_iterations=crash_its,
                        factorizations=st.factorizations)
-    deadline = t0 + opt.time_limit if np.isfinite(opt.time_limit) else None
+    deadline = t0 + opt.time_limit if math.isfinite(opt.time_limit) else None
     bm = _manager_factory(opt, deadline)(M)
     tp = time.perf_counter()
     # One path solves a linear problem: give it room (a Lemke path may need ~n pivots).
