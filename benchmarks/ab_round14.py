@@ -8,7 +8,9 @@ bookkeeping in compiled calls between the evaluations, ``_run_compiled``, with a
 dense problem's Newton point -- its linear MCP and dense direct step -- inside them; the
 Python loop's ``_newton_point`` makes that Newton point in one compiled call too), and
 the homotopy's dense tracker (``_Tracker._follow_dense`` syncs its counts at the end
-instead of at every step when nothing logs them).  They are swapped, in this process,
+instead of at every step when nothing logs them), and per solve: the options' Mapping
+test (``collections.abc``'s, not ``typing``'s), the acceptance test's Phi = 0 check, the
+preprocessor's fixed-variable test and the residual report.  They are swapped, in this process,
 for their versions in an older worktree (``--old``, a checkout of c27967c, round 13's
 last revision); everything else is the same code in both variants.
 
@@ -34,10 +36,21 @@ def _swaps(worktree):
     for k in ("Point", "_Stop", "NMSState"):  # the old methods make and catch today's
         setattr(on, k, getattr(N, k))
     oh._Stop = H._Stop
+    import typing
+
+    import compass_sparse._options_base as O
+    import compass_sparse.acceptance as A
+    import compass_sparse.solve as S
+
+    oa, om, os_ = (old_module(worktree, k) for k in ("acceptance", "merit", "solve"))
     return ([(N.NMSSolver, k, getattr(on.NMSSolver, k), getattr(N.NMSSolver, k))
              for k in ("_newton_point", "_run")]
             + [(H._Tracker, "_follow_dense", oh._Tracker._follow_dense,
-                H._Tracker._follow_dense)])
+                H._Tracker._follow_dense),
+               (O, "Mapping", typing.Mapping, O.Mapping),
+               (A, "judge", oa.judge, A.judge), (S, "judge", oa.judge, S.judge),
+               (S, "_presolve_pass", os_._presolve_pass, S._presolve_pass),
+               (S, "residual_report", om.residual_report, S.residual_report)])
 
 
 def main(argv=None):
