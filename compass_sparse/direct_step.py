@@ -276,8 +276,10 @@ def dense_newton_direct(jdata, pos_j, scatter, pos_d, eps, indptr, indices, zk, 
     compiled call: :func:`~compass_sparse._merit_kernels.newton_linearization` (M's
     entries into ``mdata``, q, r at z_k = ``zk``, F(z_k) = ``fk``), then
     :func:`_dense_direct_from` on that M, then the test of :func:`_accepted`.  Returns
-    (code, |F|, accepted): code 0 when r = 0, 1 after a direct step, which ``accepted``
-    says ends the path.  The same bits as the three steps called one by one."""
+    (code, |F|, accepted, guessed): code 0 when r = 0, 1 after a direct step, which
+    ``accepted`` says ends the path; ``guessed``: the inward guess changed the start basis
+    (``slack`` holds the one before it).  The same bits as the three steps called one by
+    one."""
     newton_linearization(jdata, pos_j, scatter, pos_d, eps, indptr, indices, zk, fk, x, mdata,
                          q, r)
     code, res, mz, nf, guessed = _dense_direct_from(
@@ -287,7 +289,7 @@ def dense_newton_direct(jdata, pos_j, scatter, pos_d, eps, indptr, indices, zk, 
     if code == 1 and res >= 0.0:
         qmax = max_abs_kernel(q, q, False)
         accepted = res <= res_tol * (1.0 + mz + qmax)  # (NaN fails, as in _accepted)
-    return code, nf, accepted
+    return code, nf, accepted, guessed
 
 
 def dense_direct_path(M, q, lb, ub, x, r, previous, factors: DirectFactors):
@@ -319,8 +321,15 @@ def dense_direct_path(M, q, lb, ub, x, r, previous, factors: DirectFactors):
     nnz_lu = factors.dense_done(nf)
     end, _ = _accepted(res, mz, q, zt, wt, vt, nnz_lu)
     if end is None:
-        return "path", (z, w, v, basic, slack if guessed else None), basic, nnz_lu
+        return failed_direct_start(z, w, v, basic, slack, guessed, nnz_lu)
     return "direct", end, basic, nnz_lu
+
+
+def failed_direct_start(z, w, v, basic, slack, guessed, nnz_lu):
+    """:func:`dense_direct_path`'s outcome when its direct step failed: the path's start
+    (z, w, v), its basis, the basis before the inward guess (when ``guessed``) and the
+    step's LU entries."""
+    return "path", (z, w, v, basic, slack if guessed else None), basic, nnz_lu
 
 
 def reduced_system(M, free, z, q):

@@ -55,8 +55,8 @@ from ._merit_kernels import csc_matvec, newton_linearization
 from .acceptance import Acceptance
 from .crash import _NO_INDICES, _NO_VALUES, crash
 from .direct_step import (DIRECT_MIN_N, FEASIBILITY_TOLERANCE, RESIDUAL_TOLERANCE,
-                          REUSE_BEATS_REFACTOR_NNZ, DirectFactors,
-                          direct_step_applies)
+                          REUSE_BEATS_REFACTOR_NNZ, DirectFactors, direct_step_applies,
+                          failed_direct_start)
 from .evaluation import all_finite
 from .exceptions import FactorBudgetError
 from .fallback import gradient_steps, lm_step
@@ -427,13 +427,13 @@ class NMSSolver:
         if J is None:
             return None, None, LinearCode.ERROR
         t0 = time.perf_counter()
-        M = res = None
+        M = res = start = None
         if self._dense_lane(opt):
             # A small dense problem's linear MCP and its dense direct step in one compiled
             # call; when the step ends the path, solve_linear_mcp below is not needed.
-            M, q, r, res = dense_newton_result(self.linearizer, J, eps, cur.z, cur.f, x,
-                                               self.lb, self.ub, self.bm, self.basis,
-                                               self._direct)
+            M, q, r, res, start = dense_newton_result(
+                self.linearizer, J, eps, cur.z, cur.f, x, self.lb, self.ub, self.bm,
+                self.basis, self._direct)
         if M is None:
             # M = J + eps I, q = f - M z and r = f + x - z (r: the normal map of the
             # linearization at x)
@@ -441,7 +441,7 @@ class NMSSolver:
         if res is not None:
             self.bm.set_matrix(M)
         else:
-            res = self._solve_linear(M, q, r, x, self._start_ray(opt), opt)
+            res = self._solve_linear(M, q, r, x, self._start_ray(opt), opt, start)
         self._path_done(res, t0, opt)
         return res, J, res.code
 
@@ -795,11 +795,10 @@ class NMSSolver:
                         # the step failed: the path, on the call's linear MCP and from
                         # its start (dense_direct_path's outcome)
                         P = lin.M
-                        basic = B[nk.B_BASIC].copy()
-                        start = ("path", (W[nk.W_LZ].copy(), W[nk.W_LW].copy(),
-                                          W[nk.W_LV].copy(), basic,
-                                          B[nk.B_SLACK].copy() if si[nk.I_GUESSED] else None),
-                                 basic, self._direct.dense_done(int(si[nk.I_NF])))
+                        start = failed_direct_start(
+                            W[nk.W_LZ].copy(), W[nk.W_LW].copy(), W[nk.W_LV].copy(),
+                            B[nk.B_BASIC].copy(), B[nk.B_SLACK].copy(), si[nk.I_GUESSED],
+                            self._direct.dense_done(int(si[nk.I_NF])))
                         hand_basis()
                         res = self._solve_linear(
                             trusted_csc(mdata.copy(), P.indices, P.indptr, P.shape),

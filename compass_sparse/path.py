@@ -83,7 +83,8 @@ from ._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slo
 from ._slot_kernels import lemke_start, slot_basis, slot_point, slot_table, start_basis
 from .basis import KIND_DENSE, KIND_M, KIND_UNIT, FactorReuseFailed, UpdateStatus
 from .direct_step import (FEASIBILITY_TOLERANCE, RESIDUAL_TOLERANCE, DirectFactors,
-                          dense_direct_path, dense_newton_direct, direct_step)
+                          dense_direct_path, dense_newton_direct, direct_step,
+                          failed_direct_start)
 from .exceptions import ShapeError, SingularBasisError
 from .merit import max_abs
 
@@ -286,17 +287,19 @@ def _decided_result(kind, end, basic, nnz_lu, manager, direct, t0):
 
 
 def dense_newton_result(lin, J, eps, zk, fk, x, lb, ub, manager, warm, direct):
-    """(M, q, r, res): the linear MCP of a major iteration, ``lin.linearize(J, eps, zk, fk,
-    x)``, and what ``solve_linear_mcp(M, q, lb, ub, manager, ..., x, warm=warm, r=r,
-    direct=direct)`` returns when the path's start or its dense direct step decides it
-    (res None when the path must run: the caller runs it), in one compiled call for a
-    small dense problem (:func:`~compass_sparse.direct_step.dense_newton_direct`): the
-    same values, counts and bits.  All None when the arguments are not that call's."""
+    """(M, q, r, res, start): the linear MCP of a major iteration, ``lin.linearize(J, eps,
+    zk, fk, x)``, and what ``solve_linear_mcp(M, q, lb, ub, manager, ..., x, warm=warm,
+    r=r, direct=direct)`` returns when the path's start or its dense direct step decides
+    it, in one compiled call for a small dense problem
+    (:func:`~compass_sparse.direct_step.dense_newton_direct`): the same values, counts and
+    bits.  When the step fails, res is None and ``start`` is the outcome for that call's
+    ``dense_start`` (the path runs from the start computed here).  All None when the
+    arguments are not the compiled call's."""
     n = zk.shape[0]
     if not (direct.dense and J.data.dtype == np.float64 and J.data.shape[0] == J.nnz
             and _floats(n, zk, fk, x, lb, ub) and n == lin.n
             and (warm is None or warm.basic.shape == (n,))):
-        return None, None, None, None
+        return None, None, None, None, None
     t0 = time.perf_counter()
     P = lin.M
     mdata = np.empty(P.data.shape[0])
@@ -305,18 +308,20 @@ def dense_newton_result(lin, J, eps, zk, fk, x, lb, ub, manager, warm, direct):
     basic, slack = np.empty((2, n), dtype=np.int8)
     scatter = lin.pos_J is not None
     use_previous = warm is not None
-    code, nf, accepted = dense_newton_direct(
+    code, nf, accepted, guessed = dense_newton_direct(
         J.data, lin.pos_J if scatter else lin.pos_D, scatter, lin.pos_D, float(eps),
         P.indptr, P.indices, zk, fk, x, lb, ub, warm.basic if use_previous else basic,
         use_previous, mdata, q, r, z, w, v, basic, slack, zt, wt, vt, FEASIBILITY_TOLERANCE,
         direct.rank_tolerance, RESIDUAL_TOLERANCE)
     M = trusted_csc(mdata, P.indices, P.indptr, P.shape)
     if code == 0:
-        return M, q, r, _decided_result("start", (z, w, v), basic, 0, manager, direct, t0)
+        return M, q, r, _decided_result("start", (z, w, v), basic, 0, manager, direct,
+                                        t0), None
     nnz_lu = direct.dense_done(nf)
     if not accepted:
-        return M, q, r, None
-    return M, q, r, _decided_result("direct", (zt, wt, vt), basic, nnz_lu, manager, direct, t0)
+        return M, q, r, None, failed_direct_start(z, w, v, basic, slack, guessed, nnz_lu)
+    return M, q, r, _decided_result("direct", (zt, wt, vt), basic, nnz_lu, manager, direct,
+                                    t0), None
 
 
 @dataclass
