@@ -845,9 +845,7 @@ def homotopy_pass(solver, z_start, *, polish=None, center=None) -> HomotopyOutco
     stopped = ""
     tracker_box = {}
 
-    def log(line):
-        if solver.log_major is not None:
-            solver.log_major(line)
+    log = solver.log_major  # (None: no log lines, and the tracker skips making them)
 
     try:
         # dense LU of the bordered system: one BLAS thread (a multithreaded BLAS ran these
