@@ -8,7 +8,8 @@ bookkeeping in compiled calls between the evaluations, ``_run_compiled``, with a
 dense problem's Newton point -- its linear MCP and dense direct step -- inside them; the
 Python loop's ``_newton_point`` makes that Newton point in one compiled call too), and
 the homotopy's dense tracker (``_Tracker._follow_dense`` syncs its counts at the end
-instead of at every step when nothing logs them), and per solve: the options' Mapping
+instead of at every step when nothing logs them; ``homotopy_pass`` gives it no log
+function then), and per solve: the options' Mapping
 test (``collections.abc``'s, not ``typing``'s), the acceptance test's Phi = 0 check, the
 preprocessor's fixed-variable test and the residual report.  They are swapped, in this process,
 for their versions in an older worktree (``--old``, a checkout of c27967c, round 13's
@@ -47,6 +48,7 @@ def _swaps(worktree):
              for k in ("_newton_point", "_run")]
             + [(H._Tracker, "_follow_dense", oh._Tracker._follow_dense,
                 H._Tracker._follow_dense),
+               (H, "homotopy_pass", oh.homotopy_pass, H.homotopy_pass),
                (O, "Mapping", typing.Mapping, O.Mapping),
                (A, "judge", oa.judge, A.judge), (S, "judge", oa.judge, S.judge),
                (S, "_presolve_pass", os_._presolve_pass, S._presolve_pass),
