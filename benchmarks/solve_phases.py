@@ -1,0 +1,105 @@
+"""Where a small solve's time goes, by phase: exclusive times per solve of the user's F
+and J, the evaluator around them, the homotopy's compiled tracker, its driver and its
+offers of accepted points, the crash, the stabilized Newton method's runs, the paths and
+the rest of the pipeline (``solve_mcp`` outside all of these).
+
+Each phase is a function wrapped by a timer that subtracts the wrapped phases called
+inside it (~0.3 us of overhead per call, counted in the caller's phase): the split is
+a guide to what is left, not a benchmark (``bench_small.py`` and the ``ab_round*.py``
+scripts are those).
+
+Usage:  PYTHONPATH=. python3 benchmarks/solve_phases.py [--thesis FAMILY N SEED | --known NAME]
+                                                         [--solves 300]
+"""
+from __future__ import annotations
+
+import argparse
+import collections
+import os
+import statistics
+import sys
+import time
+
+sys.path[:0] = [os.path.join(os.path.dirname(__file__), "..", "tests")]
+
+
+def _problem(a):
+    from compass_sparse import MCP
+
+    if a.known:
+        import known_problems as kp
+
+        makers = dict(kp.ALL_SOLVABLE, double_root=kp.degenerate_root, billups=kp.billups,
+                      log_ncp=lambda: kp.log_ncp(raise_errors=False), sqrt_ncp=kp.sqrt_ncp)
+        p = makers[a.known]()
+        return MCP(p.F, p.J, p.lb, p.ub, p.x0)
+    from compass_sparse.generators import thesis_family
+
+    p = thesis_family(a.thesis[1], a.thesis[0], a.thesis[2]).problem
+    return MCP(p.F, p.J, p.lb, p.ub, p.x0)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--thesis", nargs=3, type=int, default=[2, 10, 1],
+                    metavar=("FAMILY", "N", "SEED"))
+    ap.add_argument("--known", help="a known problem's name (instead of --thesis)")
+    ap.add_argument("--solves", type=int, default=300)
+    a = ap.parse_args(argv)
+
+    from compass_sparse import _homotopy_kernels as hk
+    from compass_sparse import crash, evaluation, homotopy, nms, solve_mcp
+
+    spent = collections.Counter()
+    inner = []  # time of the wrapped phases inside the running one
+
+    def timed(owner, name, phase):
+        fn = getattr(owner, name)
+
+        def wrapper(*args, **kwargs):
+            t = time.perf_counter()
+            inner.append(0.0)
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                d = time.perf_counter() - t
+                spent[phase] += d - inner.pop()
+                if inner:
+                    inner[-1] += d
+
+        setattr(owner, name, wrapper)
+
+    prob = _problem(a)
+    ev = prob.evaluator
+    timed(ev, "_user_F", "the user's F and J")
+    if callable(ev._user_jac):
+        timed(ev, "_user_jac", "the user's F and J")
+    for name in ("f", "f_once", "fj", "jac"):
+        timed(evaluation.Evaluator, name, "the evaluator")
+    timed(hk, "follow_dense", "the homotopy's compiled tracker")
+    timed(homotopy._Tracker, "_offer", "the homotopy's offers of accepted points")
+    timed(nms.NMSSolver, "_homotopy", "the homotopy's driver")
+    timed(nms, "crash", "the crash")
+    timed(nms.NMSSolver, "_run", "the NMS runs")
+    timed(nms.NMSSolver, "_solve_linear", "the paths")
+    for _ in range(30):
+        solve_mcp(prob, options={"time_limit": 60})
+    rows = []  # per solve: {phase: seconds}, "total"
+    for _ in range(a.solves):
+        spent.clear()
+        t = time.perf_counter()
+        solve_mcp(prob, options={"time_limit": 60})
+        row = dict(spent, total=time.perf_counter() - t)
+        row["the rest of the pipeline"] = row["total"] - sum(spent.values())
+        rows.append(row)
+    # medians over the solves (a shared machine's slow solves move means, not medians)
+    phases = sorted({k for r in rows for k in r} - {"total"},
+                    key=lambda k: -statistics.median(r.get(k, 0.0) for r in rows))
+    print(f"{a.solves} solves, median {statistics.median(r['total'] for r in rows) * 1e3:.3f}"
+          " ms; median exclusive time per solve:")
+    for k in phases:
+        print(f"  {k:44s} {statistics.median(r.get(k, 0.0) for r in rows) * 1e3:7.3f} ms")
+
+
+if __name__ == "__main__":
+    main()
