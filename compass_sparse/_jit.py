@@ -46,8 +46,14 @@ import time
 
 import numpy as np
 
-__all__ = ["INTERPRET_MAX_ENTRIES", "INTERPRET_WINDOW", "LazyKernel", "cold_start",
+__all__ = ["INTERPRET_MAX_ENTRIES", "INTERPRET_WINDOW", "LazyKernel", "NO_INDICES", "NO_VALUES",
+           "cold_start",
            "end_cold_start", "materialize", "njit"]
+
+NO_VALUES = np.zeros(0)
+NO_INDICES = np.zeros(0, dtype=np.int32)
+"""Empty float and int32 arrays: the arguments of a compiled call (reverse communication)
+that its request leaves unused (one object each, so that no call allocates them)."""
 
 INTERPRET_WINDOW = 0.2
 """Seconds of wall time, from a process's first interpreted kernel call, during which

@@ -39,6 +39,7 @@ from ._crash_kernels import (NO_BASIS_CHANGE, dense_crash_step, dense_perturbed_
                              initial_shift)
 from ._merit_kernels import crash_active_set, csc_diagonal, csc_to_dense
 from ._blas import BLAS_LIMIT_MIN_N, single_threaded_blas
+from ._jit import NO_INDICES, NO_VALUES
 from .basis.backends import DENSE_SOLVE_MAX_N, SingularFactorError, solve_sparse
 from .direct_step import (DIRECT_MAX_N, KLU_FILL_LIMIT, REUSE_BEATS_REFACTOR_NNZ,
                           DirectFactors, automatic_lu, klu_available, reduced_system)
@@ -95,8 +96,6 @@ bit); False keeps the Python route, the reference of the tests."""
 
 _REASONS = ("iteration limit", "converged", "domain error in J", "no basis change",
             "singular reduced Jacobian", "no progress", "time limit")  # (ck.R_* order)
-_NO_VALUES = np.zeros(0)
-_NO_INDICES = np.zeros(0, dtype=np.int32)
 
 
 def _klu_suits(Jii, lu) -> bool:
@@ -467,7 +466,7 @@ def _crash_dense(evalr, z, f0, J0, lb, ub, opt, tol, deadline, log, on_point, st
         return deadline is not None and time.perf_counter() > deadline
 
     step = ck.crash_dense
-    none, no_index = _NO_VALUES, _NO_INDICES
+    none, no_index = NO_VALUES, NO_INDICES
     if late():
         code = step(sf, si, W, prev_free, none, no_index, no_index, none, ck.STOP)
     elif J0 is not None:

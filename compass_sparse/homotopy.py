@@ -98,7 +98,7 @@ from ._csc import csc_times
 from ._homotopy_kernels import (bordered_pivots_ok, bordered_values, chord_step,
                                 homotopy_values, lu_solve, smoothed_projection,
                                 unit_tangent)
-from ._jit import cold_start
+from ._jit import NO_INDICES, NO_VALUES, cold_start
 from ._merit_kernels import csc_to_dense
 from .evaluation import all_finite
 from .merit import dot_norm, fb_phi, fb_psi, float_vector, max_abs, project
@@ -322,8 +322,6 @@ def _dense(J):
 
 
 # ------------------------------------------------------------------ the tracker
-_NO_VALUES = np.zeros(0)  # (the compiled tracker's arguments that a request leaves unused)
-_NO_INDICES = np.zeros(0, dtype=np.int32)
 _DENSE_ENDS = {hk.SINGULAR: HomotopyStatus.SINGULAR,
                hk.STEP_TOO_SMALL: HomotopyStatus.STEP_TOO_SMALL,
                hk.DIVERGED: HomotopyStatus.DIVERGED, hk.RETURNED: HomotopyStatus.RETURNED,
@@ -597,7 +595,7 @@ class _Tracker:
         p_row = W[hk.W_P, :n]
         y = W[hk.W_Y]
         follow = hk.follow_dense
-        none, no_index = _NO_VALUES, _NO_INDICES
+        none, no_index = NO_VALUES, NO_INDICES
         logged, log = 0, self.log
 
         def sync():  # the tracker's counts (the end game's factorizations too) get the path's

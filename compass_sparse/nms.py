@@ -50,10 +50,10 @@ import scipy.sparse as sp
 
 from . import _nms_kernels as nk
 from ._csc import trusted_csc
-from ._jit import cold_start
+from ._jit import NO_INDICES, NO_VALUES, cold_start
 from ._merit_kernels import csc_matvec, newton_linearization
 from .acceptance import Acceptance
-from .crash import _NO_INDICES, _NO_VALUES, crash
+from .crash import crash
 from .direct_step import (DIRECT_MIN_N, FEASIBILITY_TOLERANCE, RESIDUAL_TOLERANCE,
                           REUSE_BEATS_REFACTOR_NNZ, DirectFactors, direct_step_applies,
                           failed_direct_start)
@@ -748,8 +748,8 @@ class NMSSolver:
         take_best()
         take_basis()
         kernel = nk.nms_dense
-        none = jx = mdata = _NO_VALUES  # (the arguments a call leaves unused)
-        ip = ix = mp = mi = _NO_INDICES
+        none = jx = mdata = NO_VALUES  # (the arguments a call leaves unused)
+        ip = ix = mp = mi = NO_INDICES
         pj = pd = _NO_POSITIONS
         cur_J, f = cur.J, None
         code_res = pivots = None  # the last linear solve's code and pivots (the log's)
