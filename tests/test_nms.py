@@ -197,7 +197,8 @@ def test_compiled_nms_gives_the_python_routes_points_bit_for_bit(monkeypatch):
     communication) against the Python loop they replace, on known, thesis and random
     problems, F and J failing at some points, and the options that change the iteration
     (monotone, memory, watchdogs, the arc search, m-step frequency, no LM fallback, no
-    crash, restarts without the homotopy): the same results bit for bit -- status and
+    crash, restarts without the homotopy, paths from the Lemke start, the homotopy's
+    polishing runs): the same results bit for bit -- status and
     message, point and F, every count, the basis, the history and the passes."""
     import compass_sparse._nms_kernels as nk
     import compass_sparse.nms as N
@@ -214,7 +215,8 @@ def test_compiled_nms_gives_the_python_routes_points_bit_for_bit(monkeypatch):
     options = ({}, {"nms": False}, {"nms_memory_size": 2, "nms_mstep_frequency": 1},
                {"nms_searchtype": "arc"}, {"nms_maximum_watchdogs": 0},
                {"lm_fallback": False, "crash_method": "none"},
-               {"homotopy": "off", "restart_limit": 2, "major_iteration_limit": 15})
+               {"homotopy": "off", "restart_limit": 2, "major_iteration_limit": 15},
+               {"lemke_start": "always", "major_iteration_limit": 4}, {"homotopy": "only"})
     steps = set()
     for p in _nms_problems(10):
         for opt in options:
