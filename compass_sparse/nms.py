@@ -80,6 +80,11 @@ COMPILED_NMS = True
 """Run the major iterations' bookkeeping in compiled calls (:meth:`NMSSolver._run_compiled`)
 where it applies; False keeps the Python loop (the reference of the tests)."""
 
+COMPILED_NMS_MAX_N = 5000
+"""Largest order whose major iterations run in compiled calls.  Their work area holds 28
+vectors of length n (224 MB at n = 1e6), and above a few thousand variables a major
+iteration's ~80 us of Python is a vanishing share of its factorizations."""
+
 _NO_POSITIONS = np.zeros(0, dtype=np.int64)  # (the linearizer's maps before one is made)
 
 FLAT_REJECTION_LIMIT = 10
@@ -658,10 +663,11 @@ class NMSSolver:
 
     def _compiled_applies(self) -> bool:
         """Whether the major iterations run in compiled calls (:meth:`_run_compiled`): on
-        the user's problem unscaled, without a callback or a log of the iterations, and
-        once numba is loaded (during the cold start the Python loop is the faster)."""
+        the user's problem unscaled, up to COMPILED_NMS_MAX_N variables, without a
+        callback or a log of the iterations, and once numba is loaded (during the cold
+        start the Python loop is the faster)."""
         return (COMPILED_NMS and self.callback is None and self.log_major is None
-                and self.acceptance.row is None and self.n > 0
+                and self.acceptance.row is None and 0 < self.n <= COMPILED_NMS_MAX_N
                 and _solver_vectors(self.lb, self.ub, self.lb, self.ub)  # float vectors
                 and not cold_start()["interpreting"])
 

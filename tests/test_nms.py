@@ -258,3 +258,22 @@ def test_compiled_nms_stops_at_the_time_limit_as_the_python_route(monkeypatch):
             assert out[False] == out[True], K
             stops += out[True][0] is cs.Status.TIME_LIMIT
     assert stops > 40
+
+
+def test_compiled_nms_keeps_the_python_loop_above_its_order_limit(monkeypatch):
+    """Above COMPILED_NMS_MAX_N variables (the work area holds 28 vectors of length n)
+    the major iterations stay in the Python loop; below it they take the compiled calls;
+    the results are the same either way."""
+    import compass_sparse.nms as N
+
+    calls = []
+    real = N.NMSSolver._run_compiled
+    monkeypatch.setattr(N.NMSSolver, "_run_compiled",
+                        lambda self, *a: calls.append(self.n) or real(self, *a))
+    p = thesis_family(20, 1, 3).problem
+    below = _solve_record(p, {})
+    assert calls and set(calls) == {20}
+    calls.clear()
+    monkeypatch.setattr(N, "COMPILED_NMS_MAX_N", 19)
+    above = _solve_record(p, {})
+    assert calls == [] and above == below
