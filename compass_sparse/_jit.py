@@ -46,9 +46,8 @@ import time
 
 import numpy as np
 
-__all__ = ["INTERPRET_MAX_ENTRIES", "INTERPRET_WINDOW", "LazyKernel", "NO_INDICES", "NO_VALUES",
-           "cold_start",
-           "end_cold_start", "materialize", "njit"]
+__all__ = ["INTERPRET_MAX_ENTRIES", "INTERPRET_WINDOW", "LazyKernel", "NO_INDICES",
+           "NO_VALUES", "cold_start", "end_cold_start", "materialize", "njit"]
 
 NO_VALUES = np.zeros(0)
 NO_INDICES = np.zeros(0, dtype=np.int32)

@@ -304,16 +304,15 @@ def _dense_newton(sf, si, W, B, mdata, indptr, indices, data, pos_j, pos_d, m_in
     """The Newton point of a small dense problem from J (``indptr``, ``indices``,
     ``data``): the linear MCP (M's entries into ``mdata`` on the pattern ``m_indptr``,
     ``m_indices``, J's entries at ``pos_j`` when si[I_SCATTER], the diagonal at
-    ``pos_d``: the linearizer's maps), its path's start and the dense direct step (path.dense_newton_result).  True
-    when the start or the step ends the path (its end in the R rows, its basis the warm
-    one, si[I_DIRECT]: whether the step was made, si[I_NF] its order); False when the
-    path must run: q and r in rows W_Q, W_R, its start (z, w, v) in the L rows, its
-    start basis in B[B_BASIC], and in B[B_SLACK] the basis before the inward guess when
-    si[I_GUESSED]."""
+    ``pos_d``: the linearizer's maps), its path's start and the dense direct step, as
+    path.dense_newton_result makes them.  True when the start or the step ends the path
+    (its end in the R rows, its basis the warm one, si[I_DIRECT]: whether the step was
+    made, si[I_NF] its order); False when the path must run: q and r in rows W_Q, W_R,
+    its start (z, w, v) in the L rows, its start basis in B[B_BASIC], and in B[B_SLACK]
+    the basis before the inward guess when si[I_GUESSED]."""
     scatter = si[I_SCATTER] != 0
-    newton_linearization(data, pos_j, scatter, pos_d, sf[S_EPS],
-                         m_indptr, m_indices, W[W_CZ], W[W_CF], W[W_CX], mdata, W[W_Q],
-                         W[W_R])
+    newton_linearization(data, pos_j, scatter, pos_d, sf[S_EPS], m_indptr, m_indices,
+                         W[W_CZ], W[W_CF], W[W_CX], mdata, W[W_Q], W[W_R])
     code, res, mz, nf, guessed = _dense_direct_from(
         m_indptr, m_indices, mdata, W[W_Q], W[W_LB], W[W_UB], W[W_CX], W[W_R], B[B_WARM],
         si[I_HAS_WARM] != 0, W[W_LZ], W[W_LW], W[W_LV], B[B_BASIC], B[B_SLACK], W[W_RZ],
