@@ -1,7 +1,7 @@
 """The stabilized Newton method's bookkeeping in compiled code (:meth:`NMSSolver._run`).
 
 A major iteration of a small problem spent ~100 us of Python around ~15 us of the user's
-F and J: the candidate point's merit, the best point, the acceptance pre-test, the
+F and J (double_root, round 13): the candidate point's merit, the best point, the acceptance pre-test, the
 reference value, the d/m-step classification and its descent test, the checkpoint and
 its memory, the watchdog's search, the stall rule.  Here all of that runs in one
 compiled call between two requests to the Python driver (``NMSSolver._run_compiled``),
@@ -12,11 +12,9 @@ by reverse communication as the crash and the homotopy's tracker do:
   it brings J (A_J), and the call makes the linear MCP and its dense direct step; when
   the step fails it asks for the path (NEED_PATH).  Otherwise, or then, the driver runs
   the linear solve (``_newton_point``: its Jacobian, its path, its counts) and brings
-  the path's end
-  (z, w, v) in rows W_RZ, W_RW, W_RV with A_NEWTON (whether it is usable, solved the
-  linear problem, reached t > 0: si[I_USABLE], si[I_RES_SOLVED], si[I_RES_MOVED]), or,
-  when J failed there, the
-  fallback's point with A_FRESH_J.
+  the path's end (z, w, v) in rows W_RZ, W_RW, W_RV with A_NEWTON (whether it is
+  usable, solved the linear problem, reached t > 0: si[I_USABLE], si[I_RES_SOLVED],
+  si[I_RES_MOVED]), or, when J failed there, the fallback's point with A_FRESH_J.
 - NEED_F_CAND / NEED_F_TRIAL: F at the Newton point / at the watchdog's trial point
   W_TZ (the driver checks the time limit first for a trial point, as the search does);
   answered by A_F_GIVEN (F in ``ft``) or A_F_FAILED.

@@ -82,8 +82,8 @@ where it applies; False keeps the Python loop (the reference of the tests)."""
 
 COMPILED_NMS_MAX_N = 5000
 """Largest order whose major iterations run in compiled calls.  Their work area holds 28
-vectors of length n (224 MB at n = 1e6), and above a few thousand variables a major
-iteration's ~80 us of Python is a vanishing share of its factorizations."""
+vectors of length n (224 MB at n = 1e6), and above a few thousand variables the ~50 us
+of Python a major iteration saves is a vanishing share of its factorizations."""
 
 _NO_POSITIONS = np.zeros(0, dtype=np.int64)  # (the linearizer's maps before one is made)
 
@@ -676,8 +676,8 @@ class NMSSolver:
         in compiled calls (``_nms_kernels.nms_dense``, which says what it needs next);
         here the evaluations, the paths that the dense direct step does not end, the
         acceptance test, the fallback, the limits, the counts and the history.  The
-        Python loop's steps in its order: the same points bit for bit, without its ~80 us
-        of Python per major iteration of a small problem."""
+        Python loop's steps in its order: the same points bit for bit, ~50 us faster per
+        major iteration of a small problem (double_root: 1.28 -> 0.82 ms a solve)."""
         n = self.n
         W = np.empty((nk.W_ROWS, n))
         cur = st.cur
