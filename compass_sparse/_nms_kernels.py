@@ -44,8 +44,8 @@ import numpy as np
 from ._crash_kernels import _np_max, _np_min
 from ._jit import njit
 from ._merit_kernels import (fb_directional_kernel, fb_phi_kernel, max_abs_kernel,
-                             min_map_within, newton_linearization, normal_map_kernel)
-from .direct_step import _dense_direct_from
+                             min_map_within, normal_map_kernel)
+from .direct_step import dense_newton_direct
 
 # requests (returns)
 NEED_NEWTON, NEED_F_CAND, NEED_F_TRIAL, JUDGE, NEED_FALLBACK, TIME_UP, STALLED, NEED_PATH = \
@@ -93,7 +93,7 @@ def _py_min(a, b):
 
 
 @njit(cache=True)
-def _memory_max(sf, si, mem):
+def _memory_max(si, mem):
     """max(memory) as Python takes it over the list: the first largest."""
     m = mem[0]
     for j in range(1, si[I_NMEM]):
@@ -103,7 +103,8 @@ def _memory_max(sf, si, mem):
 
 
 @njit(cache=True)
-def _memory_min(sf, si, mem):
+def _memory_min(si, mem):
+    """min(memory), as Python takes it."""
     m = mem[0]
     for j in range(1, si[I_NMEM]):
         if mem[j] < m:
@@ -114,7 +115,7 @@ def _memory_min(sf, si, mem):
 @njit(cache=True)
 def _reference(sf, si, mem, psi):
     """nms.reference_value(memory, psi, sqrt(2 psi), fbn_start): (R, large)."""
-    R = _memory_max(sf, si, mem)
+    R = _memory_max(si, mem)
     if math.sqrt(2.0 * psi) <= sf[S_LOCAL] * sf[S_FBN_START]:
         return _py_min(R, psi), 1.0
     return R, 100.0
@@ -127,15 +128,23 @@ def _copy(W, dst, src):
 
 
 @njit(cache=True)
-def _checkpoint(sf, si, W, mem, x_row):
-    """NMSState.checkpoint of the point in the T rows (its x in row ``x_row``): it becomes
-    the current iterate and the checkpoint, its merit enters the memory."""
-    psi = sf[S_TPSI]
+def _make_current(sf, si, W, x_row):
+    """The point in the T rows (its x in row ``x_row``) becomes the current iterate (not
+    the checkpoint: _checkpoint says when it is)."""
     _copy(W, W_CZ, W_TZ)
     _copy(W, W_CF, W_TF)
     _copy(W, W_CPHI, W_TPHI)
     _copy(W, W_CX, x_row)
-    sf[S_CPSI] = psi
+    sf[S_CPSI] = sf[S_TPSI]
+    si[I_CUR_IS_CKPT] = 0
+
+
+@njit(cache=True)
+def _checkpoint(sf, si, W, mem, x_row):
+    """NMSState.checkpoint of the point in the T rows (its x in row ``x_row``): it becomes
+    the current iterate and the checkpoint, its merit enters the memory."""
+    psi = sf[S_TPSI]
+    _make_current(sf, si, W, x_row)
     k = si[I_NMEM]
     if k < si[I_MEMSIZE]:
         mem[k] = psi
@@ -157,7 +166,8 @@ def _consider(sf, si, W):
     point, and the residual pre-test of Acceptance.small (whether it passed)."""
     phi = W[W_TPHI]
     fb_phi_kernel(W[W_TZ], W[W_TF], W[W_LB], W[W_UB], phi)
-    psi = 0.5 * np.dot(phi, phi)
+    sq = np.dot(phi, phi)  # (fb_psi's product; Acceptance.small's norm is its root)
+    psi = 0.5 * sq
     sf[S_TPSI] = psi
     if psi < sf[S_BPSI]:
         sf[S_BPSI] = psi
@@ -168,7 +178,7 @@ def _consider(sf, si, W):
     tol = sf[S_TOL]
     if math.sqrt(2.0 * psi) > tol:
         return False
-    if math.sqrt(np.dot(phi, phi)) > tol:
+    if math.sqrt(sq) > tol:
         return False
     return min_map_within(W[W_TZ], W[W_TF], W[W_LB], W[W_UB], tol)
 
@@ -221,16 +231,11 @@ def _classify(sf, si, W, mem, indptr, indices, data):
     else:
         si[I_ND] += 1
         sf[S_DELTA] = _py_max(sf[S_DELTA] * sf[S_DELTA_SHRINK], sf[S_DELTA_MIN])
-    if step != LOG_D or psi < _memory_min(sf, si, mem):
+    if step != LOG_D or psi < _memory_min(si, mem):
         _checkpoint(sf, si, W, mem, W_RX)
         si[I_WATCHDOGS] = 0
     else:  # the candidate becomes the current iterate only
-        _copy(W, W_CZ, W_TZ)
-        _copy(W, W_CF, W_TF)
-        _copy(W, W_CPHI, W_TPHI)
-        _copy(W, W_CX, W_RX)
-        sf[S_CPSI] = psi
-        si[I_CUR_IS_CKPT] = 0
+        _make_current(sf, si, W, W_RX)
     sf[S_EPS] *= sf[S_PROX_SHRINK]
     si[I_LOG] = step
     sf[S_LOG_FBN] = math.sqrt(2.0 * psi)
@@ -303,18 +308,16 @@ def _dense_newton(sf, si, W, B, mdata, indptr, indices, data, pos_j, pos_d, m_in
     ``data``): the linear MCP (M's entries into ``mdata`` on the pattern ``m_indptr``,
     ``m_indices``, J's entries at ``pos_j`` when si[I_SCATTER], the diagonal at
     ``pos_d``: the linearizer's maps), its path's start and the dense direct step, as
-    path.dense_newton_result makes them.  True when the start or the step ends the path
+    path.dense_newton_result makes them (direct_step.dense_newton_direct).  True when the start or the step ends the path
     (its end in the R rows, its basis the warm one, si[I_DIRECT]: whether the step was
     made, si[I_NF] its order); False when the path must run: q and r in rows W_Q, W_R,
     its start (z, w, v) in the L rows, its start basis in B[B_BASIC], and in B[B_SLACK]
     the basis before the inward guess when si[I_GUESSED]."""
-    scatter = si[I_SCATTER] != 0
-    newton_linearization(data, pos_j, scatter, pos_d, sf[S_EPS], m_indptr, m_indices,
-                         W[W_CZ], W[W_CF], W[W_CX], mdata, W[W_Q], W[W_R])
-    code, res, mz, nf, guessed = _dense_direct_from(
-        m_indptr, m_indices, mdata, W[W_Q], W[W_LB], W[W_UB], W[W_CX], W[W_R], B[B_WARM],
-        si[I_HAS_WARM] != 0, W[W_LZ], W[W_LW], W[W_LV], B[B_BASIC], B[B_SLACK], W[W_RZ],
-        W[W_RW], W[W_RV], sf[S_FEASIBILITY], sf[S_RANK])
+    code, nf, accepted, guessed = dense_newton_direct(
+        data, pos_j, si[I_SCATTER] != 0, pos_d, sf[S_EPS], m_indptr, m_indices, W[W_CZ],
+        W[W_CF], W[W_CX], W[W_LB], W[W_UB], B[B_WARM], si[I_HAS_WARM] != 0, mdata, W[W_Q],
+        W[W_R], W[W_LZ], W[W_LW], W[W_LV], B[B_BASIC], B[B_SLACK], W[W_RZ], W[W_RW],
+        W[W_RV], sf[S_FEASIBILITY], sf[S_RANK], sf[S_RESIDUAL])
     si[I_NF] = nf
     si[I_DIRECT] = code
     si[I_GUESSED] = guessed
@@ -322,8 +325,7 @@ def _dense_newton(sf, si, W, B, mdata, indptr, indices, data, pos_j, pos_d, m_in
         _copy(W, W_RZ, W_LZ)
         _copy(W, W_RW, W_LW)
         _copy(W, W_RV, W_LV)
-    elif not (res >= 0.0 and res <= sf[S_RESIDUAL] * (1.0 + mz + max_abs_kernel(
-            W[W_Q], W[W_Q], False))):  # (direct_step._accepted; NaN fails)
+    elif not accepted:
         return False
     for i in range(W.shape[1]):
         B[B_WARM, i] = B[B_BASIC, i]
