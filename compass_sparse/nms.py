@@ -754,14 +754,17 @@ class NMSSolver:
         take_best()
         take_basis()
         kernel = nk.nms_dense
-        none = jx = mdata = NO_VALUES  # (the arguments a call leaves unused)
+        jx = mdata = NO_VALUES  # (the arguments a call leaves unused)
         ip = ix = mp = mi = NO_INDICES
         pj = pd = _NO_POSITIONS
+
+        def answer(arg, ft=NO_VALUES, late=False):  # the kernel's next call
+            return kernel(sf, si, W, mem, B, mdata, ft, ip, ix, jx, pj, pd, mp, mi, arg, late)
+
         cur_J, f = cur.J, None
         code_res = pivots = None  # the last linear solve's code and pivots (the log's)
         try:
-            code = kernel(sf, si, W, mem, B, mdata, none, ip, ix, jx, pj, pd, mp, mi,
-                          nk.A_START, False)
+            code = answer(nk.A_START)
             while True:
                 if si[nk.I_LOG]:  # a finished major iteration
                     self._record(code_res, nk.LETTERS[si[nk.I_LOG]], float(sf[nk.S_LOG_FBN]),
@@ -791,8 +794,7 @@ class NMSSolver:
                         ip, ix, jx = J.indptr, J.indices, J.data
                         sf[nk.S_RANK] = self._direct.rank_tolerance
                         t0 = time.perf_counter()
-                        code = kernel(sf, si, W, mem, B, mdata, none, ip, ix, jx, pj, pd, mp,
-                                      mi, nk.A_J, False)
+                        code = answer(nk.A_J)
                         self.nit += 1
                         if code != nk.NEED_PATH:
                             self._dense_step_done(si[nk.I_DIRECT], si[nk.I_NF], t0)
@@ -827,37 +829,30 @@ class NMSSolver:
                         if fb is None:
                             return "evaluation failure and no fallback progress"
                         self._record(code_res, letter, fb.fbn, 0, float(sf[nk.S_EPS]))
-                        code = kernel(sf, si, W, mem, B, mdata, none, ip, ix, jx, pj, pd, mp,
-                                      mi, nk.A_FRESH_J, False)
+                        code = answer(nk.A_FRESH_J)
                         continue
                     code_res, pivots = path_end(res)
                     ip, ix, jx = J.indptr, J.indices, J.data
-                    code = kernel(sf, si, W, mem, B, mdata, none, ip, ix, jx, pj, pd, mp, mi,
-                                  nk.A_NEWTON, False)
+                    code = answer(nk.A_NEWTON)
                 elif code == nk.NEED_F_CAND or code == nk.NEED_F_TRIAL:
                     if code == nk.NEED_F_TRIAL and self._past_deadline():
                         raise _Stop(Status.TIME_LIMIT, "time limit reached")
                     f = self.ev.f(W[nk.W_RZ] if code == nk.NEED_F_CAND else W[nk.W_TZ])
-                    code = (kernel(sf, si, W, mem, B, mdata, none, ip, ix, jx, pj, pd, mp, mi,
-                                   nk.A_F_FAILED, False)
-                            if f is None else
-                            kernel(sf, si, W, mem, B, mdata, f, ip, ix, jx, pj, pd, mp, mi,
-                                   nk.A_F_GIVEN, self._past_deadline()))
+                    code = (answer(nk.A_F_FAILED) if f is None else
+                            answer(nk.A_F_GIVEN, f, self._past_deadline()))
                 elif code == nk.JUDGE:
                     hand_best()  # (a solution found here becomes the best point)
                     self._judge(W[nk.W_TZ].copy(), f, W[nk.W_TPHI].copy(),
                                 float(sf[nk.S_TPSI]))
                     owner[0] = True
-                    code = kernel(sf, si, W, mem, B, mdata, none, ip, ix, jx, pj, pd, mp, mi,
-                                  nk.A_JUDGED, self._past_deadline())
+                    code = answer(nk.A_JUDGED, late=self._past_deadline())
                 elif code == nk.NEED_FALLBACK:
                     fb, letter = fallback()
                     if fb is None:
                         self._record(code_res, "G", self.best.fbn, pivots, float(sf[nk.S_EPS]))
                         return "no descent from the best point"
                     self._record(code_res, letter, fb.fbn, pivots, float(sf[nk.S_EPS]))
-                    code = kernel(sf, si, W, mem, B, mdata, none, ip, ix, jx, pj, pd, mp, mi,
-                                  nk.A_FRESH, False)
+                    code = answer(nk.A_FRESH)
                 elif code == nk.TIME_UP:
                     raise _Stop(Status.TIME_LIMIT, "time limit reached")
                 else:  # STALLED
