@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from ._eval_kernels import top_abs_distinct
 from ._jit import njit
 
 
@@ -345,6 +346,25 @@ def residual_maxima_kernel(z, f, lb, ub, phi, mm):
         if r > nm_inf or r != r:
             nm_inf = r
     return fb_inf, natural, nm_inf
+
+
+@njit(cache=True)
+def residual_report_kernel(z, f, lb, ub, phi, mm, idx):
+    """The numbers of merit.residual_report in one call (a Python route of six array
+    operations and calls cost a small solve ~10 us): the maxima of
+    :func:`residual_maxima_kernel`, ||Phi||_2 as merit._norm2 takes it (scaled by
+    ||Phi||_inf against over- and underflow: m sqrt(s . s), s = Phi / m; m itself when
+    it is 0 or not finite), Phi . Phi (merit.fb_psi's product) and the rows of the
+    len(idx) largest |Phi_i| by :func:`top_abs_distinct` (whose answer, False on a tie,
+    is returned last).  The products are np.dot's, the same BLAS product as the Python
+    route's."""
+    fb_inf, natural, nm_inf = residual_maxima_kernel(z, f, lb, ub, phi, mm)
+    fb_norm = fb_inf
+    if fb_inf != 0.0 and math.isfinite(fb_inf):
+        s = phi / fb_inf
+        fb_norm = fb_inf * math.sqrt(np.dot(s, s))
+    distinct = top_abs_distinct(phi, idx) if idx.shape[0] > 0 else False
+    return fb_inf, natural, nm_inf, fb_norm, np.dot(phi, phi), distinct
 
 
 @njit(cache=True)

@@ -36,7 +36,7 @@ import scipy.sparse as sp
 from ._eval_kernels import top_abs_distinct
 from ._merit_kernels import (csc_rmatvec, fb_diagonals_kernel, fb_directional_kernel,
                              fb_gradient_kernel, fb_phi_kernel, max_abs_kernel, normal_map_kernel,
-                             residual_maxima_kernel)
+                             residual_report_kernel)
 
 __all__ = [
     "fischer",
@@ -329,22 +329,25 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5,
     if phi is None:
         phi = fb_phi(z, f, lb, ub)
     aphi = None  # |Phi|, made only where a sort needs it
-    if z.ndim == 1 and f.shape == z.shape:
+    k = min(k_worst, z.size)
+    idx = np.empty(k, dtype=np.int64)
+    distinct = False  # whether idx holds the k largest |Phi_i| (unique: no ties)
+    if z.ndim == 1 and f.shape == z.shape and float_vector(phi):
         mm = np.empty_like(z)
-        fb_inf, natural, nm_inf = residual_maxima_kernel(
+        fb_inf, natural, nm_inf, fb_norm, sq, distinct = residual_report_kernel(
             np.ascontiguousarray(z), np.ascontiguousarray(f), np.ascontiguousarray(lb),
-            np.ascontiguousarray(ub), np.ascontiguousarray(phi), mm)
+            np.ascontiguousarray(ub), np.ascontiguousarray(phi), mm, idx)
+        psi = 0.5 * sq  # (fb_psi's formula)
     else:
         aphi = np.abs(phi)
         mm = np.abs(min_map(z, f, lb, ub))
         nm = normal_map_at_arrays(z, f, lb, ub)[1]
         fb_inf, natural, nm_inf = (float(np.max(aphi)), float(np.max(mm)),
                                    float(np.max(np.abs(nm)))) if z.size else (0.0, 0.0, 0.0)
-    k = min(k_worst, z.size)
-    idx = np.empty(k, dtype=np.int64)
-    # the k largest in one compiled pass when they are distinct (then the answer is
-    # unique: the sorts below give it too); ties keep numpy's order
-    if not (k > 0 and float_vector(phi) and top_abs_distinct(phi, idx)):
+        fb_norm, psi = _norm2(phi, fb_inf), fb_psi(phi)
+    # the k largest came from one compiled pass when they are distinct (then the answer
+    # is unique: the sorts below give it too); ties keep numpy's order
+    if not distinct:
         aphi = np.abs(phi) if aphi is None else aphi
         if k == z.size:
             # every row is listed (small problems): one sort, no partition first
@@ -360,11 +363,11 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5,
         label = lambda i: str(names[i])  # noqa: E731
     worst = [(label(i), abs(float(phi[i])), float(mm[i])) for i in idx.tolist()]
     return ResidualReport(
-        fb_norm=_norm2(phi, fb_inf),
+        fb_norm=float(fb_norm),
         fb_inf=float(fb_inf),
         natural=float(natural),
         normal_map_inf=float(nm_inf),
-        merit=fb_psi(phi),
+        merit=float(psi),
         worst=worst,
         worst_index=int(idx[0]) if k > 0 else -1,
     )

@@ -289,6 +289,68 @@ def test_residual_report_names_worst_row():
     assert rep3.worst[0][0] == "F[6]"
 
 
+def _report_by_arrays(z, f, lb, ub, k):
+    """The residual report's numbers by array operations, as documented: maxima of |Phi|,
+    of the min-map and of the normal map; ||Phi||_2 scaled by ||Phi||_inf; Psi; the k
+    largest |Phi_i| by a stable sort (ties: the lower row first)."""
+    from compass_sparse.merit import normal_map_at_arrays
+
+    phi = fb_phi(z, f, lb, ub)
+    aphi, mm = np.abs(phi), np.abs(min_map(z, f, lb, ub))
+    nm = np.abs(normal_map_at_arrays(z, f, lb, ub)[1])
+    m = float(np.max(aphi)) if z.size else 0.0
+    norm = m if (m == 0.0 or not np.isfinite(m)) else m * float(np.sqrt(np.dot(phi / m,
+                                                                               phi / m)))
+    rows = np.argsort(-aphi, kind="stable")[:k].tolist()
+    return ([m, float(np.max(mm)) if z.size else 0.0, float(np.max(nm)) if z.size else 0.0,
+             norm, 0.5 * float(np.dot(phi, phi))], rows)
+
+
+def _same_floats(a, b):
+    return all((x == y) or (x != x and y != y) for x, y in zip(a, b))
+
+
+@pytest.mark.parametrize("case", ["ties", "nan", "inf", "huge", "tiny", "empty", "solution"])
+@pytest.mark.parametrize("k", [1, 3, 5, 12])
+def test_residual_report_in_one_compiled_call_gives_the_array_formulas_bits(case, k):
+    """The report's numbers come from one compiled call (round 15); they are the bits
+    of the array formulas, NaN and infinity propagating as np.max does, and its worst
+    rows are the stable sort's whenever they are unique (ties are then left to it)."""
+    rng = np.random.default_rng(["ties", "nan", "inf", "huge", "tiny", "empty",
+                                 "solution"].index(case) * 100 + k)
+    n = 0 if case == "empty" else 9
+    lb = np.where(rng.random(n) < 0.3, -INF, rng.integers(-2, 2, n).astype(float))
+    ub = np.where(rng.random(n) < 0.3, INF, lb + rng.integers(0, 3, n))
+    z = np.clip(rng.standard_normal(n), lb, ub)
+    f = rng.standard_normal(n)
+    if case == "ties":
+        z, f = np.clip(np.round(z), lb, ub), np.round(f)
+    elif case == "nan":
+        f[3] = np.nan
+    elif case == "inf":
+        f[5] = -INF
+    elif case == "huge":
+        z, f = np.clip(z * 1e300, lb, ub), f * 1e300
+    elif case == "tiny":
+        f = f * 1e-300
+    elif case == "solution":
+        f = np.where(z > lb, 0.0, np.abs(f)) * np.where(np.isfinite(lb), 1.0, 0.0)
+        f[(z < ub) & (z > lb)] = 0.0
+    with np.errstate(all="ignore"):
+        rep = residual_report(z, f, lb, ub, k_worst=k)
+        want, rows = _report_by_arrays(z, f, lb, ub, min(k, n))
+    got = [rep.fb_inf, rep.natural, rep.normal_map_inf, rep.fb_norm, rep.merit]
+    assert _same_floats(got, want), (got, want)
+    listed = [int(r[0][2:-1]) for r in rep.worst]
+    aphi = np.abs(fb_phi(z, f, lb, ub))
+    # the k largest |Phi_i|, largest first, whatever the order among equal values
+    assert _same_floats(aphi[listed], aphi[rows]) and len(listed) == len(rows)
+    top = np.sort(aphi)[::-1][:len(rows) + 1]
+    if case != "nan" and np.all(np.diff(top) < 0):  # unique: the rows themselves
+        assert listed == rows
+    assert rep.worst_index == (listed[0] if listed else -1)
+
+
 @pytest.mark.parametrize("x", [np.array([1.0, -3.0, 2.0]), np.array([-0.0]), np.zeros(0),
                                np.array([1.0, np.nan, -5.0]), np.array([np.inf, -1.0]),
                                np.arange(6.0)[::2] - 5.0, [1, -7, 2]])
