@@ -33,7 +33,6 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ._eval_kernels import top_abs_distinct
 from ._merit_kernels import (csc_rmatvec, fb_diagonals_kernel, fb_directional_kernel,
                              fb_gradient_kernel, fb_phi_kernel, max_abs_kernel, normal_map_kernel,
                              residual_report_kernel)

@@ -25,11 +25,11 @@ import numpy as np
 
 sys.path[:0] = [os.path.join(os.path.dirname(__file__), "..", "..", "tests")]
 
-from compass_sparse import _crash_kernels as ck  # noqa: E402
-from compass_sparse._merit_kernels import min_map_within, scale_test_kernel  # noqa: E402
-from compass_sparse.crash import (CRASH_START_FACTOR, CRASH_STEP_LIMIT,  # noqa: E402
+from compass_sparse import _crash_kernels as ck
+from compass_sparse._merit_kernels import min_map_within, scale_test_kernel
+from compass_sparse.crash import (CRASH_START_FACTOR, CRASH_STEP_LIMIT,
                                   PERTURB_ATTEMPTS)
-from compass_sparse.merit import fb_phi, residual_report  # noqa: E402
+from compass_sparse.merit import fb_phi, residual_report
 
 
 def bare_solve(F, J, lb, ub, x0, opt):
