@@ -35,7 +35,7 @@ import scipy.sparse as sp
 from ._csc import without_duplicates
 from ._merit_kernels import (flat_step_kernel, min_map_within,
                              scale_test_kernel)
-from .merit import fb_jacobian_diagonals, fb_phi, max_abs, min_map
+from .merit import dot_norm, fb_jacobian_diagonals, fb_phi, max_abs, min_map
 from .path import _floats
 from .scaling import scale_entries
 
@@ -65,15 +65,6 @@ class Verdict:
                 f"{row_label(self.flat_row)}")
 
 
-def _norm(phi) -> float:
-    """sqrt(Phi . Phi): np.dot's product and a correctly rounded root, as
-    float(np.sqrt(np.dot(phi, phi))) gives it, without numpy's scalar square root (~1 us;
-    asked at every point a solve judges)."""
-    if phi.__class__ is np.ndarray and phi.ndim == 1 and phi.dtype == np.float64:
-        return math.sqrt(phi.dot(phi))
-    return float(np.sqrt(np.dot(phi, phi)))
-
-
 def residuals_small(z, f, lb, ub, tol, phi=None) -> bool:
     """Test (1): both residuals at most tol (``phi``: fb_phi(z, f), when already known)."""
     if phi is None:
@@ -84,9 +75,9 @@ def residuals_small(z, f, lb, ub, tol, phi=None) -> bool:
             if not min_map_within(z, f, lb, ub, float(tol)):
                 return False
             phi = fb_phi(z, f, lb, ub)
-            return not _norm(phi) > tol
+            return not dot_norm(phi) > tol
         phi = fb_phi(z, f, lb, ub)
-    if _norm(phi) > tol:
+    if dot_norm(phi) > tol:  # (np.dot's product, a correctly rounded root)
         return False
     if _floats(np.size(z), z, f, lb, ub):  # the solver's points: one compiled pass
         return bool(min_map_within(z, f, lb, ub, float(tol)))

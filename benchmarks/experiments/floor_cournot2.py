@@ -15,7 +15,6 @@ Usage:  PYTHONPATH=. python3 benchmarks/experiments/floor_cournot2.py [--rounds 
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import statistics
 import sys
@@ -29,7 +28,7 @@ from compass_sparse import _crash_kernels as ck
 from compass_sparse._merit_kernels import min_map_within, scale_test_kernel
 from compass_sparse.crash import (CRASH_START_FACTOR, CRASH_STEP_LIMIT,
                                   PERTURB_ATTEMPTS)
-from compass_sparse.merit import fb_phi, residual_report
+from compass_sparse.merit import dot_norm, fb_phi, residual_report
 
 
 def bare_solve(F, J, lb, ub, x0, opt):
@@ -52,7 +51,7 @@ def bare_solve(F, J, lb, ub, x0, opt):
     z, f = x0.copy(), f_at(x0)
     jd = j_at(z)
     phi = fb_phi(z, f, lb, ub)
-    if min_map_within(z, f, lb, ub, tol) and math.sqrt(phi @ phi) <= tol:
+    if min_map_within(z, f, lb, ub, tol) and dot_norm(phi) <= tol:
         raise RuntimeError("the start is a solution: not this experiment's case")
     W = np.empty((ck.CW_ROWS, n))
     W[ck.CW_Z], W[ck.CW_F], W[ck.CW_LB], W[ck.CW_UB] = z, f, lb, ub
@@ -71,7 +70,7 @@ def bare_solve(F, J, lb, ub, x0, opt):
     zt = W[ck.CW_ZT].copy()
     ft = f_at(zt)
     phi = fb_phi(zt, ft, lb, ub)
-    if not (math.sqrt(phi @ phi) <= tol and min_map_within(zt, ft, lb, ub, tol)):
+    if not (dot_norm(phi) <= tol and min_map_within(zt, ft, lb, ub, tol)):
         raise RuntimeError("the crash's first point is not a solution: not this case")
     row, _, ratio = scale_test_kernel(zt, ft, lb, ub, phi, ptr, cols, j_at(zt))
     if row >= 0 and ratio > 1e-3:
