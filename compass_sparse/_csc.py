@@ -7,7 +7,10 @@ fixed pattern of J + eps I, a copy of the stored pattern).  :func:`trusted_csc` 
 same attributes directly.  It is used only where the caller guarantees a structurally
 valid matrix: int32 index arrays, indptr non-decreasing from 0 to len(indices) = len(data),
 row indices within the shape.  Nothing more is assumed: scipy still computes the sorted
-and canonical flags from the arrays when asked.  When this scipy keeps other attributes
+and canonical flags from the arrays when asked.  A caller whose matrix is canonical by
+construction (the evaluator's Jacobians: the full pattern of a dense J, values copied onto
+the stored pattern) says so, ``canonical=True``, and :func:`without_duplicates` then
+returns it without its scan (two scans of every evaluated J in a small solve).  When this scipy keeps other attributes
 than the ones known here, or an index array is not int32, the checked constructor is used
 instead (probed once, at first use).
 """
@@ -29,16 +32,23 @@ def _probe():
                  getattr(A, "maxprint", None)]
 
 
-def trusted_csc(data, indices, indptr, shape) -> sp.csc_matrix:
-    """csc_matrix((data, indices, indptr), shape) for structurally valid int32 arrays."""
+_CANONICAL = "_compass_canonical"  # the mark of a matrix canonical by construction
+
+
+def trusted_csc(data, indices, indptr, shape, canonical: bool = False) -> sp.csc_matrix:
+    """csc_matrix((data, indices, indptr), shape) for structurally valid int32 arrays;
+    ``canonical``: the caller guarantees sorted, duplicate-free columns too (marked)."""
     if not _STATE:
         _probe()
     if not _STATE[0] or indices.dtype != np.int32 or indptr.dtype != np.int32:
-        return sp.csc_matrix((data, indices, indptr), shape=shape)
-    M = sp.csc_matrix.__new__(sp.csc_matrix)
-    M._shape = (int(shape[0]), int(shape[1]))
-    M.maxprint = _STATE[1]
-    M.indices, M.indptr, M.data = indices, indptr, data
+        M = sp.csc_matrix((data, indices, indptr), shape=shape)
+    else:
+        M = sp.csc_matrix.__new__(sp.csc_matrix)
+        M._shape = (int(shape[0]), int(shape[1]))
+        M.maxprint = _STATE[1]
+        M.indices, M.indptr, M.data = indices, indptr, data
+    if canonical:
+        setattr(M, _CANONICAL, True)
     return M
 
 
@@ -47,7 +57,9 @@ def without_duplicates(A) -> sp.csc_matrix:
     it already is one, else a canonical copy.  The test is one compiled scan of the index
     arrays: scipy's ``has_canonical_format`` computes it again on every matrix that does
     not carry its flag (the solver's own matrices, built by :func:`trusted_csc`), ~10 us
-    on a small matrix."""
+    on a small matrix; a matrix marked canonical by :func:`trusted_csc` is not scanned."""
+    if A.__dict__.get(_CANONICAL, False) if A.__class__ is sp.csc_matrix else False:
+        return A
     if not (sp.issparse(A) and A.format == "csc"):
         A = sp.csc_matrix(A)
     ip, ix = A.indptr, A.indices

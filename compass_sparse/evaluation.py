@@ -91,7 +91,7 @@ def _dense_csc(A, n: int) -> sp.csc_matrix:
     # it every major iteration); copies of the index arrays, since scipy may sort or
     # prune them in place.
     indptr, indices = _full_pattern(n)
-    return trusted_csc(A.T.flatten(), indices.copy(), indptr.copy(), (n, n))
+    return trusted_csc(A.T.flatten(), indices.copy(), indptr.copy(), (n, n), canonical=True)
 
 
 def canonical_csc(J, n: int) -> sp.csc_matrix:
@@ -112,7 +112,7 @@ def canonical_csc(J, n: int) -> sp.csc_matrix:
                 # already canonical (the common case): copies of its arrays, without
                 # scipy's constructor checks and sorting (~50 us per evaluation)
                 return trusted_csc(J.data[:nnz].copy(), J.indices[:nnz].copy(),
-                                   J.indptr.copy(), (n, n))
+                                   J.indptr.copy(), (n, n), canonical=True)
         C = sp.csc_matrix(J, dtype=float, copy=True)
     else:
         return _dense_csc(J.astype(float, copy=False), n)
@@ -355,7 +355,8 @@ class Evaluator:
                 and P.indptr.dtype == np.int32):
             data = np.empty(P.indices.shape[0])
             if csc_copy_on_pattern(J.indptr, J.indices, J.data, P.indptr, P.indices, data):
-                return trusted_csc(data, P.indices.copy(), P.indptr.copy(), (n, n))
+                return trusted_csc(data, P.indices.copy(), P.indptr.copy(), (n, n),
+                                   canonical=True)  # (P is canonical)
         return self._fix_pattern(canonical_csc(J, n))
 
     def _set_constant_mask(self):

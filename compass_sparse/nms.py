@@ -413,8 +413,16 @@ class NMSSolver:
         cannot be evaluated; the linearizer made for its pattern."""
         J = cur.J if cur.J is not None else self.ev.jac(cur.z, cur.f)
         self._last_J = J
-        if J is not None and (self.linearizer is None or self.linearizer.nnz_J != J.nnz):
-            self.linearizer = Linearizer(J)  # first J, or an undeclared pattern grew
+        if J is None:
+            return J
+        if self.linearizer is None:
+            # M = J + eps I has the same pattern in every solve of this problem: its index
+            # arrays are made once per Jacobian pattern; made when first needed (a solve
+            # that the crash ends never needs them: 6% of a solve of cournot2).
+            self.linearizer = self.ev.for_pattern(
+                "linearizer", lambda: _linearizer_for(J, self.ev.pattern_ref))
+        if self.linearizer is None or self.linearizer.nnz_J != J.nnz:
+            self.linearizer = Linearizer(J)  # J off the pattern, or an undeclared one grew
         return J
 
     def _start_ray(self, opt) -> bool:
@@ -948,12 +956,6 @@ class NMSSolver:
         status, message = Status.NO_PROGRESS, ""
         schedule = RestartSchedule(self.opt0)
         self._last_J = None
-        if self.linearizer is None and start.J is not None:
-            # M = J + eps I has the same pattern in every solve of this problem: its index
-            # arrays are made once per Jacobian pattern (a loop of small solves made them
-            # in every solve); a Jacobian off that pattern makes its own (_newton_point).
-            self.linearizer = self.ev.for_pattern("linearizer", lambda: _linearizer_for(
-                start.J, self.ev.pattern_ref))
         pattern = start.J if start.J is not None else self.ev.pattern_ref
         homotopy_after = self.opt0.restarts_before_homotopy(
             self.n, pattern.nnz if pattern is not None else self.n * self.n)

@@ -88,6 +88,13 @@ def as_bounds(lb, ub, n: int, names: Sequence[str] | None = None):
     return lo, hi
 
 
+def project(x, lb, ub) -> np.ndarray:
+    """x projected onto the box [lb, ub] of validated bounds (lb <= ub, no NaN): np.clip's
+    values bit for bit, signed zeros included, at 40% of its cost on a short vector
+    (np.clip's dispatch is ~3 us of a small problem's set-up)."""
+    return np.minimum(np.maximum(x, lb), ub)
+
+
 def as_real(value, what: str) -> np.ndarray:
     """``value`` as a float array; complex input is an error, never truncated silently."""
     arr = np.asarray(value)
@@ -197,7 +204,7 @@ class MCP:
                 f"x0 is {x0[bad[0]]} for {_var_label(self.var_names, bad[0])}; the start point "
                 "must be finite"
             )
-        self.x0 = np.clip(x0, self.lb, self.ub)
+        self.x0 = project(x0, self.lb, self.ub)
         pattern = None
         if jac_sparsity is not None:
             # The stored entries of jac_sparsity (or the nonzeros of an array) are the
@@ -229,7 +236,7 @@ class MCP:
             self.lb, self.ub = lb, ub
         else:
             self.lb, self.ub = as_bounds(lb, ub, self.n, self.var_names)
-        self.x0 = np.clip(np.asarray(x0, dtype=float), self.lb, self.ub)
+        self.x0 = project(np.asarray(x0, dtype=float), self.lb, self.ub)
         self.evaluator = evaluator
         return self
 
@@ -239,9 +246,13 @@ class MCP:
         if n is not None:
             cands.append(("n", int(n)))
         if x0 is not None:
-            cands.append(("x0", int(np.size(x0))))
+            cands.append(("x0", x0.size if x0.__class__ is np.ndarray else int(np.size(x0))))
         for arr, what in ((lb, "lb"), (ub, "ub")):
-            if np.ndim(arr) > 0:
+            # (an array's own attributes: np.ndim and np.size cost ~1 us each)
+            if arr.__class__ is np.ndarray:
+                if arr.ndim > 0:
+                    cands.append((what, arr.size))
+            elif np.ndim(arr) > 0:
                 cands.append((what, int(np.size(arr))))
         if pattern is not None:
             shp = np.shape(pattern) if not sp.issparse(pattern) else pattern.shape
@@ -356,7 +367,7 @@ class MCP:
         x0 = _as_start(x0, self.n)
         if not np.all(np.isfinite(x0)):
             raise StartPointError("the start point must be finite")
-        other.x0 = np.clip(x0, self.lb, self.ub)
+        other.x0 = project(x0, self.lb, self.ub)
         other.evaluator = self.evaluator.fresh()
         return other
 

@@ -249,6 +249,8 @@ def _presolve_pass(problem, opt, f0, J0):
     def count_linear_rows():
         P = J0 if J0 is not None else problem.pattern  # J0 is stored on the pattern
         mask = problem.constant_mask
+        if mask is None and P.indices.shape[0] == problem.n * problem.n:
+            return 0  # a full pattern with nothing declared constant (a dense J)
         nonconst_rows = P.indices if mask is None else P.indices[~mask]
         return int(np.count_nonzero(np.bincount(nonconst_rows, minlength=problem.n) == 0))
 

@@ -832,3 +832,64 @@ def test_crash_limits_blas_threads_only_from_the_size_where_blas_could_use_threa
                   np.ones(n), options={"crash_minimum_dimension": 1})
     assert r.success and r.passes["crash"].ran
     assert len(opened) == blocks
+
+
+def test_project_gives_np_clip_bits_signed_zeros_and_infinite_bounds_included():
+    """The start point's projection (problem.project: np.minimum of np.maximum) gives
+    np.clip's values bit for bit on validated bounds, signed zeros and infinite bounds
+    included (20000 random boxes)."""
+    from compass_sparse.problem import project
+
+    rng = np.random.default_rng(17)
+    vals = np.array([0.0, -0.0, 1.0, -1.0, 2.5, -3e300, 5e-324, np.inf, -np.inf])
+    for _ in range(20000):
+        n = int(rng.integers(1, 7))
+        x = rng.choice(vals[:7], n)
+        a, b = rng.choice(vals, n), rng.choice(vals, n)
+        lb, ub = np.minimum(a, b), np.maximum(a, b)
+        assert project(x, lb, ub).tobytes() == np.clip(x, lb, ub).tobytes()
+
+
+def test_evaluators_jacobians_are_marked_canonical_only_when_they_are():
+    """A J the evaluator returns (dense, on the stored pattern, a canonical CSC copy)
+    carries the canonical mark, which lets without_duplicates return it unscanned; every
+    marked matrix passes the scan; an unmarked matrix with duplicates is still summed."""
+    from compass_sparse._csc import _CANONICAL, trusted_csc, without_duplicates
+    from compass_sparse._merit_kernels import csc_is_canonical
+    from compass_sparse.evaluation import Evaluator
+
+    rng = np.random.default_rng(3)
+    A = sp.random(6, 6, density=0.5, format="csc", random_state=4) + sp.eye(6, format="csc")
+    A = A.tocsc()
+    A.indices, A.indptr = A.indices.astype(np.int32), A.indptr.astype(np.int32)
+    for jac in (lambda x: A.toarray(), lambda x: A.copy()):
+        ev = Evaluator(lambda x: x, jac, 6)
+        for _ in range(3):
+            J = ev.J(rng.standard_normal(6))
+            assert J.__dict__.get(_CANONICAL) is True
+            assert csc_is_canonical(J.indptr, J.indices, 6, J.indptr[-1])
+            assert without_duplicates(J) is J
+    dup = trusted_csc(np.array([1.0, 2.0]), np.array([0, 0], dtype=np.int32),
+                      np.array([0, 2], dtype=np.int32), (1, 1))
+    assert dup.__dict__.get(_CANONICAL) is None
+    summed = without_duplicates(dup)
+    assert summed is not dup and summed.nnz == 1 and summed.data[0] == 3.0
+
+
+def test_a_solve_the_crash_ends_builds_no_newton_linearizer(monkeypatch):
+    """The Newton linearizer (the index arrays of J + eps I) is made at the first major
+    iteration: a solve that the crash ends builds none (cournot2), one with major
+    iterations builds it, with the same point as before this change (kojshin)."""
+    import compass_sparse.nms as nms
+
+    built = []
+    real = nms.Linearizer.__init__
+    monkeypatch.setattr(nms.Linearizer, "__init__",
+                        lambda self, J: built.append(1) or real(self, J))
+    k = kp.cournot_duopoly()
+    r = solve_mcp(k.F, k.J, k.lb, k.ub, k.x0)
+    assert r.success and r.nit == 0 and r.crash_iterations > 0 and built == []
+    k = kp.kojima_shindo()
+    r = solve_mcp(k.F, k.J, k.lb, k.ub, k.x0, options={"crash_method": "none"})
+    assert r.success and r.nit > 0 and len(built) == 1
+    assert min(np.max(np.abs(r.x - s)) for s in k.solutions) < 1e-6
