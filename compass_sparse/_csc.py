@@ -42,13 +42,16 @@ def trusted_csc(data, indices, indptr, shape, canonical: bool = False) -> sp.csc
         _probe()
     if not _STATE[0] or indices.dtype != np.int32 or indptr.dtype != np.int32:
         M = sp.csc_matrix((data, indices, indptr), shape=shape)
-    else:
-        M = sp.csc_matrix.__new__(sp.csc_matrix)
-        M._shape = (int(shape[0]), int(shape[1]))
-        M.maxprint = _STATE[1]
-        M.indices, M.indptr, M.data = indices, indptr, data
+        if canonical:
+            setattr(M, _CANONICAL, True)
+        return M
+    M = sp.csc_matrix.__new__(sp.csc_matrix)
+    # the new object's attributes in one dict (the probe found exactly these): half the
+    # cost of five attribute assignments, and every evaluated J is one such matrix
+    M.__dict__ = {"_shape": (int(shape[0]), int(shape[1])), "maxprint": _STATE[1],
+                  "indices": indices, "indptr": indptr, "data": data}
     if canonical:
-        setattr(M, _CANONICAL, True)
+        M.__dict__[_CANONICAL] = True
     return M
 
 

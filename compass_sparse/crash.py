@@ -428,9 +428,39 @@ def _offer(on_point, stats, zt, ft):
 
 def _csc(J):
     """J as the compiled crash reads it: a float64 CSC matrix (the evaluator's J is)."""
-    if sp.issparse(J) and J.format == "csc" and J.data.dtype == np.float64:
+    if (J.__class__ is sp.csc_matrix or sp.issparse(J) and J.format == "csc") \
+            and J.data.dtype == np.float64:
         return J
     return sp.csc_matrix(J, dtype=np.float64)
+
+
+_SETTINGS: dict = {}  # id(options) -> (options, tol, sf, si): see _dense_settings
+
+
+def _dense_settings(opt, tol):
+    """Fresh copies of the compiled crash's settings arrays (sf, si) for options ``opt``
+    and tolerance ``tol``, made from arrays kept per options object: a loop of solves
+    with the same options sets them up once (a dozen item assignments, ~3 us a solve).
+    The entry holds the options object itself, so its id is not reused while kept."""
+    hit = _SETTINGS.get(id(opt))
+    if hit is None or hit[0] is not opt or hit[1] != tol:
+        sf = np.zeros(ck.CF_SIZE)
+        sf[ck.CF_SIGMA] = opt.crash_sigma
+        sf[ck.CF_MIN_STEP] = opt.crash_stepsize_minimum
+        sf[ck.CF_TOL] = tol
+        sf[ck.CF_EPS_SCALE] = 1e-8  # (the Python route's eps_scale)
+        sf[ck.CF_STEP_LIMIT] = CRASH_STEP_LIMIT
+        sf[ck.CF_START_FACTOR] = CRASH_START_FACTOR
+        si = np.zeros(ck.CI_SIZE, dtype=np.int64)
+        si[ck.CI_LIMIT] = opt.crash_iteration_limit
+        si[ck.CI_NBCHANGE] = opt.crash_nbchange_limit
+        si[ck.CI_PERTURB] = bool(opt.crash_perturb)
+        si[ck.CI_ATTEMPTS] = PERTURB_ATTEMPTS
+        si[ck.CI_LINE] = opt.crash_searchtype == "line"
+        if len(_SETTINGS) >= 32:
+            _SETTINGS.clear()
+        hit = _SETTINGS[id(opt)] = (opt, tol, sf, si)
+    return hit[2].copy(), hit[3].copy()
 
 
 def _crash_dense(evalr, z, f0, J0, lb, ub, opt, tol, deadline, log, on_point, stats, t0):
@@ -446,19 +476,7 @@ def _crash_dense(evalr, z, f0, J0, lb, ub, opt, tol, deadline, log, on_point, st
     W[ck.CW_LB] = lb
     W[ck.CW_UB] = ub
     prev_free = np.zeros(n, dtype=np.bool_)
-    sf = np.zeros(ck.CF_SIZE)
-    sf[ck.CF_SIGMA] = opt.crash_sigma
-    sf[ck.CF_MIN_STEP] = opt.crash_stepsize_minimum
-    sf[ck.CF_TOL] = tol
-    sf[ck.CF_EPS_SCALE] = 1e-8  # (the Python route's eps_scale)
-    sf[ck.CF_STEP_LIMIT] = CRASH_STEP_LIMIT
-    sf[ck.CF_START_FACTOR] = CRASH_START_FACTOR
-    si = np.zeros(ck.CI_SIZE, dtype=np.int64)
-    si[ck.CI_LIMIT] = opt.crash_iteration_limit
-    si[ck.CI_NBCHANGE] = opt.crash_nbchange_limit
-    si[ck.CI_PERTURB] = bool(opt.crash_perturb)
-    si[ck.CI_ATTEMPTS] = PERTURB_ATTEMPTS
-    si[ck.CI_LINE] = opt.crash_searchtype == "line"
+    sf, si = _dense_settings(opt, tol)
     rows = []
     seen = [0, 0]  # accepted steps and factorizations already counted in stats
 

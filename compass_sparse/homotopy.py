@@ -308,7 +308,8 @@ def _dense_lu(A):
 
 def _float_csc(J):
     """J as a CSC matrix of floats (the evaluator's J already is: then J itself)."""
-    if sp.issparse(J) and J.format == "csc" and J.data.dtype == np.float64:
+    if (J.__class__ is sp.csc_matrix or sp.issparse(J) and J.format == "csc") \
+            and J.data.dtype == np.float64:
         return J
     return sp.csc_matrix(J, dtype=np.float64)
 
