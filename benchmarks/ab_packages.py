@@ -17,10 +17,15 @@ solver time per solve of a batch, their ratio, and in how many rounds the curren
 was faster.  Both revisions must return the same point bit for bit (checked; a change that
 moves points is not a trim and needs its own comparison).
 
+With ``--one-shot`` each solve is ``solve_mcp(F, jac, lb, ub, x0)`` from the user's
+functions, as a script calls it: the problem's construction, its start check and its
+first Jacobian's pattern are timed too (problems with a declared pattern or constant
+entries lose them there: the known problems have none).
+
 Usage (the older revision checked out in a worktree first):
     git worktree add /tmp/old <revision>
     PYTHONPATH=. python3 benchmarks/ab_packages.py --old /tmp/old cournot2 fam2_n10_s1 \\
-        [--rounds 12] [--per-batch 4]
+        [--rounds 12] [--per-batch 4] [--one-shot]
 
 The old package is copied to ``<tmp>/compass_ab_<name of --old>/compass_sparse_old`` and
 compiles its kernels there on its first run (numba's cache then keeps them).
@@ -85,15 +90,20 @@ def cases(names):
     return [by_name[x] for x in names]
 
 
-def _batch(solve_mcp, prob, x0, clock, k):
+def _batch(solve_mcp, prob, x0, clock, k, one_shot=False):
     """Mean solver time (wall time without the user's F and J) of k solves, and the last
-    point."""
+    point.  ``one_shot``: each solve is ``solve_mcp(F, jac, lb, ub, x0)`` from the user's
+    functions (the problem's construction and first Jacobian pattern timed too)."""
     total, r = 0.0, None
+    ev = prob.evaluator
     for _ in range(k):
         clock[:] = [0.0, 0.0]
-        q = prob.with_start(x0)
         t = time.perf_counter()
-        r = solve_mcp(q, options={"time_limit": 60.0})
+        if one_shot:
+            r = solve_mcp(ev._user_F, ev._user_jac, prob.lb, prob.ub, x0,
+                          options={"time_limit": 60.0})
+        else:
+            r = solve_mcp(prob.with_start(x0), options={"time_limit": 60.0})
         total += time.perf_counter() - t - clock[0]
     return total / k, r
 
@@ -104,6 +114,9 @@ def main(argv=None):
     ap.add_argument("--old", required=True, help="worktree of the older revision")
     ap.add_argument("--rounds", type=int, default=12)
     ap.add_argument("--per-batch", type=int, default=4)
+    ap.add_argument("--one-shot", action="store_true",
+                    help="solve_mcp(F, jac, lb, ub, x0) from the user's functions each time "
+                         "(problems without a declared pattern or constant entries)")
     a = ap.parse_args(argv)
 
     import compass_sparse as new
@@ -120,7 +133,7 @@ def main(argv=None):
                                   ("new", new, case.problem)):
             clock = [0.0, 0.0]
             prob = bs._timed_problem(built, clock)
-            _, r = _batch(pkg.solve_mcp, prob, x0, clock, 5)  # warm-up (and compiling)
+            _, r = _batch(pkg.solve_mcp, prob, x0, clock, 5, a.one_shot)  # warm-up
             variants[label] = (pkg.solve_mcp, prob, clock, r)
         ro, rn = variants["old"][3], variants["new"][3]
         if ro.x.tobytes() != rn.x.tobytes() or ro.status.name != rn.status.name:
@@ -130,7 +143,8 @@ def main(argv=None):
         for r in range(a.rounds):
             for label in (("old", "new") if r % 2 == 0 else ("new", "old")):
                 solve, prob, clock, _ = variants[label]
-                times[label].append(_batch(solve, prob, x0, clock, a.per_batch)[0])
+                times[label].append(_batch(solve, prob, x0, clock, a.per_batch,
+                                           a.one_shot)[0])
         mo, mn = statistics.median(times["old"]), statistics.median(times["new"])
         wins = sum(n < o for o, n in zip(times["old"], times["new"]))
         print(f"| {case.name} | {case.n} | {mo * 1e3:.3f} ms | {mn * 1e3:.3f} ms | "
