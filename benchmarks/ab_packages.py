@@ -127,7 +127,7 @@ def main(argv=None):
     old = load_old(a.old)
     end_cold_start()
     importlib.import_module(OLD_NAME + "._jit").end_cold_start()
-    print(f"| problem | n | old | new | new / old | new faster |\n|---|---|---|---|---|---|")
+    print("| problem | n | old | new | new / old | new faster |\n|---|---|---|---|---|---|")
     for case in cases(a.problems):
         x0 = case.problem.x0
         variants = {}

@@ -10,9 +10,9 @@ row indices within the shape.  Nothing more is assumed: scipy still computes the
 and canonical flags from the arrays when asked.  A caller whose matrix is canonical by
 construction (the evaluator's Jacobians: the full pattern of a dense J, values copied onto
 the stored pattern) says so, ``canonical=True``, and :func:`without_duplicates` then
-returns it without its scan (two scans of every evaluated J in a small solve).  When this scipy keeps other attributes
-than the ones known here, or an index array is not int32, the checked constructor is used
-instead (probed once, at first use).
+returns it without its scan (two scans of every evaluated J in a small solve).  When this
+scipy keeps other attributes than the ones known here, or an index array is not int32,
+the checked constructor is used instead (probed once, at first use).
 """
 from __future__ import annotations
 
@@ -53,6 +53,16 @@ def trusted_csc(data, indices, indptr, shape, canonical: bool = False) -> sp.csc
     if canonical:
         M.__dict__[_CANONICAL] = True
     return M
+
+
+def float_csc(J) -> sp.csc_matrix:
+    """J as a CSC matrix of floats, as the compiled kernels read it: the evaluator's J
+    itself (the class tested first: scipy's issparse is an ABC check, ~0.5 us), else a
+    converted copy."""
+    if (J.__class__ is sp.csc_matrix or sp.issparse(J) and J.format == "csc") \
+            and J.data.dtype == np.float64:
+        return J
+    return sp.csc_matrix(J, dtype=np.float64)
 
 
 def without_duplicates(A) -> sp.csc_matrix:

@@ -40,6 +40,7 @@ from ._crash_kernels import (NO_BASIS_CHANGE, dense_crash_step, dense_perturbed_
 from ._merit_kernels import crash_active_set, csc_diagonal, csc_to_dense
 from ._blas import BLAS_LIMIT_MIN_N, single_threaded_blas
 from ._jit import NO_INDICES, NO_VALUES
+from ._csc import float_csc
 from .basis.backends import DENSE_SOLVE_MAX_N, SingularFactorError, solve_sparse
 from .direct_step import (DIRECT_MAX_N, KLU_FILL_LIMIT, REUSE_BEATS_REFACTOR_NNZ,
                           DirectFactors, automatic_lu, klu_available, reduced_system)
@@ -426,14 +427,6 @@ def _offer(on_point, stats, zt, ft):
             raise
 
 
-def _csc(J):
-    """J as the compiled crash reads it: a float64 CSC matrix (the evaluator's J is)."""
-    if (J.__class__ is sp.csc_matrix or sp.issparse(J) and J.format == "csc") \
-            and J.data.dtype == np.float64:
-        return J
-    return sp.csc_matrix(J, dtype=np.float64)
-
-
 _SETTINGS: dict = {}  # id(options) -> (options, tol, sf, si): see _dense_settings
 
 
@@ -488,7 +481,7 @@ def _crash_dense(evalr, z, f0, J0, lb, ub, opt, tol, deadline, log, on_point, st
     if late():
         code = step(sf, si, W, prev_free, none, no_index, no_index, none, ck.STOP)
     elif J0 is not None:
-        J = _csc(J0)
+        J = float_csc(J0)
         code = step(sf, si, W, prev_free, none, J.indptr, J.indices, J.data, ck.J_GIVEN)
     else:
         code = step(sf, si, W, prev_free, none, no_index, no_index, none, ck.NOTHING)
@@ -517,7 +510,7 @@ def _crash_dense(evalr, z, f0, J0, lb, ub, opt, tol, deadline, log, on_point, st
                 code = step(sf, si, W, prev_free, none, no_index, no_index, none,
                             ck.J_FAILED)
             else:
-                J = _csc(J)
+                J = float_csc(J)
                 code = step(sf, si, W, prev_free, none, J.indptr, J.indices, J.data,
                             ck.J_GIVEN)
         else:  # NEED_F at the trial point

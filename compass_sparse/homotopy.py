@@ -94,7 +94,7 @@ import scipy.sparse.linalg as spla
 
 from . import _homotopy_kernels as hk
 from ._blas import BLAS_LIMIT_MIN_N, single_threaded_blas
-from ._csc import csc_times
+from ._csc import csc_times, float_csc
 from ._homotopy_kernels import (bordered_pivots_ok, bordered_values, chord_step,
                                 homotopy_values, lu_solve, smoothed_projection,
                                 unit_tangent)
@@ -306,14 +306,6 @@ def _dense_lu(A):
     return lu, piv
 
 
-def _float_csc(J):
-    """J as a CSC matrix of floats (the evaluator's J already is: then J itself)."""
-    if (J.__class__ is sp.csc_matrix or sp.issparse(J) and J.format == "csc") \
-            and J.data.dtype == np.float64:
-        return J
-    return sp.csc_matrix(J, dtype=np.float64)
-
-
 def _dense(J):
     """J (float CSC) as a new dense array, in one compiled pass (J.toarray() costs ~80 us
     at n = 1)."""
@@ -412,7 +404,7 @@ class _Tracker:
         if want_jac:
             if J is None:
                 return None
-            J = _float_csc(J)
+            J = float_csc(J)
             if self.dense is None:
                 self.dense = n <= DENSE_MAX_N or J.nnz >= DENSE_DENSITY * n * n
             if self.dense and floats and _floats(n, dx, dmu):
@@ -630,7 +622,7 @@ class _Tracker:
                                         "F or J undefined at the start of the path")
                         return self._end(HomotopyStatus.EVALUATION_ERROR, y.copy())
                     self._offer(p, f)
-                    J = _float_csc(J)
+                    J = float_csc(J)
                     code = follow(sf, si, W, B, piv, f, J.indptr, J.indices, J.data, False)
                 elif code == hk.END_GAME:
                     lam = y[n]
@@ -743,7 +735,7 @@ class _Tracker:
             if J is None:
                 break
             d = ((x > lb) & (x < ub)).astype(float)
-            J = _float_csc(J)
+            J = float_csc(J)
             if self.dense:
                 A = _dense(J)
                 A *= d  # J D + I - D, entry by entry as the sparse sum

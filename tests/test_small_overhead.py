@@ -880,7 +880,7 @@ def test_a_solve_the_crash_ends_builds_no_newton_linearizer(monkeypatch):
     """The Newton linearizer (the index arrays of J + eps I) is made at the first major
     iteration: a solve that the crash ends builds none (cournot2), one with major
     iterations builds it, with the same point as before this change (kojshin)."""
-    import compass_sparse.nms as nms
+    from compass_sparse import nms
 
     built = []
     real = nms.Linearizer.__init__

@@ -26,8 +26,7 @@ sys.path[:0] = [os.path.join(os.path.dirname(__file__), "..", "..", "tests")]
 
 from compass_sparse import _crash_kernels as ck
 from compass_sparse._merit_kernels import min_map_within, scale_test_kernel
-from compass_sparse.crash import (CRASH_START_FACTOR, CRASH_STEP_LIMIT,
-                                  PERTURB_ATTEMPTS)
+from compass_sparse.crash import CRASH_START_FACTOR, CRASH_STEP_LIMIT, PERTURB_ATTEMPTS
 from compass_sparse.merit import dot_norm, fb_phi, residual_report
 
 
@@ -94,7 +93,7 @@ def lean_solve(problem, options=None):
     from compass_sparse.acceptance import judge, residuals_small
     from compass_sparse.options import Options
     from compass_sparse.result import Iteration, PassStats, Status
-    from compass_sparse.solve import (_judge_on, _presolve_pass, _result, _scaling_pass)
+    from compass_sparse.solve import _judge_on, _presolve_pass, _result, _scaling_pass
 
     opt = Options.coerce(options)
     ev = problem.evaluator
