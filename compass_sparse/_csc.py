@@ -55,12 +55,16 @@ def trusted_csc(data, indices, indptr, shape, canonical: bool = False) -> sp.csc
     return M
 
 
+def is_csc(A) -> bool:
+    """Whether A is a scipy CSC matrix (or array); the class is tested first, since
+    scipy's issparse is an ABC check (~0.5 us) and the solver's matrices are csc_matrix."""
+    return A.__class__ is sp.csc_matrix or (sp.issparse(A) and A.format == "csc")
+
+
 def float_csc(J) -> sp.csc_matrix:
     """J as a CSC matrix of floats, as the compiled kernels read it: the evaluator's J
-    itself (the class tested first: scipy's issparse is an ABC check, ~0.5 us), else a
-    converted copy."""
-    if (J.__class__ is sp.csc_matrix or sp.issparse(J) and J.format == "csc") \
-            and J.data.dtype == np.float64:
+    itself, else a converted copy."""
+    if is_csc(J) and J.data.dtype == np.float64:
         return J
     return sp.csc_matrix(J, dtype=np.float64)
 
@@ -73,7 +77,7 @@ def without_duplicates(A) -> sp.csc_matrix:
     on a small matrix; a matrix marked canonical by :func:`trusted_csc` is not scanned."""
     if A.__dict__.get(_CANONICAL, False) if A.__class__ is sp.csc_matrix else False:
         return A
-    if not (sp.issparse(A) and A.format == "csc"):
+    if not is_csc(A):
         A = sp.csc_matrix(A)
     ip, ix = A.indptr, A.indices
     if ((ix.dtype == np.int32 or ix.dtype == np.int64) and ip.dtype == ix.dtype

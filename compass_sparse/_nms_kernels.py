@@ -1,11 +1,12 @@
 """The stabilized Newton method's bookkeeping in compiled code (:meth:`NMSSolver._run`).
 
 A major iteration of a small problem spent ~100 us of Python around ~15 us of the user's
-F and J (double_root, round 13): the candidate point's merit, the best point, the acceptance pre-test, the
-reference value, the d/m-step classification and its descent test, the checkpoint and
-its memory, the watchdog's search, the stall rule.  Here all of that runs in one
-compiled call between two requests to the Python driver (``NMSSolver._run_compiled``),
-by reverse communication as the crash and the homotopy's tracker do:
+F and J (double_root, round 13): the candidate point's merit, the best point, the
+acceptance pre-test, the reference value, the d/m-step classification and its descent
+test, the checkpoint and its memory, the watchdog's search, the stall rule.  Here all of
+that runs in one compiled call between two requests to the Python driver
+(``NMSSolver._run_compiled``), by reverse communication as the crash and the homotopy's
+tracker do:
 
 - NEED_NEWTON: the Newton point of the current iterate (rows W_CZ, W_CF, W_CX, the
   proximal eps in sf[S_EPS]).  The driver checks the limits.  On a small dense problem
@@ -308,11 +309,12 @@ def _dense_newton(sf, si, W, B, mdata, indptr, indices, data, pos_j, pos_d, m_in
     ``data``): the linear MCP (M's entries into ``mdata`` on the pattern ``m_indptr``,
     ``m_indices``, J's entries at ``pos_j`` when si[I_SCATTER], the diagonal at
     ``pos_d``: the linearizer's maps), its path's start and the dense direct step, as
-    path.dense_newton_result makes them (direct_step.dense_newton_direct).  True when the start or the step ends the path
-    (its end in the R rows, its basis the warm one, si[I_DIRECT]: whether the step was
-    made, si[I_NF] its order); False when the path must run: q and r in rows W_Q, W_R,
-    its start (z, w, v) in the L rows, its start basis in B[B_BASIC], and in B[B_SLACK]
-    the basis before the inward guess when si[I_GUESSED]."""
+    path.dense_newton_result makes them (direct_step.dense_newton_direct).  True when the
+    start or the step ends the path (its end in the R rows, its basis the warm one,
+    si[I_DIRECT]: whether the step was made, si[I_NF] its order); False when the path
+    must run: q and r in rows W_Q, W_R, its start (z, w, v) in the L rows, its start
+    basis in B[B_BASIC], and in B[B_SLACK] the basis before the inward guess when
+    si[I_GUESSED]."""
     code, nf, accepted, guessed = dense_newton_direct(
         data, pos_j, si[I_SCATTER] != 0, pos_d, sf[S_EPS], m_indptr, m_indices, W[W_CZ],
         W[W_CF], W[W_CX], W[W_LB], W[W_UB], B[B_WARM], si[I_HAS_WARM] != 0, mdata, W[W_Q],

@@ -43,12 +43,12 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
-from ._csc import trusted_csc
+from ._csc import is_csc, trusted_csc
 from ._eval_kernels import csc_copy_on_pattern, csc_same_pattern
 from ._merit_kernels import all_finite_kernel, csc_is_canonical, memo_key_kernel
 from .exceptions import (CompassError, EvaluationError, JacobianPatternError, ProblemError,
                          ShapeError)
-from .merit import float_vector
+from .merit import _F64, float_vector
 
 __all__ = ["Evaluator", "EvalCounters", "canonical_csc"]
 
@@ -70,7 +70,7 @@ class EvalCounters:
         self.nfev = self.njev = self.nfev_fd = self.domain_errors = 0
 
 
-_F64, _I32 = np.dtype(np.float64), np.dtype(np.int32)
+_I32 = np.dtype(np.int32)
 
 
 @functools.lru_cache(maxsize=16)
@@ -352,11 +352,9 @@ class Evaluator:
             if P is not None and P.indices.shape[0] == n * n:
                 return C  # on the full pattern stored already: nothing to check
             return self._fix_pattern(C)
-        # (the class and the dtypes by identity first: a tenth of the general tests' cost;
-        # any other matrix, or a non-native byte order, takes the general tests)
-        if (P is not None
-                and (J.__class__ is sp.csc_matrix or sp.issparse(J) and J.format == "csc")
-                and J.shape == (n, n) and J.data.dtype is _F64
+        # (the dtypes by identity: a tenth of ``==``'s cost; a non-native byte order
+        # takes the general route)
+        if (P is not None and is_csc(J) and J.shape == (n, n) and J.data.dtype is _F64
                 and J.indices.dtype is _I32 and J.indptr.dtype is _I32
                 and P.indices.dtype is _I32 and P.indptr.dtype is _I32):
             data = np.empty(P.indices.shape[0])
