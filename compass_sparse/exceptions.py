@@ -60,3 +60,20 @@ class FactorBudgetError(CompassError):
     def __init__(self, kind, message):
         super().__init__(message)
         self.kind = kind
+
+
+class GamsLicenseError(CompassError):
+    """GAMS refused to run under its licence: the licence expired or is invalid
+    (``kind`` ``"expired"`` or ``"licence"``), or a model is larger than the licence allows
+    (``kind == "size"``).  Only the GAMSPy link and the PATH reference runner raise it;
+    ``lines`` holds GAMS' own lines about its licence, which the message quotes."""
+
+    def __init__(self, message, lines=(), kind="licence", advice=""):
+        self.lines = tuple(lines)
+        self.kind = kind
+        text = message
+        if self.lines:
+            text += "\nGAMS says:\n" + "\n".join("    " + s for s in self.lines)
+        if advice:
+            text += "\n" + advice
+        super().__init__(text)

@@ -22,3 +22,28 @@ import scipy.sparse.linalg  # noqa: E402,F401
 from threadpoolctl import threadpool_limits  # noqa: E402
 
 _blas_limit = threadpool_limits(limits=1, user_api="blas")
+
+
+def pytest_configure(config):
+    config.addinivalue_line(
+        "markers", "gams: needs a GAMS system that runs (installed, licence accepted); skipped "
+        "with the reason GAMS' probe gives otherwise (compass_sparse.interfaces.gams_state)")
+
+
+def pytest_collection_modifyitems(config, items):
+    """Skip the tests marked ``gams`` with the probe's reason where GAMS cannot run (GAMSPy
+    not installed, or GAMS refusing its licence: e.g. its time-limited demo licence expired).
+    The probe runs once, and only when such a test was collected."""
+    marked = [item for item in items if item.get_closest_marker("gams") is not None]
+    if not marked:
+        return
+    import pytest
+
+    from compass_sparse.interfaces.gams_state import gams_state
+
+    state = gams_state()
+    if state.runs:
+        return
+    skip = pytest.mark.skip(reason=f"GAMS cannot run: {state.reason}")
+    for item in marked:
+        item.add_marker(skip)

@@ -7,21 +7,15 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-pytest.importorskip(
-    "gamspy", reason="gamspy is not installed (optional extra: pip install compass-sparse[gams])"
-)
-
-from compass_sparse.interfaces.path_gamspy import (  # noqa: E402
+from compass_sparse.interfaces.path_gamspy import (
     PathLicenseError,
     PathSession,
     parse_path_log,
-    path_available,
     solve_lcp_with_path,
     solve_quadratic_mcp_with_path,
 )
 
-if not path_available():  # pragma: no cover
-    pytest.skip("gamspy is installed but the PATH solver is not available", allow_module_level=True)
+gams = pytest.mark.gams  # these tests run PATH: GAMS must run here (tests/conftest.py)
 
 TOL = 1e-6
 
@@ -47,6 +41,7 @@ def check_run(run, F, lb, ub):
 
 
 # --------------------------------------------------------------------------- #
+@gams
 def test_readme_lcp():
     M = np.array([[0, 0, -1, -1], [0, 0, 1, -2], [1, -1, 2, -2], [1, 2, -2, 4]], float)
     q = np.array([2, 2, -2, -6], float)
@@ -96,6 +91,7 @@ def _manufactured_box_lcp(seed=3):
     return M, q, lb, ub, zs
 
 
+@gams
 @pytest.mark.parametrize("dense", [False, True])
 def test_box_lcp_all_bound_types(dense):
     M, q, lb, ub, zs = _manufactured_box_lcp()
@@ -106,6 +102,7 @@ def test_box_lcp_all_bound_types(dense):
     np.testing.assert_allclose(run.x, zs, atol=1e-7)
 
 
+@gams
 def test_empty_rows_and_missing_diagonal():
     # rows without any nonzero: GAMS needs a structural entry (sent as EPS)
     n = 6
@@ -129,6 +126,7 @@ def _quadratic_family(n, seed=0):
     return D, A, b, lo, up, x0
 
 
+@gams
 @pytest.mark.parametrize("sparse_A", [False, True])
 def test_quadratic_family_n10(sparse_A):
     D, A, b, lo, up, x0 = _quadratic_family(10)
@@ -138,6 +136,7 @@ def test_quadratic_family_n10(sparse_A):
     assert run.path_size == (10, 100)
 
 
+@gams
 def test_session_reuse_with_changing_data():
     n = 4
     s = PathSession(n)
@@ -157,6 +156,7 @@ def test_session_reuse_with_changing_data():
         solve_quadratic_mcp_with_path(np.ones(n), M1, q1, 0.0, np.inf, session=s)
 
 
+@gams
 def test_failure_is_reported():
     # MCPLIB "billups": 0 <= x  _|_  (x-1)^2 - 1.01 ; PATH fails from x0 = 0 ...
     run = solve_quadratic_mcp_with_path([1.0], [[-2.0]], [-0.01], [0.0], [np.inf], [0.0])
@@ -167,6 +167,7 @@ def test_failure_is_reported():
     assert run.success and run.x[0] == pytest.approx(1 + np.sqrt(1.01), abs=1e-6)
 
 
+@gams
 def test_options_pass_through():
     D, A, b, lo, up, x0 = _quadratic_family(50)
     run = solve_quadratic_mcp_with_path(D, A, b, lo, up, x0,
@@ -177,6 +178,7 @@ def test_options_pass_through():
     assert "major_iteration_limit 2" in run.log
 
 
+@gams
 def test_input_validation():
     M = np.eye(2)
     with pytest.raises(ValueError):
@@ -185,6 +187,7 @@ def test_input_validation():
         solve_lcp_with_path(np.eye(3), [1.0, 1.0], 0.0, np.inf)  # shape mismatch
 
 
+@gams
 def test_license_limit_is_a_clear_error():
     n = 1001
     M = sp.identity(n, format="csr")

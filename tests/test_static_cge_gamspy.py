@@ -6,22 +6,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip(
-    "gamspy", reason="gamspy is not installed (optional extra: pip install compass-sparse[gams])"
-)
-
-from compass_sparse import solve_mcp  # noqa: E402
-from compass_sparse.generators.cge import static_cge  # noqa: E402
-from compass_sparse.interfaces.path_gamspy import path_available  # noqa: E402
-from compass_sparse.merit import natural_residual  # noqa: E402
-
-if not path_available():  # pragma: no cover
-    pytest.skip("gamspy is installed but the PATH solver is not available", allow_module_level=True)
+from compass_sparse import solve_mcp
+from compass_sparse.generators.cge import static_cge
+from compass_sparse.merit import natural_residual
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
 from static_cge_gamspy import solve_static_with_path  # noqa: E402
 
 
+@pytest.mark.gams
 @pytest.mark.parametrize("regions, shock", [
     (1, dict(output_tax=0.25)),
     (2, dict(tariff=0.25)),

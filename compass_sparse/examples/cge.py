@@ -28,6 +28,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from ..interfaces.gams_state import require_gams
+
 
 def data(sectors: int = 3, seed: int = 0, lscale: float = 1.1, tax: float = 0.2) -> dict:
     rng = np.random.default_rng(seed)
@@ -134,6 +136,7 @@ def pyomo_solution(m) -> np.ndarray:
 
 # --------------------------------------------------------------------------- #
 def gamspy_model(d):
+    require_gams("build the GAMSPy model")
     import gamspy as gp
 
     S = d["S"]

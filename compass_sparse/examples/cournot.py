@@ -21,6 +21,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from ..interfaces.gams_state import require_gams
+
 C = np.array([10.0, 8.0, 6.0, 4.0, 2.0])
 L = np.array([5.0, 5.0, 5.0, 5.0, 5.0])
 BETA = np.array([1.2, 1.1, 1.0, 0.9, 0.8])
@@ -124,6 +126,7 @@ def pyomo_solution(m) -> np.ndarray:
 # --------------------------------------------------------------------------- #
 def gamspy_model(d):
     """(container, model, symbols) of the same model in GAMSPy."""
+    require_gams("build the GAMSPy model")
     import gamspy as gp
 
     M = d["markets"]

@@ -18,6 +18,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from ..interfaces.gams_state import require_gams
+
 
 def data(nodes: int = 10, seed: int = 0, chords: float = 0.5) -> dict:
     rng = np.random.default_rng(seed)
@@ -134,6 +136,7 @@ def pyomo_solution(m) -> np.ndarray:
 
 # --------------------------------------------------------------------------- #
 def gamspy_model(d):
+    require_gams("build the GAMSPy model")
     import gamspy as gp
 
     N = d["nodes"]

@@ -18,10 +18,13 @@ marginals are written back to the GAMSPy symbols as PATH writes them: a variable
 z_j and its marginal F_j(z); an equation's level is g_r(z) and its marginal is the level of
 its matched variable.
 
-Licence: the free GAMSPy licence lets GAMS generate models of at most 1000 rows and
-columns; above that GAMS refuses to generate the instance and
-:class:`~compass_sparse.interfaces.path_gamspy.PathLicenseError` is raised.  GAMSPy is an
-optional dependency (``pip install compass-sparse[gams]``).
+Licence: GAMS generates the instance, so the link needs GAMS to run, which it does only under
+a valid licence.  Where GAMS refuses -- an expired or invalid licence (GAMSPy's bundled demo
+licence is time-limited), or a model above the licence's size (the free GAMSPy licence: at
+most 1000 rows and columns) -- :class:`~compass_sparse.exceptions.GamsLicenseError` is raised,
+quoting GAMS' licence lines and saying what to do; the probe behind it is
+:func:`~compass_sparse.interfaces.gams_state.gams_state`.  GAMSPy is an optional dependency
+(``pip install compass-sparse[gams]``).
 """
 from __future__ import annotations
 
@@ -32,14 +35,24 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from ..exceptions import ModelError
-from .path_gamspy import PathLicenseError, path_available
+from ..exceptions import GamsLicenseError, ModelError
+from .gams_state import gams_refusals, gams_state, refusal_from, require_gams
 
 logger = logging.getLogger("compass_sparse")
 
 __all__ = ["GamsMCP", "gamspy_available", "solve_gamspy"]
 
-gamspy_available = path_available  # GAMSPy with its GMO libraries (it ships PATH too)
+def gamspy_available() -> bool:
+    """True when GAMS runs here (installed, licence accepted) and GAMSPy's model object
+    (GMO) imports."""
+    if not gams_state().runs:
+        return False
+    try:
+        import gams.core.gmo  # noqa: F401
+        import gamspy  # noqa: F401
+    except Exception:
+        return False
+    return True
 
 
 def _view(arr, n: int, ctype):
@@ -82,8 +95,8 @@ class GamsMCP:
     """
 
     def __init__(self, container, model):
+        require_gams("generate the model")
         import gams.core.gmo as G
-        from gamspy.exceptions import GamspyException
 
         self._G = G
         self.container = container
@@ -91,11 +104,12 @@ class GamsMCP:
         t0 = time.perf_counter()
         try:
             model.freeze(modifiables=[])
-        except GamspyException as exc:
-            if "license" in str(exc).lower():
-                raise PathLicenseError(
-                    f"GAMS refused to generate model {model.name}: the free GAMSPy licence "
-                    "allows at most 1000 rows/columns") from exc
+        except Exception as exc:
+            refusal = refusal_from(exc, doing=f"generate model {model.name}")
+            if refusal is not None:
+                raise refusal from exc
+            if type(exc).__module__.split(".")[0] not in ("gamspy", "gams"):
+                raise
             summary = str(exc)
             k = summary.find("Error Summary")
             summary = " ".join(summary[k:].split()) if k >= 0 else summary
@@ -270,14 +284,24 @@ class GamsMCP:
 def solve_gamspy(container, model, options=None, *, load: bool = True):
     """Solve a GAMSPy MCP model with compass_sparse; return the
     :class:`compass_sparse.Result`.  ``options``: Options or a dict with PATH's names.
-    With ``load`` the levels and marginals are written back to the model's symbols."""
+    With ``load`` the levels and marginals are written back to the model's symbols.
+
+    Raises :class:`~compass_sparse.exceptions.GamsLicenseError` where GAMS refuses its
+    licence; if that happens while the solution is written back, the solve's Result is not
+    lost: it is the error's ``result``."""
     from .. import solve_mcp
 
+    require_gams("solve a GAMSPy model")
     gm = GamsMCP(container, model)
     try:
         res = solve_mcp(gm.mcp(), options=options)
         if load:
-            gm.write_back(res.x)
+            try:
+                with gams_refusals("write the solution back to the GAMSPy symbols"):
+                    gm.write_back(res.x)
+            except GamsLicenseError as err:
+                err.result = res
+                raise
     finally:
         gm.close()
     return res

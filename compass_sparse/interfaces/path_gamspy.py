@@ -12,8 +12,11 @@ variable).
 
 GAMSPy is an optional dependency (``pip install compass-sparse[gams]``).  It is
 imported lazily, so this module can be imported without it; use
-:func:`path_available` to check.  The free GAMSPy licence limits MCPs to 1000
-rows/columns.
+:func:`path_available` to check.  GAMS runs only under a valid licence (the demo licence
+bundled with GAMSPy is time-limited; the free GAMSPy licence limits MCPs to 1000
+rows/columns): where GAMS refuses, every entry point raises
+:class:`~compass_sparse.exceptions.GamsLicenseError` quoting GAMS' licence lines (see
+:mod:`compass_sparse.interfaces.gams_state`).
 
 Model formulation
 -----------------
@@ -45,6 +48,9 @@ from typing import Any
 import numpy as np
 import scipy.sparse as sp
 
+from ..exceptions import GamsLicenseError
+from .gams_state import gams_refusals, gams_state, require_gams
+
 __all__ = [
     "PathLicenseError",
     "PathRun",
@@ -60,15 +66,18 @@ __all__ = [
 FREE_LICENSE_MAX_SIZE = 1000
 
 
-class PathLicenseError(RuntimeError):
-    """GAMS refused the model because of licence limits (free licence: MCP size <= 1000)."""
+#: The name this module gave the licence error before GamsLicenseError existed.
+PathLicenseError = GamsLicenseError
 
 
 # --------------------------------------------------------------------------- #
 # availability
 # --------------------------------------------------------------------------- #
 def path_available() -> bool:
-    """True when GAMSPy (and the PATH solver shipped with it) can be used."""
+    """True when GAMS runs here (installed, licence accepted: :func:`gams_state`) and PATH is
+    among its solvers."""
+    if not gams_state().runs:
+        return False
     try:
         import gamspy  # noqa: F401
     except Exception:
@@ -293,13 +302,19 @@ class PathSession:
     """
 
     def __init__(self, n: int, *, quadratic: bool = False):
-        import gamspy as gp
-
-        self._gp = gp
         self.n = int(n)
         if self.n < 1:
             raise ValueError("n must be positive")
         self.quadratic = bool(quadratic)
+        require_gams("run PATH")
+        import gamspy as gp
+
+        self._gp = gp
+        with gams_refusals("run PATH"):
+            self._declare(gp)
+
+    def _declare(self, gp):
+        """The container, the symbols and the MCP model (each assignment is a GAMS job)."""
         self._labels = np.array([str(k) for k in range(self.n)], dtype=object)
         m = gp.Container()
         self.container = m
@@ -406,7 +421,8 @@ class PathSession:
         x0v[fixed] = lb[fixed]
 
         t0 = time.perf_counter()
-        self._set_records(A, b, lb, ub, x0v, Dv)
+        with gams_refusals("run PATH"):
+            self._set_records(A, b, lb, ub, x0v, Dv)
         build_time = time.perf_counter() - t0
 
         solver_options = {"convergence_tolerance": float(convergence_tolerance)}
@@ -421,13 +437,13 @@ class PathSession:
         model_logger.setLevel(logging.ERROR)
         t1 = time.perf_counter()
         try:
-            self.model.solve(
-                solver="PATH", solver_options=solver_options, options=gopts, output=buf
-            )
+            with gams_refusals("run PATH", log=buf.getvalue):
+                self.model.solve(
+                    solver="PATH", solver_options=solver_options, options=gopts, output=buf
+                )
         except GamspyException as exc:
             log = buf.getvalue()
-            err = PathLicenseError if "license" in str(exc).lower() else RuntimeError
-            raise err(
+            raise RuntimeError(
                 f"GAMS failed before/while running PATH: {exc}\n--- log tail ---\n{log[-3000:]}"
             ) from exc
         finally:

@@ -51,9 +51,9 @@ def test_cge_model_from_its_calibrated_point_solves_with_the_default_crash():
     assert res.success and res.restarts == 0 and res.residual.natural <= TOL
 
 
+@pytest.mark.gams
 @pytest.mark.parametrize("module,args", CASES, ids=IDS)
 def test_gamspy_model_gives_the_callables_solution(module, args):
-    pytest.importorskip("gamspy", reason="gamspy is not installed (extra [gams])")
     from compass_sparse.interfaces.gamspy import solve_gamspy
 
     d, x = reference(module, args)
