@@ -64,12 +64,13 @@ _SIZE = re.compile(r"(limit|too large|exceed)", re.I)
 class GamsState:
     """What a trivial GAMS job showed about this machine.
 
-    ``condition``:
-      ``"not-installed"``   no GAMS system (GAMSPy's ``gamspy_base`` is absent);
-      ``"runs"``            the job ran: models within the licence's limits can be solved;
-      ``"licence-refused"`` GAMS stopped the job because of its licence (expired, invalid,
-                            missing); ``licence_lines`` quotes GAMS;
-      ``"failed"``          GAMS did not run for another reason (``detail`` says which).
+    ``condition`` is one of
+
+    * ``"not-installed"``: no GAMS system (GAMSPy's ``gamspy_base`` is absent);
+    * ``"runs"``: the job ran, so models within the licence's limits can be solved;
+    * ``"licence-refused"``: GAMS stopped the job because of its licence (expired, invalid,
+      missing); ``licence_lines`` quotes GAMS;
+    * ``"failed"``: GAMS did not run for another reason (``detail`` says which).
     """
 
     condition: str
