@@ -22,6 +22,9 @@ extensions = [
     "sphinx.ext.autodoc",
     "sphinx.ext.napoleon",
     "sphinx.ext.mathjax",
+    # MathJax copied into the built site (_static/mathjax), so that the pages render their
+    # mathematics offline; without it the browser fetches MathJax from a CDN
+    "sphinx-mathjax-offline",
     "compass_tables",
 ]
 napoleon_google_docstring = False
@@ -33,9 +36,21 @@ autodoc_class_signature = "separated"
 root_doc = "index"
 exclude_patterns = ["_build"]
 templates_path = []
-html_theme = "alabaster"
-html_static_path = []
+# The theme of the scientific Python projects' documentation (NumPy, SciPy, pandas):
+# wide content, readable tables, a page table of contents, responsive below 960 px.
+html_theme = "pydata_sphinx_theme"
+html_static_path = ["_static"]
+html_css_files = ["compass.css"]
 html_title = f"compass_sparse {release}"
-html_theme_options = {"description": "A sparse, large-scale MCP solver by PATH's method"}
+html_theme_options = {
+    "navigation_with_keys": False,
+    "show_toc_level": 2,
+    "secondary_sidebar_items": ["page-toc"],
+    "footer_start": ["copyright"],
+    "footer_end": [],
+}
+# no left sidebar: the guide is short and the header lists its pages; the content takes
+# the width (tables of options and statuses need it)
+html_sidebars = {"**": []}
 pygments_style = "sphinx"
 smartquotes = False  # option texts quote values: keep them as typed

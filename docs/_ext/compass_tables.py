@@ -129,12 +129,13 @@ class OptionsTable(SphinxDirective):
             rows = []
             for f in fields:
                 name = nodes.paragraph("", "", nodes.literal(text=f.name))
-                pn = Options.path_name(f.name)
                 rows.append([name, _literal(_fmt(f.default)), option_range(f),
-                             _literal(pn) if pn else "(none)", f.metadata.get("doc", "")])
+                             f.metadata.get("doc", "")])
             sec = nodes.rubric(text=title[0].upper() + title[1:])
-            out += [sec, _table(["option", "default", "range", "PATH name", "meaning"], rows,
-                                [22, 10, 16, 20, 40], "compass-options")]
+            # PATH's names are a table of their own (PathNamesTable): a column here repeated
+            # the option's own name on almost every row and squeezed the meaning
+            out += [sec, _table(["option", "default", "range", "meaning"], rows,
+                                [20, 9, 14, 57], "compass-options")]
         return out
 
 
