@@ -5,15 +5,34 @@
     compass-sparse cge  ... --scenarios tariff=0:0.5:51 [sigma_armington=1,2,4]
                         [--scenarios-file FILE] [--output DIR] [--workers W]
     compass-sparse options          list every solver option with its default
+    compass-sparse --version
+
+A mistake on the command line (a bad number, a missing file, an output folder that does
+not exist) is one line on stderr and exit code 2, found before any solving; Ctrl-C stops
+with exit code 130 (a scenario batch says how many scenarios were saved and how to resume).
 """
 from __future__ import annotations
 
 import argparse
 import logging
+import os
+import shutil
 import sys
+import textwrap
 import time
 
 import numpy as np
+
+from .exceptions import CompassError
+
+EXIT_USAGE = 2
+"""Exit code of a mistake on the command line (argparse's own)."""
+EXIT_INTERRUPTED = 130
+"""Exit code after Ctrl-C (128 + SIGINT, the shell's convention)."""
+
+
+class UsageError(Exception):
+    """A mistake on the command line: printed as one line, exit code 2."""
 
 
 def _opts(args):
@@ -32,11 +51,12 @@ def _show_log(args):
         logging.basicConfig(level=logging.INFO, format="%(message)s", stream=sys.stdout)
 
 
-def _print_result(name, n, res, problem=None, build_time=None):
+def _print_result(name, n, res, problem=None, build_time=None, verbose=0):
     print(f"problem       {name} (n = {n})")
     if build_time is not None:
         print(f"built in      {build_time:.3f} s")
-    print(res.summary())
+    if not verbose:  # with -v the solver's log has printed the summary already
+        print(res.summary())
     if problem is not None:
         rep = res.check(problem)
         print(f"recomputed    natural residual {rep.natural:.3e} on the original problem")
@@ -89,19 +109,64 @@ def _demo(args) -> int:
         prob = MCP(F, J, 0.0, np.inf, np.zeros(4))
         build = time.perf_counter() - t0
         res = solve_mcp(prob, options=_opts(args))
-        _print_result("kojshin", 4, res, prob, build)
+        _print_result("kojshin", 4, res, prob, build, args.verbose)
         return 0 if res.success else 1
     prob = g.problem
-    _print_result(f"{kind} (seed {args.seed})", prob.n, res, prob, build)
+    _print_result(f"{kind} (seed {args.seed})", prob.n, res, prob, build, args.verbose)
     if getattr(g, "solution", None) is not None:
         print(f"known solution max |x - x*| = {np.max(np.abs(res.x - g.solution)):.3e}")
     return 0 if res.success else 1
+
+
+def _check_common(args):
+    """The mistakes in the options every solving command takes."""
+    if args.time_limit is not None and not args.time_limit > 0:
+        raise UsageError(f"--time-limit must be positive (got {args.time_limit})")
+    if not args.tol > 0:
+        raise UsageError(f"--tol must be positive (got {args.tol})")
+    if getattr(args, "n", None) is not None and args.n < 1:
+        raise UsageError(f"--n must be at least 1 (got {args.n})")
+
+
+def _check_cge_args(args):
+    """Every mistake the cge command can find before building and solving anything."""
+    for name in ("regions", "sectors", "households"):
+        if getattr(args, name) < 1:
+            raise UsageError(f"--{name} must be at least 1 (got {getattr(args, name)})")
+    if args.tariff is not None and args.regions < 2:
+        raise UsageError("--tariff needs trade between regions: give --regions 2 or more")
+    if args.scenarios_file and not os.path.isfile(args.scenarios_file):
+        raise UsageError(f"--scenarios-file {args.scenarios_file}: no such file")
+    if args.csv:
+        folder = os.path.dirname(os.path.abspath(args.csv))
+        if not os.path.isdir(folder):
+            raise UsageError(f"--csv {args.csv}: the folder {folder} does not exist")
+    if args.workers is not None and args.workers < 0:
+        raise UsageError(f"--workers must be 0 or more (got {args.workers})")
+
+
+def _scenario_list(args):
+    """The scenarios of --scenarios and --scenarios-file (a bad spec is a UsageError)."""
+    from .batch import grid, parse_axis, read_scenarios
+
+    try:
+        scenarios = (grid(**dict(parse_axis(a) for a in args.scenarios))
+                     if args.scenarios else [])
+        if args.scenarios_file:
+            scenarios += read_scenarios(args.scenarios_file)
+    except (CompassError, OSError, ValueError) as exc:
+        raise UsageError(str(exc).splitlines()[0]) from None
+    if not scenarios:
+        raise UsageError("no scenarios: --scenarios and --scenarios-file give none")
+    return scenarios
 
 
 def _cge(args) -> int:
     from . import solve_mcp
     from .generators.cge import static_cge
 
+    _check_cge_args(args)
+    scenarios = _scenario_list(args) if (args.scenarios or args.scenarios_file) else None
     t0 = time.perf_counter()
     model = static_cge(regions=args.regions, sectors=args.sectors, households=args.households,
                        seed=args.seed)
@@ -113,13 +178,13 @@ def _cge(args) -> int:
     rep = solve_mcp(p, options={**_opts(args), "major_iteration_limit": 0})
     print(f"benchmark replication (0 iterations): ||Phi||_2 = {rep.residual.fb_norm:.3e}, "
           f"natural residual = {rep.residual.natural:.3e}")
-    if args.scenarios or args.scenarios_file:
-        return _cge_scenarios(args, model)
+    if scenarios is not None:
+        return _cge_scenarios(args, model, scenarios)
     shock = {}
     if args.output_tax is not None:
         shock["output_tax"] = args.output_tax
     if args.tariff is not None:
-        shock["tariff"] = (0, args.tariff)
+        shock["tariff"] = (0, args.tariff)  # region r1 (index 0)
     if args.productivity is not None:
         shock["productivity"] = args.productivity
     if args.endowment is not None:
@@ -129,7 +194,8 @@ def _cge(args) -> int:
     shocked = model.with_shock(**shock)
     print(f"shock: {shock}")
     res = solve_mcp(shocked.problem, options=_opts(args))
-    _print_result("counterfactual", shocked.problem.n, res, shocked.problem)
+    _print_result("counterfactual", shocked.problem.n, res, shocked.problem,
+                  verbose=args.verbose)
     from .generators.cge import economics_report
 
     econ = economics_report(shocked, shocked.benchmark, res.x)
@@ -143,21 +209,22 @@ def _cge(args) -> int:
     return 0 if res.success else 1
 
 
-def _cge_scenarios(args, model) -> int:
+def _cge_scenarios(args, model, scenarios) -> int:
     """A scenario batch of the CGE model: results to Parquet, a table of headlines."""
-    from .batch import grid, parse_axis, read_scenarios, solve_batch
+    from .batch import solve_batch
 
-    scenarios = grid(**dict(parse_axis(a) for a in args.scenarios)) if args.scenarios else []
-    if args.scenarios_file:
-        scenarios += read_scenarios(args.scenarios_file)
     names = sorted({k for s in scenarios for k in s})
     if "tariff" in names and model.info["regions"] < 2:
-        print("tariff scenarios need trade between regions: give --regions 2 or more",
-              file=sys.stderr)
-        return 2
+        raise UsageError("tariff scenarios need trade between regions: give --regions 2 or "
+                         "more")
     print(f"{len(scenarios)} scenarios over {', '.join(names)}; results in {args.output}/")
-    out = solve_batch(model, scenarios, options=_opts(args), workers=args.workers,
-                      output=args.output)
+    try:
+        out = solve_batch(model, scenarios, options=_opts(args), workers=args.workers,
+                          output=args.output)
+    except KeyboardInterrupt:
+        print(f"\ninterrupted: the scenarios finished so far are saved in {args.output}/; "
+              "run the same command again to resume", file=sys.stderr)
+        return EXIT_INTERRUPTED
     print(out.summary())
     # Headlines of region r1: mean welfare index of its households, mean Armington price,
     # mean activity level, total household income (numeraire: see above).
@@ -168,6 +235,9 @@ def _cge_scenarios(args, model) -> int:
     print("  ".join([f"{k:>15}" for k in names] + [f"{'status':>12}", f"{'its':>4}"]
                     + [f"{h:>10}" for h in heads]))
     rows = np.unique(np.linspace(0, len(out.rows) - 1, min(len(out.rows), 11)).astype(int))
+    if rows.size < len(out.rows):
+        print(f"({rows.size} of {len(out.rows)} scenarios shown, evenly spaced; every row is "
+              f"in {args.output}/)")
     for i in rows:
         r, s = out.rows[i], out.scenarios[i]
         vals = [f"{float(s[k]):>15.6g}" if np.ndim(s.get(k, np.nan)) == 0 else f"{'array':>15}"
@@ -181,17 +251,46 @@ def _cge_scenarios(args, model) -> int:
     return 0 if out.failed == 0 else 1
 
 
-def main(argv=None) -> int:
+def _options_table(width: int) -> str:
+    """Every option with its default and meaning, wrapped to ``width`` columns: the meaning
+    continues under itself, or (on a narrow terminal) under the option's line."""
+    import dataclasses
+
+    from .options import Options
+
+    out = []
+    for f in dataclasses.fields(Options):
+        head = f"{f.name:36s} {f.default!r:>12}  "
+        doc = " ".join(f.metadata["doc"].split())
+        if len(head) + 30 <= width:
+            out.append(textwrap.fill(doc, width, initial_indent=head,
+                                     subsequent_indent=" " * len(head)))
+        else:
+            out.append(head.rstrip())
+            out.append(textwrap.fill(doc, width, initial_indent=" " * 4,
+                                     subsequent_indent=" " * 4))
+    return "\n".join(out)
+
+
+def _parser() -> argparse.ArgumentParser:
+    from . import __version__
+
     ap = argparse.ArgumentParser(
         prog="compass-sparse",
-        description="Sparse solver for mixed complementarity problems (PATH's method).")
-    sub = ap.add_subparsers(dest="cmd")
+        description="Sparse solver for mixed complementarity problems (PATH's method).",
+        epilog="Exit codes: 0 solved, 1 not solved (the summary says why), 2 a mistake on "
+        "the command line, 130 interrupted.")
+    ap.add_argument("--version", action="version", version=f"compass-sparse {__version__}")
+    ap.add_argument("-v", "--verbose", dest="global_verbose", action="count", default=0,
+                    help="as -v after the command")
+    sub = ap.add_subparsers(dest="cmd", metavar="{demo,cge,options}")
 
     def common(p):
         p.add_argument("--seed", type=int, default=0, help="generator seed (default 0)")
         p.add_argument("--tol", type=float, default=1e-6,
                        help="convergence tolerance on ||Phi_FB||_2 (default 1e-6)")
-        p.add_argument("--time-limit", type=float, default=None, help="seconds")
+        p.add_argument("--time-limit", type=float, default=None,
+                       help="seconds (default: none)")
         p.add_argument("-v", "--verbose", action="count", default=0,
                        help="print the crash and major-iteration log (-vv: every pivot)")
         p.add_argument("--progress", action="store_true",
@@ -200,19 +299,28 @@ def main(argv=None) -> int:
     d = sub.add_parser("demo", help="solve a bundled default problem and print the summary")
     d.add_argument("--problem", default="structured",
                    choices=["obstacle", "structured", "thesis", "kojshin", "cge"],
-                   help="default: 'structured', a nonlinear MCP on a 2-D grid with long-range "
-                   "couplings and mixed bounds, n = 100000, with a known solution")
-    d.add_argument("--n", type=int, default=None, help="problem size")
+                   help="structured (default): a nonlinear MCP on a 2-D grid with long-range "
+                   "couplings and mixed bounds, n = 100000, with a known solution; obstacle: "
+                   "the obstacle problem, an LCP on an m x m grid (n = 40000); thesis: the "
+                   "COMPASS thesis' random family 1 (n = 50); kojshin: the 4-variable "
+                   "Kojima-Shindo NCP; cge: a static CGE model, abolishing its output taxes")
+    d.add_argument("--n", type=int, default=None,
+                   help="problem size (default: the problem's own, given above)")
     common(d)
     c = sub.add_parser("cge", help="run a CGE scenario: benchmark replication, then a shock")
-    c.add_argument("--regions", type=int, default=1)
-    c.add_argument("--sectors", type=int, default=10)
-    c.add_argument("--households", type=int, default=1)
+    c.add_argument("--regions", type=int, default=1,
+                   help="regions, named r1, r2, ... (default 1); 2 or more trade")
+    c.add_argument("--sectors", type=int, default=10, help="sectors per region (default 10)")
+    c.add_argument("--households", type=int, default=1,
+                   help="households per region (default 1)")
     c.add_argument("--output-tax", type=float, default=None,
                    help="new uniform output tax rate (default shock: abolish output taxes)")
-    c.add_argument("--tariff", type=float, default=None, help="import tariff of region 0")
-    c.add_argument("--productivity", type=float, default=None, help="productivity factor")
-    c.add_argument("--endowment", type=float, default=None, help="endowment factor")
+    c.add_argument("--tariff", type=float, default=None,
+                   help="import tariff rate of region r1 (needs --regions 2 or more)")
+    c.add_argument("--productivity", type=float, default=None,
+                   help="productivity factor of every sector")
+    c.add_argument("--endowment", type=float, default=None,
+                   help="factor endowment scale")
     c.add_argument("--top", type=int, default=10,
                    help="largest price, quantity and income changes to print (default 10)")
     c.add_argument("--csv", default=None, metavar="FILE",
@@ -222,27 +330,43 @@ def main(argv=None) -> int:
                    help="a scenario grid instead of one shock: axes name=start:stop:count or "
                    "name=v1,v2,...; names: tariff (on every import link), output_tax, "
                    "endowment, productivity, sigma_va, sigma_armington, sigma_consumer")
-    c.add_argument("--scenarios-file", default=None,
+    c.add_argument("--scenarios-file", default=None, metavar="FILE",
                    help="scenarios from a CSV (header of names) or JSON (list of objects) file")
-    c.add_argument("--output", default="cge-scenarios",
+    c.add_argument("--output", default="cge-scenarios", metavar="DIR",
                    help="directory of the Parquet results (a rerun resumes; default "
                    "cge-scenarios)")
     c.add_argument("--workers", type=int, default=None,
                    help="worker processes (default: every core; 0: in this process)")
     common(c)
     sub.add_parser("options", help="list every solver option with its default")
-    args = ap.parse_args(argv)
-    if args.cmd in ("demo", "cge"):
-        _show_log(args)
-    if args.cmd == "demo":
-        return _demo(args)
-    if args.cmd == "cge":
-        return _cge(args)
-    if args.cmd == "options":
-        from .options import Options
+    return ap
 
-        print(Options.describe())
-        return 0
+
+def main(argv=None) -> int:
+    ap = _parser()
+    args = ap.parse_args(argv)
+    if hasattr(args, "verbose"):
+        args.verbose += args.global_verbose  # (compass-sparse -v demo == demo -v)
+    try:
+        if args.cmd in ("demo", "cge"):
+            _check_common(args)
+            _show_log(args)
+        if args.cmd == "demo":
+            return _demo(args)
+        if args.cmd == "cge":
+            return _cge(args)
+        if args.cmd == "options":
+            width = shutil.get_terminal_size((100, 24)).columns
+            print(_options_table(max(40, width - 1)))
+            return 0
+    except (UsageError, CompassError) as exc:
+        # a CompassError here is bad input built from the arguments (a model the generator
+        # refuses): the user's mistake too, said in one line
+        print(f"compass-sparse {args.cmd}: {str(exc).splitlines()[0]}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print(f"\ncompass-sparse {args.cmd}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
     ap.print_help()
     return 0
 
