@@ -111,7 +111,7 @@ def _cross_check(rows_by_run: dict[str, dict], fields: list[str]) -> dict:
     for run, rows in rows_by_run.items():
         for k, r in rows.items():
             keys.setdefault(k, []).append((run, r))
-    compared, differ = 0, []
+    compared, differ, spread = 0, [], []
     for k, seen in keys.items():
         if len(seen) < 2:
             continue
@@ -121,8 +121,17 @@ def _cross_check(rows_by_run: dict[str, dict], fields: list[str]) -> dict:
             bad = [f for f in fields if r[f] != first[f]]
             if bad:
                 differ.append(dict(key=list(k), runs=[seen[0][0], run], fields=bad))
+        ts = [float(r["time"]) for _, r in seen]
+        if min(ts) > 0:
+            spread.append(max(ts) / min(ts))
+    spread.sort()
     return dict(keys_measured_more_than_once=compared, fields_compared=fields,
-                disagreements=differ)
+                disagreements=differ,
+                time_spread=dict(
+                    what="largest / least recorded PATH time of the same solve over the "
+                         "runs that measured it",
+                    median=round(spread[len(spread) // 2], 2) if spread else None,
+                    max=round(spread[-1], 2) if spread else None))
 
 
 def _write(name: str, key: dict, columns: list[str], rows: list[dict], meta: dict,
