@@ -543,7 +543,8 @@ def compare(before, after) -> str:
                      "worst ratio after / PATH"], out)
 
 
-def main(argv=None):
+def parser():
+    """The command line (its defaults are the default case list)."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--groups", nargs="+", default=["known", "thesis", "cge"],
                     choices=["known", "thesis", "cge"])
@@ -572,7 +573,23 @@ def main(argv=None):
     ap.add_argument("--summarize", metavar="CSV", help="print the tables of an existing CSV")
     ap.add_argument("--compare", nargs=2, metavar=("BEFORE", "AFTER"),
                     help="per-group table of two CSVs")
-    a = ap.parse_args(argv)
+    return ap
+
+
+def cases_of(a):
+    """The cases the parsed command line ``a`` asks for."""
+    cases = []
+    if "known" in a.groups:
+        cases += _known_cases()
+    if "thesis" in a.groups:
+        cases += _thesis_cases(a.thesis_n, a.families, a.seeds)
+    if "cge" in a.groups:
+        cases += _cge_cases(a.ramsey_T, a.static_n)
+    return cases
+
+
+def main(argv=None):
+    a = parser().parse_args(argv)
     if a.compare:
         from _common import read_csv
 
@@ -599,13 +616,7 @@ def main(argv=None):
     print(f"instrument (taken off the solver's time): per call of F or J {cw * 1e6:.2f} us "
           f"wall, {cc * 1e6:.2f} us CPU; per solve {sw * 1e6:.2f} us wall, "
           f"{sc * 1e6:.2f} us CPU")
-    cases = []
-    if "known" in a.groups:
-        cases += _known_cases()
-    if "thesis" in a.groups:
-        cases += _thesis_cases(a.thesis_n, a.families, a.seeds)
-    if "cge" in a.groups:
-        cases += _cge_cases(a.ramsey_T, a.static_n)
+    cases = cases_of(a)
     # Rounds: every round times every problem (``--repeats`` solves, ``--path-repeats``
     # PATH runs), so that each problem's samples are spread over the whole run and a slow
     # minute of the shared machine touches all problems alike instead of a few; the rows

@@ -131,7 +131,8 @@ def recorded_path(reference, family, n, seed, tol):
     if r is None:
         return None
     rec = {f: r.get(f, "") for f in FIELDS}
-    rec.update(solver="PATH", factorizations=-1, passes="", pass_times="", error="")
+    rec.update(solver="PATH", factorizations=-1, passes="", pass_times="", error="",
+               time_limit=r["time_limit"])
     return rec
 
 
@@ -139,7 +140,11 @@ def _solve(worker, source, s, hard, **kw):
     """One solve's row: ours or PATH's live (in the worker), or PATH's recorded row (None
     when the reference does not have the instance)."""
     if s == "PATH" and source.recorded:
-        return recorded_path(source.reference, kw["family"], kw["n"], kw["seed"], kw["tol"])
+        rec = recorded_path(source.reference, kw["family"], kw["n"], kw["seed"], kw["tol"])
+        if rec is not None and float(rec["time"]) > kw["time_limit"]:
+            rec["error"] = (f"recorded with a limit of {rec.get('time_limit', '?')} s: above "
+                            f"this run's {kw['time_limit']:g} s")
+        return rec
     rec = run_task(worker, TASKS[s], s, hard, **kw)
     if s == "PATH":
         rec.setdefault("path_source", "live")
@@ -266,6 +271,14 @@ def summarize_tolerances(rows, out=print):
 
 
 # --------------------------------------------------------------------------- main
+TOLERANCES = [1e-4, 1e-6, 1e-8, 1e-10, 1e-12]
+"""``--tolerances``: the convergence tolerances of both solvers."""
+TOLERANCE_INSTANCES = ([(1, 20, s) for s in range(3)] + [(1, 50, s) for s in range(3)]
+                       + [(2, 20, s) for s in range(3)])
+"""``--tolerances``: its (family, n, seed) instances (``--quick``: the next list)."""
+TOLERANCE_INSTANCES_QUICK = [(1, 20, 0), (2, 10, 0)]
+
+
 def _keys(source, plan):
     """The reference keys of the planned (family, n, seed, tol) solves (recorded mode)."""
     if not source.recorded:
@@ -322,12 +335,8 @@ def main(argv=None):
     worker = Worker(warm_up, dict(with_path=use_path))
 
     if a.tolerances:
-        tols = [1e-4, 1e-6, 1e-8, 1e-10, 1e-12]
-        if a.quick:
-            inst = [(1, 20, 0), (2, 10, 0)]
-        else:
-            inst = [(1, 20, s) for s in range(3)] + [(1, 50, s) for s in range(3)] \
-                + [(2, 20, s) for s in range(3)]
+        tols = TOLERANCES
+        inst = TOLERANCE_INSTANCES_QUICK if a.quick else TOLERANCE_INSTANCES
         out = a.out or RESULTS / ("thesis_tolerances_quick.csv" if a.quick
                                   else "thesis_tolerances.csv")
         print(source.line(_keys(source, [(f, n, s, t) for f, n, s in inst for t in tols])),
