@@ -294,7 +294,8 @@ def any_recorded(rows) -> bool:
 RECORDED_NOTE = ("PATH's figures marked recorded come from benchmarks/reference/ (measured "
                  "before GAMS' demo licence expired, on the date and revision in each row's "
                  "path_source): a ratio against them compares our time today with PATH's "
-                 "time on another day, under another load of the machine.")
+                 "time on another day, under another load and possibly on another machine "
+                 "(the reference's JSON names the run's machine).")
 
 
 def path_session(n: int, quadratic: bool):
