@@ -306,3 +306,26 @@ def test_bench_links_prints_paths_recorded_column_without_gams():
     for model, n, t in (("cournot", 100, "0.08"), ("cournot", 995, "0.15"),
                         ("spatial", 101, "0.15"), ("spatial", 997, "0.13")):
         assert f"| {model} | {n} | – | – | – | – | – | {t} | – |" in run.stdout
+
+
+def test_static_cge_gamspy_raises_the_licence_error_where_gams_refuses(monkeypatch):
+    """The GAMSPy model of bench_small's static CGE cases, asked for a live PATH run where
+    GAMS refuses its licence: the package's GamsLicenseError with GAMS' lines, before any
+    GAMSPy container is made (GAMSPy's own message would only say 'bad state')."""
+    import datetime
+
+    import compass_sparse.interfaces.gams_state as gs
+    from compass_sparse.exceptions import GamsLicenseError
+    from compass_sparse.generators.cge import size_for, static_cge
+
+    refused = gs.GamsState("licence-refused", "time-limited licence expired 2026-11-26",
+                           licence_lines=("*** Time-limited license expired 1 days ago",),
+                           expired_on=datetime.date(2026, 11, 26))
+    monkeypatch.setattr(gs, "_STATE", refused)
+    static = _bench("static_cge_gamspy")
+    monkeypatch.setattr(static, "static_container",
+                        lambda model: pytest.fail("a GAMSPy container was built"))
+    model = static_cge(**size_for(90)).with_shock(output_tax=0.25)
+    with pytest.raises(GamsLicenseError, match="expired 2026-11-26") as err:
+        static.solve_static_with_path(model)
+    assert "Time-limited license expired 1 days ago" in str(err.value)
