@@ -56,8 +56,15 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import (  # noqa: E402
-    RECORDED_NOTE, RESULTS, CsvLog, add_path_argument, choose_path_source, machine_info,
-    print_machine, recorded_mark)
+    RECORDED_NOTE,
+    RESULTS,
+    CsvLog,
+    add_path_argument,
+    choose_path_source,
+    machine_info,
+    print_machine,
+    recorded_mark,
+)
 
 SUCCESS_TOL = 1e-6
 

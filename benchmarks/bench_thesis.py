@@ -258,7 +258,9 @@ def summarize_tolerances(rows, out=print):
         for tol in sorted({t for (ss, t) in by if ss == s}, reverse=True):
             rr = by[(s, tol)]
             fin = [r["natural"] for r in rr if math.isfinite(r["natural"])]
-            table.append([s + (" (recorded)" if s == "PATH" and rec else ""), f"{tol:.0e}", f"{sum(bool(r['reported_success']) for r in rr)}/{len(rr)}",
+            name = s + (" (recorded)" if s == "PATH" and rec else "")
+            table.append([name, f"{tol:.0e}",
+                          f"{sum(bool(r['reported_success']) for r in rr)}/{len(rr)}",
                           f"{sum(r['natural'] <= tol for r in rr)}/{len(rr)}",
                           fmt_time(median([r["time"] for r in rr])),
                           fmt_time(sum(r["time"] for r in rr if math.isfinite(r["time"]))),

@@ -314,9 +314,10 @@ def test_static_cge_gamspy_raises_the_licence_error_where_gams_refuses(monkeypat
     GAMSPy container is made (GAMSPy's own message would only say 'bad state')."""
     import datetime
 
+    from compass_sparse.generators.cge import size_for, static_cge
+
     import compass_sparse.interfaces.gams_state as gs
     from compass_sparse.exceptions import GamsLicenseError
-    from compass_sparse.generators.cge import size_for, static_cge
 
     refused = gs.GamsState("licence-refused", "time-limited licence expired 2026-11-26",
                            licence_lines=("*** Time-limited license expired 1 days ago",),
