@@ -1,4 +1,4 @@
-"""Shared helpers of the benchmark scripts (bench_lcp.py, bench_thesis.py, bench_scaling.py).
+"""Shared helpers of the benchmark scripts (bench_lcp.py, bench_thesis.py, bench_small.py, ...).
 
 * :func:`natural_residual` -- the independent success test every benchmark applies to the
   returned point of BOTH solvers: ``||z - clip(z - F(z), l, u)||_inf <= SUCCESS_TOL``.
@@ -9,6 +9,9 @@
 * :class:`CsvLog` -- appends one row per solve and flushes, so partial results survive an
   interrupted run.
 * :func:`machine_info` -- date, cores, versions, git revision: recorded with every result.
+* :func:`choose_path_source` / :func:`path_reference` -- PATH's figures from a live run, or
+  where GAMS cannot run (or ``--path recorded``) from the recorded rows of
+  ``benchmarks/reference/`` (reference/README.md), with a line that says which.
 
 Only the public API of compass_sparse is used.
 """
@@ -123,6 +126,176 @@ def path_available() -> bool:
         return bool(pa())
     except Exception:
         return False
+
+
+def why_path_cannot_run() -> str | None:
+    """None when PATH can run here; otherwise why not, in one line (GAMS' probe's reason)."""
+    if path_available():
+        return None
+    try:
+        from compass_sparse.interfaces.gams_state import gams_state
+
+        st = gams_state()
+    except Exception as exc:  # pragma: no cover - the probe itself failed
+        return f"GAMS' state could not be probed ({type(exc).__name__}: {exc})"
+    if not st.runs:
+        return f"GAMS cannot run: {st.reason}"
+    return "PATH is not among GAMS' solvers"
+
+
+# --------------------------------------------------------------------------- PATH, recorded
+REFERENCE = HERE / "reference"
+"""PATH 5.2's recorded rows, one file per suite (reference/README.md)."""
+PATH_MODES = ("auto", "live", "recorded")
+
+
+class PathReference:
+    """PATH's recorded rows of one suite (``reference/<suite>.csv`` with its sidecar JSON).
+
+    ``rows`` maps the suite's key (a tuple in the order of ``key_fields``, each value of
+    the type the JSON declares) to a row dict whose values are typed like
+    :func:`read_csv`'s and which carries ``path_source`` = ``"recorded <date> <rev>"``
+    of the run it comes from.  :meth:`get` looks a key up by field name."""
+
+    def __init__(self, suite: str, directory: Path = REFERENCE):
+        self.suite = suite
+        self.csv_path = Path(directory) / f"{suite}.csv"
+        self.meta = json.loads(self.csv_path.with_suffix(".json").read_text())
+        self.key_types = dict(self.meta["key"])
+        self.key_fields = list(self.key_types)
+        self.runs = self.meta["runs"]
+        self.absent = {self.key(**a["key"]): a["reason"] for a in self.meta.get("absent", [])}
+        self.rows: dict = {}
+        for r in read_csv(self.csv_path):
+            k = self.key(**{f: r[f] for f in self.key_fields})
+            if k in self.rows:
+                raise ValueError(f"{self.csv_path}: key {k} appears twice")
+            run = self.runs[r["run"]]
+            r["path_source"] = f"recorded {run['date']} {run['revision']}"
+            self.rows[k] = r
+
+    def key(self, **fields) -> tuple:
+        """The lookup key of a problem, from its fields (extra fields are an error)."""
+        if set(fields) != set(self.key_fields):
+            raise KeyError(f"{self.suite}: a key has the fields {self.key_fields}, "
+                           f"not {sorted(fields)}")
+        conv = {"int": int, "float": float, "str": str}
+        return tuple(conv[self.key_types[f]](fields[f]) for f in self.key_fields)
+
+    def get(self, **fields) -> dict | None:
+        """A copy of the recorded row of that problem, or None when PATH was not recorded
+        on it."""
+        r = self.rows.get(self.key(**fields))
+        return dict(r) if r is not None else None
+
+    def runs_of(self, keys=None) -> list[str]:
+        """The runs the given keys' rows come from (all runs of the file without keys), in
+        the JSON's order."""
+        if keys is None:
+            used = {r["run"] for r in self.rows.values()}
+        else:
+            used = {self.rows[k]["run"] for k in keys if k in self.rows}
+        return [rid for rid in self.runs if rid in used]
+
+    def describe(self, keys=None) -> str:
+        """'<date> at rev <rev>[, ...] (benchmarks/reference/<suite>.csv)'."""
+        runs = self.runs_of(keys) or list(self.runs)
+        text = ", ".join(f"{self.runs[r]['date']} at rev {self.runs[r]['revision']}"
+                         for r in runs)
+        where = self.csv_path.relative_to(HERE.parent) if self.csv_path.is_relative_to(
+            HERE.parent) else self.csv_path
+        many = "; each row's run in its path_source" if len(runs) > 1 else ""
+        return f"{text} ({where}{many})"
+
+
+_REFERENCES: dict = {}
+
+
+def path_reference(suite: str) -> PathReference:
+    """PATH's recorded rows of ``suite`` ("small", "thesis", "lcp", "cge", "links"),
+    read once per process."""
+    if suite not in _REFERENCES:
+        _REFERENCES[suite] = PathReference(suite)
+    return _REFERENCES[suite]
+
+
+class PathSource:
+    """Where a benchmark takes PATH's figures from: ``mode`` is "live" (PATH runs now),
+    "recorded" (``reference``: the suite's recorded rows) or "none" (PATH left out);
+    ``why`` says why PATH does not run live."""
+
+    def __init__(self, mode: str, reference: PathReference | None = None, why: str = ""):
+        self.mode, self.reference, self.why = mode, reference, why
+
+    @property
+    def live(self) -> bool:
+        return self.mode == "live"
+
+    @property
+    def recorded(self) -> bool:
+        return self.mode == "recorded"
+
+    def line(self, keys=None) -> str:
+        """The one line a benchmark prints first about PATH's figures."""
+        if self.live:
+            try:
+                import gamspy
+
+                via = f" through gamspy {gamspy.__version__}"
+            except Exception:  # pragma: no cover
+                via = ""
+            return f"# PATH: live run (PATH{via}; time = PATH's own Total Time)"
+        if self.recorded:
+            return (f"# PATH: recorded {self.reference.describe(keys)}; {self.why}; ratios "
+                    f"against PATH compare with a run of another day")
+        return f"# PATH: not run ({self.why})"
+
+    def lookup(self, **fields) -> dict | None:
+        """The recorded row of a problem (None: not in the reference); recorded mode only."""
+        return self.reference.get(**fields)
+
+
+def choose_path_source(suite: str, mode: str = "auto", no_path: bool = False) -> PathSource:
+    """PATH's source for a benchmark run.  ``mode``: "auto" (live when PATH can run here,
+    else the recorded rows), "live" (PATH must run: exits with the reason when it cannot),
+    "recorded" (the recorded rows even where PATH runs).  ``no_path`` leaves PATH out."""
+    if mode not in PATH_MODES:
+        raise ValueError(f"PATH's source is one of {PATH_MODES}, not {mode!r}")
+    if no_path:
+        return PathSource("none", why="--no-path")
+    if mode == "recorded":
+        return PathSource("recorded", path_reference(suite), "--path recorded asked")
+    why = why_path_cannot_run()
+    if why is None:
+        return PathSource("live")
+    if mode == "live":
+        raise SystemExit(f"--path live: PATH cannot run here ({why}); "
+                         f"--path recorded (or auto) uses PATH's recorded figures")
+    return PathSource("recorded", path_reference(suite), why)
+
+
+def add_path_argument(ap):
+    """The ``--path`` option of the side-by-side benchmarks."""
+    ap.add_argument("--path", choices=PATH_MODES, default="auto", dest="path_mode",
+                    help="PATH's figures: a live run where GAMS can run, else the recorded "
+                         "ones of benchmarks/reference/ (auto, the default); live only; or "
+                         "the recorded ones even where GAMS runs")
+
+
+def recorded_mark(row) -> str:
+    """' (recorded)' for a PATH row from the reference, '' otherwise."""
+    return " (recorded)" if row and str(row.get("path_source", "")).startswith("recorded") else ""
+
+
+def any_recorded(rows) -> bool:
+    return any(str(r.get("path_source", "")).startswith("recorded") for r in rows if r)
+
+
+RECORDED_NOTE = ("PATH's figures marked recorded come from benchmarks/reference/ (measured "
+                 "before GAMS' demo licence expired, on the date and revision in each row's "
+                 "path_source): a ratio against them compares our time today with PATH's "
+                 "time on another day, under another load and possibly on another machine "
+                 "(the reference's JSON names the run's machine).")
 
 
 def path_session(n: int, quadratic: bool):

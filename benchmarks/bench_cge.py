@@ -24,7 +24,11 @@ Parts (``--parts``):
 3. ``stress``: badly scaled units (z = D y, rows S F), zero-activity degeneracy (prohibitive
    output tax, productivity -> 0), missing numeraire (homogeneous, singular model).
 4. ``path``: the one-sector LPR Ramsey model written in GAMSPy and solved by PATH, against
-   ours on the same capital-tax counterfactual.
+   ours on the same capital-tax counterfactual.  Where GAMS cannot run (or with ``--path
+   recorded``) PATH's rows are the recorded ones of ``benchmarks/reference/cge.csv``: the
+   run's first lines say which source is used, and recorded rows carry ``path_source =
+   "recorded <date> <rev>"`` (their ``max_rel_diff`` is left empty: PATH's point was not
+   kept; ``K5_change`` and ``K_last_change`` are the recorded ones of PATH's point).
 
 Success everywhere = OUR recomputation of ||z - clip(z - F(z), lb, ub)||_inf <= 1e-6 on the
 original problem.  Every case runs in a freshly forked process (numba compiled before the
@@ -51,7 +55,16 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, CsvLog, machine_info, print_machine  # noqa: E402
+from _common import (  # noqa: E402
+    RECORDED_NOTE,
+    RESULTS,
+    CsvLog,
+    add_path_argument,
+    choose_path_source,
+    machine_info,
+    print_machine,
+    recorded_mark,
+)
 
 SUCCESS_TOL = 1e-6
 
@@ -628,7 +641,7 @@ def part_stress(args, info):
 # =========================================================================== part 4
 PATH_FIELDS = ["T", "n", "tax", "solver", "success", "status", "natural", "time", "wall",
                "major", "minor", "crash", "nfev", "njev", "max_rel_diff", "K5_change",
-               "K_last_change", "error"]
+               "K_last_change", "error", "path_source"]
 
 
 def ramsey_gamspy(T, tax, x0_model, tol=1e-6):
@@ -760,7 +773,46 @@ def ramsey_gamspy(T, tax, x0_model, tol=1e-6):
                 status=ex[-1].strip() if ex else str(model.solve_status), log=log)
 
 
-def task_path(T, tax, time_limit, repeats):
+def _live_path_row(T, tax, m, ms, prob, res, repeats):
+    """PATH's row from ``repeats`` live runs of the GAMSPy model (median time)."""
+    try:
+        pr = None
+        pt = []
+        for _ in range(max(1, repeats)):
+            pr = ramsey_gamspy(T, tax, m.benchmark)
+            pt.append(pr["time"] if pr["time"] is not None else pr["wall"])
+        xp = pr["x"]
+        nat_p = nat_res(xp, ms.F(xp), prob.lb, prob.ub)
+        diff = float(np.max(np.abs(xp - res.x) / np.maximum(1.0, np.abs(res.x))))
+        return dict(T=T, n=prob.n, tax=tax, solver="PATH", time=float(np.median(pt)),
+                    wall=pr["wall"], status=pr["status"], natural=nat_p, major=pr["major"],
+                    minor=pr["minor"], crash=pr["crash"], nfev=pr["nfev"], njev=pr["njev"],
+                    max_rel_diff=diff, _x=xp, path_source="live")
+    except Exception:
+        return dict(T=T, n=prob.n, tax=tax, solver="PATH", status="exception",
+                    natural=math.inf, error=traceback.format_exc().strip().splitlines()[-1],
+                    path_source="live")
+
+
+def _recorded_path_row(T, tax, prob, recorded):
+    """PATH's recorded row of the case in this part's fields; a row with an error when the
+    reference's model has another size (it would be another problem)."""
+    if int(recorded["n"]) != prob.n:
+        return dict(T=T, n=prob.n, tax=tax, solver="PATH", status="not recorded",
+                    natural=math.inf, path_source=recorded["path_source"],
+                    error=f"the reference's model has n = {recorded['n']}, this one {prob.n}")
+    rec = dict(T=T, n=prob.n, tax=tax, solver="PATH", max_rel_diff="",
+               path_source=recorded["path_source"])
+    rec.update({k: recorded[k] for k in ("time", "wall", "status", "natural", "major", "minor",
+                                          "crash", "nfev", "njev", "K5_change",
+                                          "K_last_change")})
+    return rec
+
+
+def task_path(T, tax, time_limit, repeats, recorded=None):
+    """Ours and PATH's rows of one case.  ``recorded``: PATH's recorded row
+    (benchmarks/reference/cge.csv) instead of a live PATH run; False: the reference does
+    not have the case (PATH's row is left out)."""
     from compass_sparse import solve_mcp
     from compass_sparse.generators.cge import ramsey_cge
 
@@ -779,25 +831,15 @@ def task_path(T, tax, time_limit, repeats):
                 minor=res.minor_iterations, crash=res.crash_iterations, nfev=res.nfev,
                 njev=res.njev)
     rows = [ours]
-    try:
-        pr = None
-        pt = []
-        for _ in range(max(1, repeats)):
-            pr = ramsey_gamspy(T, tax, m.benchmark)
-            pt.append(pr["time"] if pr["time"] is not None else pr["wall"])
-        xp = pr["x"]
-        nat_p = nat_res(xp, ms.F(xp), prob.lb, prob.ub)
-        diff = float(np.max(np.abs(xp - res.x) / np.maximum(1.0, np.abs(res.x))))
-        rows.append(dict(T=T, n=prob.n, tax=tax, solver="PATH", time=float(np.median(pt)),
-                         wall=pr["wall"], status=pr["status"], natural=nat_p,
-                         major=pr["major"], minor=pr["minor"], crash=pr["crash"],
-                         nfev=pr["nfev"], njev=pr["njev"], max_rel_diff=diff, _x=xp))
-    except Exception:
-        rows.append(dict(T=T, n=prob.n, tax=tax, solver="PATH", status="exception",
-                         natural=math.inf, error=traceback.format_exc().strip().splitlines()[-1]))
+    if recorded is None:
+        rows.append(_live_path_row(T, tax, m, ms, prob, res, repeats))
+    elif recorded is not False:
+        rows.append(_recorded_path_row(T, tax, prob, recorded))
     K0 = m.block(m.benchmark, "K").ravel()
     for r in rows:
         r["success"] = bool(r.get("natural", math.inf) <= SUCCESS_TOL)
+        if r.get("path_source", "").startswith("recorded"):
+            continue  # the capital changes of PATH's point as recorded (no point kept)
         K = ms.block(r.pop("_x", np.full(prob.n, np.nan)), "K").ravel()
         r["K5_change"] = float(K[5] / K0[5] - 1) if T > 5 else float("nan")
         r["K_last_change"] = float(K[-1] / K0[-1] - 1)
@@ -805,12 +847,18 @@ def task_path(T, tax, time_limit, repeats):
 
 
 def part_path(args, info):
+    source = args.path_source
     log = CsvLog(RESULTS / f"cge_path{args.suffix}.csv", PATH_FIELDS)
     rows = []
     for T in args.path_T:
         for tax in (-0.1, 0.25):
+            recorded = None
+            if source.recorded:
+                recorded = source.lookup(T=T, tax=tax) or False
+                if recorded is False:
+                    print(f"  T={T} tax={tax:+.2f} PATH – (not in the reference)", flush=True)
             out = run_forked(task_path, 600, T=int(T), tax=tax, time_limit=args.time_limit,
-                             repeats=3)
+                             repeats=3, recorded=recorded)
             rs = out.get("rows") or [dict(T=T, tax=tax, solver="both", success=False,
                                           error=out.get("error", ""))]
             for r in rs:
@@ -821,7 +869,7 @@ def part_path(args, info):
                       f"res={r.get('natural', float('nan')):.1e} t={r.get('time', float('nan'))}s "
                       f"maj={r.get('major', '')} minor={r.get('minor', '')} "
                       f"diff={r.get('max_rel_diff', '')} dK5={r.get('K5_change', '')} "
-                      f"{r.get('error', '')}", flush=True)
+                      f"{r.get('error', '')}{recorded_mark(r)}", flush=True)
     log.close()
     return rows
 
@@ -890,17 +938,21 @@ def report(suffix: str):
     p = RESULTS / f"cge_path{suffix}.csv"
     if p.exists():
         rows = read_csv(p)
+        rec = any(str(r.get("path_source", "")).startswith("recorded") for r in rows)
         print("\n### Side by side with PATH (one-sector LPR Ramsey)\n")
         print(md_table(["T", "n", "capital tax", "solver", "ok", "status", "natural res.",
                         "time", "major", "minor", "crash", "F/J evals", "max rel. diff",
                         "dK(t=5)", "dK(T-1)"],
-                       [[g(r, "T"), g(r, "n"), g(r, "tax"), r["solver"], g(r, "success"),
+                       [[g(r, "T"), g(r, "n"), g(r, "tax"), r["solver"] + recorded_mark(r),
+                         g(r, "success"),
                          g(r, "status"), g(r, "natural", fmt_e), g(r, "time", fmt_time),
                          g(r, "major"), g(r, "minor"), g(r, "crash"),
                          f"{g(r, 'nfev')}/{g(r, 'njev')}", g(r, "max_rel_diff", fmt_e),
                          g(r, "K5_change", lambda v: f"{100 * v:+.2f}%"),
                          g(r, "K_last_change", lambda v: f"{100 * v:+.2f}%")]
                         for r in rows]))
+        if rec:
+            print("\n" + RECORDED_NOTE)
 
 
 # =========================================================================== main
@@ -925,6 +977,7 @@ def main(argv=None):
     ap.add_argument("--append", action="store_true", help="append to the part-1 CSV")
     ap.add_argument("--stress-tests", nargs="+", default=None,
                     choices=["scaling", "degenerate", "numeraire"], help="subset of part 3")
+    add_path_argument(ap)
     ap.add_argument("--report", action="store_true",
                     help="only print markdown tables from the CSV files of a run")
     args = ap.parse_args(argv)
@@ -944,6 +997,9 @@ def main(argv=None):
     args.path_T = [40] if args.quick else [40, 110]
     info = machine_info()
     print_machine(info)
+    if "path" in args.parts:
+        args.path_source = choose_path_source("cge", args.path_mode)
+        print(args.path_source.line(), flush=True)
     t0 = time.perf_counter()
     warm_up()
     print(f"# warm-up {time.perf_counter() - t0:.1f} s", flush=True)

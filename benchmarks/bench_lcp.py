@@ -26,6 +26,11 @@ and a hard timeout, so a hung solve is a failure row, not a crash of the benchma
 
     python benchmarks/bench_lcp.py --quick
     python benchmarks/bench_lcp.py                  # full: 1e3..1e5 and PATH at 100..1000
+    python benchmarks/bench_lcp.py --quick --path recorded   # part B against PATH's record
+
+PATH's figures in part B: a live run where GAMS can run; where it cannot (or with ``--path
+recorded``) the recorded rows of ``benchmarks/reference/lcp.csv``, marked as such in the
+output and in the CSV (``path_source``); an instance the reference does not have gets "–".
 """
 from __future__ import annotations
 
@@ -39,13 +44,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import (  # noqa: E402
-    RESULTS, CsvLog, Worker, fmt_e, fmt_time, machine_info, md_table, median, ours_record,
-    path_available, path_record, path_session, print_machine, run_task, warm_up, write_json)
+    RECORDED_NOTE, RESULTS, CsvLog, Worker, add_path_argument, any_recorded,
+    choose_path_source, fmt_e, fmt_time, machine_info, md_table, median, ours_record,
+    path_record, path_session, print_machine, recorded_mark, run_task, warm_up, write_json)
 
 FIELDS = ["part", "kind", "bounds", "n", "seed", "config", "solver", "success",
           "reported_success", "status", "natural", "fb_norm", "time", "time_min", "time_max",
           "repeats", "wall", "major", "minor", "crash", "factorizations", "restarts", "passes",
-          "pass_times", "error"]
+          "pass_times", "error", "path_source"]
 CONFIGS = {"default": {}, "nocrash": {"crash_method": "none"}}
 
 
@@ -100,6 +106,20 @@ def task(kind, n, seed, bounds, config, solver, time_limit, repeats, budget):
 
     rec = _repeat(once, repeats, budget)
     rec["n"] = n_true
+    if solver == "PATH":
+        rec["path_source"] = "live"
+    return rec
+
+
+def recorded_path(reference, kind, bounds, n, seed, config):
+    """PATH's recorded row (benchmarks/reference/lcp.csv; ``n`` the instance's true size)
+    in this script's fields, or None when PATH was not recorded on it."""
+    r = reference.get(kind=kind, bounds=bounds, n=n, seed=seed, config=config)
+    if r is None:
+        return None
+    rec = {f: r.get(f, "") for f in FIELDS}
+    rec.update(part="B", solver="PATH", factorizations=-1, passes="", pass_times="",
+               error="")
     return rec
 
 
@@ -120,11 +140,21 @@ def table_a(rows):
 
 
 def table_b(pairs):
-    header = ["instance", "n", "config", "ours solved", "PATH solved", "ours natural",
+    rec = any_recorded(p for _, p in pairs)
+    mark = " (recorded)" if rec else ""
+    header = ["instance", "n", "config", "ours solved", f"PATH solved{mark}", "ours natural",
               "PATH natural", "ours pivots", "PATH crash/major/minor", "ours time",
-              "PATH time", "ratio ours/PATH", "PATH status"]
+              f"PATH time{mark}", "ratio ours/" + ("recorded PATH" if rec else "PATH"),
+              "PATH status"]
     out = []
     for o, p in pairs:
+        if p is None:  # not in the reference
+            out.append([f"{o['kind']} ({o['bounds']})" if o["kind"] != "obstacle"
+                        else "obstacle", o["n"], o["config"],
+                        "yes" if o["success"] else "**no**", "–", fmt_e(o["natural"]), "–",
+                        o["minor"], "–", fmt_time(o["time"]), "–", "–",
+                        "not in the reference"])
+            continue
         ratio = o["time"] / p["time"] if (o["success"] and p["success"]
                                           and p["time"] > 0) else math.nan
         out.append([f"{o['kind']} ({o['bounds']})" if o["kind"] != "obstacle" else "obstacle",
@@ -134,7 +164,7 @@ def table_b(pairs):
                     f"{p['crash']}/{p['major']}/{p['minor']}", fmt_time(o["time"]),
                     fmt_time(p["time"]), f"{ratio:.3g}" if math.isfinite(ratio) else "–",
                     p["status"]])
-    return md_table(header, out)
+    return md_table(header, out) + ("\n\n" + RECORDED_NOTE if rec else "")
 
 
 # --------------------------------------------------------------------------- main
@@ -157,14 +187,15 @@ def main(argv=None):
                     help="part A runs the nocrash configuration only up to this n "
                          "(a crash-free path needs O(n) pivots)")
     ap.add_argument("--no-path", action="store_true", help="skip part B")
+    add_path_argument(ap)
     ap.add_argument("--out", type=Path, default=None, help="CSV output")
     a = ap.parse_args(argv)
 
     info = machine_info()
     print_machine(info)
-    use_path = (not a.no_path) and path_available()
-    if not a.no_path and not use_path:
-        print("# PATH (gamspy) not available: part B skipped", flush=True)
+    source = choose_path_source("lcp", a.path_mode, a.no_path)
+    print(source.line(), flush=True)
+    use_path = source.live
     sizes = a.sizes or ([1000] if a.quick else [1000, 10000, 100000])
     psizes = a.path_sizes or ([100, 1000] if a.quick else [100, 300, 1000])
     tl = min(a.time_limit, 10.0) if a.quick else a.time_limit
@@ -176,7 +207,7 @@ def main(argv=None):
     log = CsvLog(out, FIELDS)
     write_json(out.with_suffix(".json"), dict(machine=info, sizes=sizes, path_sizes=psizes,
                                               bounds=a.bounds, seeds=a.seeds, repeats=repeats,
-                                              time_limit=tl))
+                                              time_limit=tl, path=source.line().lstrip("# ")))
     worker = Worker(warm_up, dict(with_path=use_path))
 
     def instances(ns):
@@ -206,12 +237,29 @@ def main(argv=None):
             if config == "nocrash" and n > a.nocrash_max_n:
                 continue
             rows_a.append(solve("A", kind, n, seed, bounds, config, "compass_sparse"))
+    def recorded(kind, n, seed, bounds, config):
+        rec = recorded_path(source.reference, kind, bounds, n, seed, config)
+        if rec is None:
+            print(f"B {kind:8s} {bounds:5s} n={n:7d} seed {seed} {config:8s} {'PATH':15s} "
+                  f"– (not in the reference)", flush=True)
+            return None
+        rec.update(kind=kind, bounds=bounds, seed=seed, config=config)
+        log.write(rec)
+        print(f"B {kind:8s} {bounds:5s} n={rec['n']:7d} seed {seed} {config:8s} {'PATH':15s} "
+              f"{'OK  ' if rec['success'] else 'FAIL'} natural {fmt_e(rec['natural'])} pivots "
+              f"{rec['minor']:6d} {fmt_time(rec['time']):>9s} {rec['status']}"
+              f"{recorded_mark(rec)}", flush=True)
+        return rec
+
     pairs = []
-    if use_path:
+    if source.mode != "none":
         for kind, n, seed, bounds in instances(psizes):
             for config in CONFIGS:
                 o = solve("B", kind, n, seed, bounds, config, "compass_sparse")
-                p = solve("B", kind, n, seed, bounds, config, "PATH")
+                if use_path:
+                    p = solve("B", kind, n, seed, bounds, config, "PATH")
+                else:  # the reference is keyed by the instance's true size, as our row
+                    p = recorded(kind, o["n"], seed, bounds, config)
                 pairs.append((o, p))
     log.close()
     worker.close()
@@ -219,15 +267,19 @@ def main(argv=None):
     print("\n## A. compass_sparse on large LCPs\n")
     print(table_a(rows_a))
     if pairs:
-        print("\n## B. Side by side with PATH (same instances, same run)\n")
+        rec = any_recorded(p for _, p in pairs)
+        print("\n## B. Side by side with PATH " + (
+            "(same instances; PATH's recorded rows)\n" if rec else "(same instances, same run)\n"))
         print(table_b(pairs))
         for config in CONFIGS:
-            pp = [(o, p) for o, p in pairs if o["config"] == config]
+            pp = [(o, p) for o, p in pairs if o["config"] == config and p is not None]
             rat = [o["time"] / p["time"] for o, p in pp
                    if o["success"] and p["success"] and p["time"] > 0]
             print(f"\n{config}: ours solved {sum(o['success'] for o, _ in pp)}/{len(pp)}, "
-                  f"PATH solved {sum(p['success'] for _, p in pp)}/{len(pp)}, median time "
-                  f"ratio ours/PATH over both-solved {median(rat):.3g}" if rat else "")
+                  f"PATH{' (recorded)' if rec else ''} solved "
+                  f"{sum(p['success'] for _, p in pp)}/{len(pp)}, median time "
+                  f"ratio ours/{'recorded ' if rec else ''}PATH over both-solved "
+                  f"{median(rat):.3g}" if rat else "")
     print(f"\n# rows in {out}; worker restarts after hard timeouts: {worker.restarts}",
           flush=True)
     return 0

@@ -10,13 +10,18 @@ Parts (``--parts``):
   build time, compilation time, F and J evaluation times and their ratio to hand-written
   numpy, and solve times of the Pyomo route and of the numpy callables (same solver).
 * ``gamspy`` — the same for the GAMSPy route (GMO evaluation) within the free licence
-  (n <= 1000), with PATH on the identical GAMSPy model side by side.
+  (n <= 1000), with PATH on the identical GAMSPy model side by side.  Where GAMS cannot
+  run (or with ``--path recorded``) PATH's column is the recorded one of
+  ``benchmarks/reference/links.csv``, marked as such (the first lines of the output say
+  which source is used); our GAMSPy route needs GAMS as well, so without GAMS its columns
+  are "–".
 
 Times are medians over ``--repeats`` runs (evaluations: over 30 calls).  Only the public
 API is used.  Usage::
 
     python benchmarks/bench_links.py                     # every part
     python benchmarks/bench_links.py --parts evaluator --repeats 3
+    python benchmarks/bench_links.py --parts gamspy --path recorded
 """
 from __future__ import annotations
 
@@ -32,9 +37,12 @@ import scipy.sparse as sp
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from compass_sparse import solve_mcp
 from compass_sparse.examples import cournot, spatial
+
+from _common import RECORDED_NOTE, add_path_argument, choose_path_source  # noqa: E402
 
 from compass_sparse._jit import end_cold_start  # noqa: E402
 
@@ -212,16 +220,35 @@ def part_pyomo(reps):
                   f"{ej*1e3:.3f} ({ej/hj:.1f}) | {ts:.3f} | {th:.3f} | {nat:.1e} |")
 
 
-def part_gamspy(reps):
-    from compass_sparse.interfaces.gamspy import GamsMCP, solve_gamspy
+def part_gamspy(reps, source):
+    from compass_sparse.interfaces.gams_state import gams_state
 
+    recorded = source.recorded
+    gams_runs = gams_state().runs  # our GAMSPy route needs GAMS too
+    if gams_runs:
+        from compass_sparse.interfaces.gamspy import GamsMCP, solve_gamspy
+    mark = " (recorded)" if recorded else ""
     print("\n## GAMSPy route (free licence: n <= 1000), PATH on the same model\n")
+    if not gams_runs:
+        print(f"Our GAMSPy route is not run: GAMS cannot run ({gams_state().reason}); "
+              "its columns are '–'.\n")
     print("| model | n | GAMSPy build [s] | GMO generation [s] | F [ms] (x numpy) | "
-          "J [ms] (x numpy) | solve ours [s] (in solve_mcp) | solve PATH [s] | max level diff |")
+          f"J [ms] (x numpy) | solve ours [s] (in solve_mcp) | solve PATH [s]{mark} | "
+          "max level diff |")
     print("|---|---|---|---|---|---|---|---|---|")
     for name, sizes in GAMS_SIZES.items():
         mod = MODULES[name]
         for n_target, args in sizes.items():
+            ref = None
+            if recorded:
+                ref = source.lookup(model=name, n_target=n_target)
+                if ref is not None and ref["size_arg"] != args[0]:
+                    ref = None  # recorded at another size: not this model
+            if not gams_runs:
+                path = f"{ref['solve_wall']:.2f}" if ref else "– (not in the reference)"
+                n = ref["n"] if ref else f"~{n_target}"
+                print(f"| {name} | {n} | – | – | – | – | – | {path} | – |")
+                continue
             d, kw, x = case(mod, args)
             tb = med(lambda: mod.gamspy_model(d), reps)
             ct, model, sym = mod.gamspy_model(d)
@@ -234,23 +261,33 @@ def part_gamspy(reps):
             gm.close()
             hf, hj = med(lambda: kw["F"](x), 30), med(lambda: kw["jac"](x), 30)
             ours, inner, path = [], [], []
+            diff = None
             for _ in range(reps):
                 ct, model, sym = mod.gamspy_model(d)
                 t = time.perf_counter()
                 res = solve_gamspy(ct, model, {"convergence_tolerance": TOL})
                 ours.append(time.perf_counter() - t)
                 inner.append(res.time)
+                if recorded:
+                    continue
                 xa = mod.gamspy_solution(sym, d)
                 ct2, model2, sym2 = mod.gamspy_model(d)
                 t = time.perf_counter()
                 model2.solve(solver="path", solver_options={"convergence_tolerance": TOL})
                 path.append(time.perf_counter() - t)
                 xb = mod.gamspy_solution(sym2, d)
-            diff = float(np.max(np.abs(xa - xb)))
+                diff = float(np.max(np.abs(xa - xb)))
+            if recorded:
+                path_text = f"{ref['solve_wall']:.2f}" if ref else "– (not in the reference)"
+            else:
+                path_text = f"{statistics.median(path):.2f}"
             print(f"| {name} | {gm.n} | {tb:.2f} | {tg:.2f} | {ef*1e3:.2f} ({ef/hf:.0f}) | "
                   f"{ej*1e3:.2f} ({ej/hj:.0f}) | {statistics.median(ours):.2f} "
-                  f"({statistics.median(inner):.2f}) | "
-                  f"{statistics.median(path):.2f} | {diff:.1e} |")
+                  f"({statistics.median(inner):.2f}) | {path_text} | "
+                  f"{'–' if diff is None else f'{diff:.1e}'} |")
+    if recorded:
+        print("\n" + RECORDED_NOTE + " Here PATH's time is the wall time of GAMSPy's "
+              "model.solve (GAMS process included), as recorded (0.01 s).")
 
 
 def main(argv=None):
@@ -258,13 +295,21 @@ def main(argv=None):
     ap.add_argument("--parts", nargs="+", default=["evaluator", "pyomo", "gamspy"],
                     choices=["evaluator", "pyomo", "gamspy"])
     ap.add_argument("--repeats", type=int, default=3)
+    add_path_argument(ap)
     a = ap.parse_args(argv)
     import platform
 
     print(f"# bench_links: revision {revision()}, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, "
           f"python {platform.python_version()}, numpy {np.__version__}")
+    source = None
+    if "gamspy" in a.parts:
+        source = choose_path_source("links", a.path_mode)
+        print(source.line(), flush=True)
     for part in a.parts:
-        {"evaluator": part_evaluator, "pyomo": part_pyomo, "gamspy": part_gamspy}[part](a.repeats)
+        if part == "gamspy":
+            part_gamspy(a.repeats, source)
+        else:
+            {"evaluator": part_evaluator, "pyomo": part_pyomo}[part](a.repeats)
 
 
 if __name__ == "__main__":

@@ -32,10 +32,20 @@ generation are not counted; PATH evaluates F and J through GAMS' compiled instru
 included in its time).  Success = OUR natural residual
 ``||z - clip(z - F(z), l, u)||_inf <= 1e-6`` of the returned point, for both solvers.
 
+PATH's figures
+--------------
+Where GAMS cannot run (e.g. its licence expired) PATH's rows are the recorded ones of
+``benchmarks/reference/small.csv`` (``--path recorded`` asks for them where GAMS runs;
+``--path live`` insists on a live run).  The first lines of the output say which source
+is used; recorded rows carry ``path_source = "recorded <date> <rev>"`` in the CSV (live
+ones ``live``) and are marked in the tables, whose ratios then compare with PATH's run
+of that day; a problem the reference does not have gets "–".
+
     python3 benchmarks/bench_small.py                     # all groups, 5 repeats
     python3 benchmarks/bench_small.py --groups known --repeats 21
     python3 benchmarks/bench_small.py --rounds 3 --repeats 3 --path-repeats 1
     python3 benchmarks/bench_small.py --no-path           # compass_sparse only
+    python3 benchmarks/bench_small.py --path recorded     # PATH's recorded figures
     python3 benchmarks/bench_small.py --import-time       # import and first solve only
 
 Results: ``benchmarks/results/small<suffix>.csv`` (one row per problem and solver) and a
@@ -60,21 +70,26 @@ sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE.parent / "tests"))
 from _common import (
+    RECORDED_NOTE,
     RESULTS,
     SUCCESS_TOL,
     CsvLog,
+    add_path_argument,
+    any_recorded,
+    choose_path_source,
     fmt_time,
     machine_info,
     md_table,
     natural_residual,
-    path_available,
     path_session,
     print_machine,
+    recorded_mark,
     warm_up,
 )
 
 FIELDS = ["group", "name", "n", "solver", "success", "status", "natural", "time", "user",
-          "wall", "cpu", "user_cpu", "major", "minor", "repeats", "error", "cpu_min"]
+          "wall", "cpu", "user_cpu", "major", "minor", "repeats", "error", "cpu_min",
+          "path_source"]
 
 
 # --------------------------------------------------------------------------- cases
@@ -390,7 +405,19 @@ def run_path(case, repeats, times=None):
     return dict(group=case.group, name=case.name, n=case.n, solver="PATH",
                 success=nat <= SUCCESS_TOL, status=status, natural=nat,
                 time=statistics.median(times), user=math.nan, wall=math.nan,
-                major="", minor="", repeats=len(times), error="")
+                major="", minor="", repeats=len(times), error="", path_source="live")
+
+
+def recorded_path(case, reference):
+    """PATH's recorded row of the case (benchmarks/reference/small.csv) in this script's
+    fields, or None when PATH was not recorded on it."""
+    r = reference.get(group=case.group, name=case.name, n=case.n)
+    if r is None:
+        return None
+    return dict(group=case.group, name=case.name, n=case.n, solver="PATH",
+                success=bool(r["success"]), status=r["status"], natural=float(r["natural"]),
+                time=float(r["time"]), user=math.nan, wall=math.nan, major="", minor="",
+                repeats=r["repeats"], error="", path_source=r["path_source"])
 
 
 # --------------------------------------------------------------------------- import time
@@ -431,6 +458,8 @@ def summarize(rows, imp=None) -> str:
         by.setdefault((r["group"], r["name"]), {})[r["solver"]] = r
     out = []
     table = []
+    rec = any_recorded(r for r in rows if r["solver"] == "PATH")
+    mark = " (recorded)" if rec else ""
     for (g, name), d in by.items():
         o, p = d.get("compass_sparse"), d.get("PATH")
         ratio = (_ours(o) / p["time"] if o and p and p["success"] and o["success"]
@@ -443,7 +472,8 @@ def summarize(rows, imp=None) -> str:
                       fmt_time(p["time"]) if p else "–",
                       f"{ratio:.2f}" if not math.isnan(ratio) else "–"])
     out.append(md_table(["group", "problem", "n", "ours ok", "ours CPU", "ours wall", "in F/J",
-                         "pivots", "PATH ok", "PATH time", "ratio"], table))
+                         "pivots", f"PATH ok{mark}", f"PATH time{mark}",
+                         "ratio vs recorded PATH" if rec else "ratio"], table))
     out.append("")
     gt = []
     for g in dict.fromkeys(r["group"] for r in rows):
@@ -461,9 +491,13 @@ def summarize(rows, imp=None) -> str:
                    fmt_time(statistics.median([p["time"] for _, p in pairs])) if pairs else "–",
                    f"{statistics.median(ratios):.2f}" if ratios else "–",
                    f"{max(ratios):.2f}" if ratios else "–"])
-    out.append(md_table(["group", "problems", "ours solved", "PATH solved",
-                         "median ours (both solved)", "median PATH", "median ratio",
-                         "worst ratio"], gt))
+    out.append(md_table(["group", "problems", "ours solved", f"PATH solved{mark}",
+                         "median ours (both solved)", f"median PATH{mark}",
+                         "median ratio" + (" vs recorded PATH" if rec else ""),
+                         "worst ratio" + (" vs recorded PATH" if rec else "")], gt))
+    if rec:
+        out.append("")
+        out.append(RECORDED_NOTE)
     small = [r for r in rows if r["solver"] == "compass_sparse" and int(r["n"]) <= 10]
     if small:
         out.append("")
@@ -509,7 +543,8 @@ def compare(before, after) -> str:
                      "worst ratio after / PATH"], out)
 
 
-def main(argv=None):
+def parser():
+    """The command line (its defaults are the default case list)."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--groups", nargs="+", default=["known", "thesis", "cge"],
                     choices=["known", "thesis", "cge"])
@@ -524,16 +559,37 @@ def main(argv=None):
     ap.add_argument("--static-n", nargs="+", type=int, default=[90, 830])
     ap.add_argument("--time-limit", type=float, default=60.0)
     ap.add_argument("--no-path", action="store_true")
+    add_path_argument(ap)
     ap.add_argument("--order", choices=["sweeps", "interleaved"], default="sweeps",
                     help="within a round: all our solves, then all PATH runs (sweeps), or "
                          "each problem's solves followed by its PATH runs (interleaved)")
     ap.add_argument("--import-time", action="store_true",
                     help="only measure the import and the first solve in fresh interpreters")
     ap.add_argument("--suffix", default="")
+    ap.add_argument("--out", type=Path, default=None,
+                    help="CSV of the rows (default benchmarks/results/small<suffix>.csv)")
+    ap.add_argument("--no-import-time", action="store_true",
+                    help="leave out the import time (fresh interpreters) after the solves")
     ap.add_argument("--summarize", metavar="CSV", help="print the tables of an existing CSV")
     ap.add_argument("--compare", nargs=2, metavar=("BEFORE", "AFTER"),
                     help="per-group table of two CSVs")
-    a = ap.parse_args(argv)
+    return ap
+
+
+def cases_of(a):
+    """The cases the parsed command line ``a`` asks for."""
+    cases = []
+    if "known" in a.groups:
+        cases += _known_cases()
+    if "thesis" in a.groups:
+        cases += _thesis_cases(a.thesis_n, a.families, a.seeds)
+    if "cge" in a.groups:
+        cases += _cge_cases(a.ramsey_T, a.static_n)
+    return cases
+
+
+def main(argv=None):
+    a = parser().parse_args(argv)
     if a.compare:
         from _common import read_csv
 
@@ -552,19 +608,15 @@ def main(argv=None):
         return
     info = machine_info()
     print_machine(info)
-    use_path = not a.no_path and path_available()
+    source = choose_path_source("small", a.path_mode, a.no_path)
+    print(source.line(), flush=True)
+    use_path = source.live
     warm_up(with_path=use_path)
     cw, cc, sw, sc = _instrument_cost()
     print(f"instrument (taken off the solver's time): per call of F or J {cw * 1e6:.2f} us "
           f"wall, {cc * 1e6:.2f} us CPU; per solve {sw * 1e6:.2f} us wall, "
           f"{sc * 1e6:.2f} us CPU")
-    cases = []
-    if "known" in a.groups:
-        cases += _known_cases()
-    if "thesis" in a.groups:
-        cases += _thesis_cases(a.thesis_n, a.families, a.seeds)
-    if "cge" in a.groups:
-        cases += _cge_cases(a.ramsey_T, a.static_n)
+    cases = cases_of(a)
     # Rounds: every round times every problem (``--repeats`` solves, ``--path-repeats``
     # PATH runs), so that each problem's samples are spread over the whole run and a slow
     # minute of the shared machine touches all problems alike instead of a few; the rows
@@ -579,7 +631,8 @@ def main(argv=None):
     ours_samples = {c.name: {} for c in cases}
     path_samples = {c.name: [] for c in cases}
     rows = []
-    log = CsvLog(RESULTS / f"small{a.suffix}.csv", FIELDS)  # rows of the last round
+    out = a.out or RESULTS / f"small{a.suffix}.csv"
+    log = CsvLog(out, FIELDS)  # rows of the last round
 
     def ours(c, rnd):
         if rnd == 0:
@@ -589,6 +642,8 @@ def main(argv=None):
     def theirs(c):
         if use_path and c.path_run is not None:
             return run_path(c, a.path_repeats, path_samples[c.name])
+        if source.recorded:
+            return recorded_path(c, source.reference)
         return None
 
     for rnd in range(a.rounds):
@@ -602,16 +657,20 @@ def main(argv=None):
             line = f"{c.group:7s} {c.name:22s} n={c.n:5d} ours {fmt_time(r['time']):>9s} " \
                    f"(F/J {fmt_time(r['user'])}) {'ok' if r['success'] else 'FAIL'}"
             if p is not None:
-                line += f" | PATH {fmt_time(p['time']):>9s} {'ok' if p['success'] else 'FAIL'}"
+                line += (f" | PATH {fmt_time(p['time']):>9s} {'ok' if p['success'] else 'FAIL'}"
+                         + recorded_mark(p))
+            elif source.recorded:
+                line += " | PATH         – (not in the reference)"
             if last:
                 for row in [r] + ([p] if p is not None else []):
                     log.write(row)
                     rows.append(row)
             print(f"[round {rnd + 1}/{a.rounds}] " + line, flush=True)
     log.close()
-    imp = import_time()
+    imp = None if a.no_import_time else import_time()
     print()
     print(summarize(rows, imp))
+    print(f"\n# rows in {out}", flush=True)
 
 
 if __name__ == "__main__":

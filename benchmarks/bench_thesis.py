@@ -15,6 +15,12 @@ from the raw data in float64).  A time-out counts as a failure.  Times: compass_
 wall time of the ``solve_mcp`` call; PATH = its own "Total Time" (GAMS process overhead
 excluded).
 
+PATH's figures: a live run where GAMS can run; where it cannot (or with ``--path
+recorded``) the recorded rows of ``benchmarks/reference/thesis.csv``.  The first lines of
+the output say which; recorded rows carry ``path_source = "recorded <date> <rev>"`` in the
+CSV and the tables say so; an instance the reference does not have is left out of PATH's
+side (its cell counts only the instances both solvers have).
+
 Table mode (default): the loop runs instance by instance over all (family, n) cells, so an
 interrupted run leaves a balanced partial table; every solve is appended to the CSV at
 once (``--resume`` skips the solves already in it).  ``--summarize CSV`` re-prints the
@@ -26,6 +32,7 @@ convergence_tolerance in 1e-4 ... 1e-12 on a few instances, both solvers.
     python benchmarks/bench_thesis.py --quick
     python benchmarks/bench_thesis.py --instances 100 --time-limit 60     # full table
     python benchmarks/bench_thesis.py --tolerances
+    python benchmarks/bench_thesis.py --quick --path recorded          # PATH's recorded rows
 """
 from __future__ import annotations
 
@@ -40,13 +47,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _common import (  # noqa: E402
-    RESULTS, SUCCESS_TOL, CsvLog, Worker, fmt_e, fmt_time, machine_info, md_table, median,
-    ours_record, path_available, path_record, path_session, print_machine, read_csv,
-    run_task, warm_up, write_json)
+    RECORDED_NOTE, RESULTS, SUCCESS_TOL, CsvLog, Worker, add_path_argument, any_recorded,
+    choose_path_source, fmt_e, fmt_time, machine_info, md_table, median, ours_record,
+    path_record, path_session, print_machine, read_csv, recorded_mark, run_task, warm_up,
+    write_json)
 
 FIELDS = ["family", "n", "seed", "tol", "solver", "success", "reported_success", "status",
           "natural", "fb_norm", "time", "wall", "major", "minor", "crash", "factorizations",
-          "restarts", "repeats", "passes", "pass_times", "error"]
+          "restarts", "repeats", "passes", "pass_times", "error", "path_source"]
 SOLVERS = ("compass_sparse", "PATH")
 
 
@@ -108,10 +116,39 @@ def task_path(family, n, seed, time_limit, tol, repeats=1):
             session=path_session(n, True))
         return path_record(run, info["lb"], info["ub"])
 
-    return _repeat(once, repeats)
+    rec = _repeat(once, repeats)
+    rec["path_source"] = "live"
+    return rec
 
 
 TASKS = {"compass_sparse": task_ours, "PATH": task_path}
+
+
+def recorded_path(reference, family, n, seed, tol):
+    """PATH's recorded row of the instance (benchmarks/reference/thesis.csv) in this
+    script's fields, or None when PATH was not recorded on it."""
+    r = reference.get(family=family, n=n, seed=seed, tol=tol)
+    if r is None:
+        return None
+    rec = {f: r.get(f, "") for f in FIELDS}
+    rec.update(solver="PATH", factorizations=-1, passes="", pass_times="", error="",
+               time_limit=r["time_limit"])
+    return rec
+
+
+def _solve(worker, source, s, hard, **kw):
+    """One solve's row: ours or PATH's live (in the worker), or PATH's recorded row (None
+    when the reference does not have the instance)."""
+    if s == "PATH" and source.recorded:
+        rec = recorded_path(source.reference, kw["family"], kw["n"], kw["seed"], kw["tol"])
+        if rec is not None and float(rec["time"]) > kw["time_limit"]:
+            rec["error"] = (f"recorded with a limit of {rec.get('time_limit', '?')} s: above "
+                            f"this run's {kw['time_limit']:g} s")
+        return rec
+    rec = run_task(worker, TASKS[s], s, hard, **kw)
+    if s == "PATH":
+        rec.setdefault("path_source", "live")
+    return rec
 
 
 # --------------------------------------------------------------------------- summaries
@@ -131,6 +168,8 @@ def summarize(rows, out=print):
     fams = sorted({k[0] for k in cells})
     ns = sorted({k[1] for k in cells})
     solvers = [s for s in SOLVERS if any(k[2] == s for k in cells)]
+    rec = any_recorded(r for r in rows if r["solver"] == "PATH")
+    label = {"compass_sparse": "compass_sparse", "PATH": "PATH (recorded)" if rec else "PATH"}
 
     out("\nSuccess rate (natural residual <= 1e-6) and median time of a success; "
         "K = instances that completed for BOTH solvers in that cell\n")
@@ -138,7 +177,7 @@ def summarize(rows, out=print):
     table = []
     for fam in fams:
         for s in solvers:
-            line = [f"{fam} / {s}"]
+            line = [f"{fam} / {label[s]}"]
             for n in ns:
                 common = _common_seeds(cells, fam, n, solvers)
                 if not common:
@@ -154,7 +193,8 @@ def summarize(rows, out=print):
     out("\nDetails per cell (same instances for both solvers)\n")
     header = ["family", "n", "solver", "solved", "median t (success)", "median t (failure)",
               "timeouts", "median major", "median pivots", "median restarts",
-              "only this solver solved", "median time ratio ours/PATH (both solved)"]
+              "only this solver solved",
+              "median time ratio ours/" + ("recorded PATH" if rec else "PATH") + " (both solved)"]
     table = []
     for fam in fams:
         for n in ns:
@@ -178,13 +218,15 @@ def summarize(rows, out=print):
                         rat = [cells[(fam, n, s)][k]["time"] / max(cells[(fam, n, other)][k]["time"], 1e-6)
                                for k in both]
                         ratio = f"{median(rat):.3g} ({len(both)} inst.)"
-                table.append([fam, n, s, f"{len(ok)}/{len(rr)}",
+                table.append([fam, n, label[s], f"{len(ok)}/{len(rr)}",
                               fmt_time(median([r["time"] for r in ok])),
                               fmt_time(median([r["time"] for r in bad])), to,
                               _med_int([r["major"] for r in rr]),
                               _med_int([r["minor"] for r in rr]),
                               _med_int([r["restarts"] for r in rr]), only, ratio])
     out(md_table(header, table))
+    if rec:
+        out("\n" + RECORDED_NOTE)
 
 
 def _med_int(xs):
@@ -211,11 +253,14 @@ def summarize_tolerances(rows, out=print):
               "median time", "total time", "median achieved FB norm", "median achieved natural",
               "max achieved natural"]
     table = []
+    rec = any_recorded(r for r in rows if r["solver"] == "PATH")
     for s in SOLVERS:
         for tol in sorted({t for (ss, t) in by if ss == s}, reverse=True):
             rr = by[(s, tol)]
             fin = [r["natural"] for r in rr if math.isfinite(r["natural"])]
-            table.append([s, f"{tol:.0e}", f"{sum(bool(r['reported_success']) for r in rr)}/{len(rr)}",
+            name = s + (" (recorded)" if s == "PATH" and rec else "")
+            table.append([name, f"{tol:.0e}",
+                          f"{sum(bool(r['reported_success']) for r in rr)}/{len(rr)}",
                           f"{sum(r['natural'] <= tol for r in rr)}/{len(rr)}",
                           fmt_time(median([r["time"] for r in rr])),
                           fmt_time(sum(r["time"] for r in rr if math.isfinite(r["time"]))),
@@ -223,9 +268,27 @@ def summarize_tolerances(rows, out=print):
                           fmt_e(median(fin)) if fin else "inf",
                           fmt_e(max(fin)) if fin else "inf"])
     out(md_table(header, table))
+    if rec:
+        out("\n" + RECORDED_NOTE)
 
 
 # --------------------------------------------------------------------------- main
+TOLERANCES = [1e-4, 1e-6, 1e-8, 1e-10, 1e-12]
+"""``--tolerances``: the convergence tolerances of both solvers."""
+TOLERANCE_INSTANCES = ([(1, 20, s) for s in range(3)] + [(1, 50, s) for s in range(3)]
+                       + [(2, 20, s) for s in range(3)])
+"""``--tolerances``: its (family, n, seed) instances (``--quick``: the next list)."""
+TOLERANCE_INSTANCES_QUICK = [(1, 20, 0), (2, 10, 0)]
+
+
+def _keys(source, plan):
+    """The reference keys of the planned (family, n, seed, tol) solves (recorded mode)."""
+    if not source.recorded:
+        return None
+    ref = source.reference
+    return [ref.key(family=f, n=n, seed=s, tol=t) for f, n, s, t in plan]
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -243,6 +306,7 @@ def main(argv=None):
                     help="solves faster than 0.2 s are repeated this often; median time")
     ap.add_argument("--seed0", type=int, default=0, help="instance k uses seed seed0 + k")
     ap.add_argument("--no-path", action="store_true", help="compass_sparse only")
+    add_path_argument(ap)
     ap.add_argument("--out", type=Path, default=None, help="CSV output")
     ap.add_argument("--resume", action="store_true",
                     help="append to --out and skip solves already in it")
@@ -263,10 +327,9 @@ def main(argv=None):
 
     info = machine_info()
     print_machine(info)
-    use_path = (not a.no_path) and path_available()
-    if not a.no_path and not use_path:
-        print("# PATH (gamspy) not available: compass_sparse only", flush=True)
-    solvers = [s for s in SOLVERS if s == "compass_sparse" or use_path]
+    source = choose_path_source("thesis", a.path_mode, a.no_path)
+    use_path = source.live
+    solvers = [s for s in SOLVERS if s == "compass_sparse" or source.mode != "none"]
     if a.path_only:
         solvers = [s for s in solvers if s == "PATH"]
     tl = a.time_limit if a.time_limit is not None else (20.0 if a.quick else 60.0)
@@ -274,31 +337,35 @@ def main(argv=None):
     worker = Worker(warm_up, dict(with_path=use_path))
 
     if a.tolerances:
-        tols = [1e-4, 1e-6, 1e-8, 1e-10, 1e-12]
-        if a.quick:
-            inst = [(1, 20, 0), (2, 10, 0)]
-        else:
-            inst = [(1, 20, s) for s in range(3)] + [(1, 50, s) for s in range(3)] \
-                + [(2, 20, s) for s in range(3)]
+        tols = TOLERANCES
+        inst = TOLERANCE_INSTANCES_QUICK if a.quick else TOLERANCE_INSTANCES
         out = a.out or RESULTS / ("thesis_tolerances_quick.csv" if a.quick
                                   else "thesis_tolerances.csv")
+        print(source.line(_keys(source, [(f, n, s, t) for f, n, s in inst for t in tols])),
+              flush=True)
         log = CsvLog(out, FIELDS)
         rows = []
         for fam, n, seed in inst:
             for tol in tols:
                 for s in solvers:
-                    rec = run_task(worker, TASKS[s], s, hard, family=fam, n=n, seed=seed,
-                                   time_limit=tl, tol=tol, repeats=a.repeats)
+                    rec = _solve(worker, source, s, hard, family=fam, n=n, seed=seed,
+                                 time_limit=tl, tol=tol, repeats=a.repeats)
+                    if rec is None:
+                        print(f"family {fam} n={n:4d} seed {seed:3d} tol {tol:.0e} {s:15s} "
+                              f"– (not in the reference)", flush=True)
+                        continue
                     rec.update(family=fam, n=n, seed=seed, tol=tol, solver=s)
                     log.write(rec)
                     rows.append(rec)
                     print(f"family {fam} n={n:4d} seed {seed:3d} tol {tol:.0e} {s:15s} "
                           f"natural {fmt_e(rec['natural'])} FB {fmt_e(rec['fb_norm'])} "
-                          f"{fmt_time(rec['time'])} {rec['status']}", flush=True)
+                          f"{fmt_time(rec['time'])} {rec['status']}{recorded_mark(rec)}",
+                          flush=True)
         log.close()
         worker.close()
         write_json(out.with_suffix(".json"), dict(machine=info, time_limit=tl, tolerances=tols,
-                                                  instances=inst))
+                                                  instances=inst,
+                                                  path=source.line().lstrip("# ")))
         summarize_tolerances(rows)
         print(f"\n# rows in {out}", flush=True)
         return 0
@@ -312,12 +379,17 @@ def main(argv=None):
         rows = read_csv(out)
         done = {(int(r["family"]), int(r["n"]), int(r["seed"]), r["solver"]) for r in rows}
         print(f"# resuming: {len(done)} solves already in {out}", flush=True)
+    plan = [(fam, n, a.seed0 + k, 1e-6) for k in range(K) for n in sizes
+            for fam in a.families if not (fam == 2 and n > a.family2_max)]
+    print(source.line(_keys(source, plan)), flush=True)
     log = CsvLog(out, FIELDS, append=a.resume)
     write_json(out.with_suffix(".json"), dict(machine=info, time_limit=tl, instances=K,
                                               sizes=sizes, families=a.families,
                                               family2_max=a.family2_max, seed0=a.seed0,
                                               homotopy=a.homotopy,
-                                              success_tol=SUCCESS_TOL))
+                                              success_tol=SUCCESS_TOL,
+                                              path=source.line(_keys(source, plan))
+                                              .lstrip("# ")))
     t_start = time.perf_counter()
     # instance-major order: every pass over k adds one instance to every cell
     for k in range(K):
@@ -331,8 +403,12 @@ def main(argv=None):
                         continue
                     extra = ({} if s != "compass_sparse" or a.homotopy is None
                              else dict(homotopy=a.homotopy))
-                    rec = run_task(worker, TASKS[s], s, hard, family=fam, n=n, seed=seed,
-                                   time_limit=tl, tol=1e-6, repeats=a.repeats, **extra)
+                    rec = _solve(worker, source, s, hard, family=fam, n=n, seed=seed,
+                                 time_limit=tl, tol=1e-6, repeats=a.repeats, **extra)
+                    if rec is None:
+                        print(f"[{time.perf_counter() - t_start:7.0f}s] family {fam} n={n:4d} "
+                              f"seed {seed:3d} {s:15s} – (not in the reference)", flush=True)
+                        continue
                     rec.update(family=fam, n=n, seed=seed, tol=1e-6, solver=s)
                     log.write(rec)
                     rows.append(rec)
@@ -340,7 +416,8 @@ def main(argv=None):
                           f"seed {seed:3d} {s:15s} {'OK  ' if rec['success'] else 'FAIL'} "
                           f"natural {fmt_e(rec['natural'])} {fmt_time(rec['time']):>9s} "
                           f"major {rec['major']} pivots {rec['minor']} {rec['status']}"
-                          + (f" [{rec['error']}]" if rec["error"] else ""), flush=True)
+                          + (f" [{rec['error']}]" if rec["error"] else "") + recorded_mark(rec),
+                          flush=True)
     log.close()
     worker.close()
     summarize(rows)

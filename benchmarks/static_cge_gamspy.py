@@ -13,7 +13,10 @@ generator's defaults 0.8, 2.0 and 0.5); a model with Cobb-Douglas or Leontief ne
 raises ``NotImplementedError`` rather than being solved as a different model.
 
 ``solve_static_with_path(model)`` returns the point (in the generator's order), PATH's
-"Total Time", its counters and exit message.  tests/test_static_cge_gamspy.py checks that
+"Total Time", its counters and exit message; where GAMS cannot run it raises the package's
+``GamsLicenseError`` (or ImportError without GAMSPy) before building anything.  bench_small.py
+calls it only for a live PATH run (elsewhere PATH's figures come from
+``benchmarks/reference/small.csv``).  tests/test_static_cge_gamspy.py checks that
 the two formulations agree: PATH's solution of this one zeroes the generator's F and is
 the point our solver finds.
 """
@@ -223,10 +226,13 @@ def _set_attr(m, v, attr, labels, vals, pname):
 def solve_static_with_path(model, tol=1e-6, options=None):
     """Solve a static CGE model with PATH through GAMSPy from the model's start point.
     Returns dict(x, time (PATH's Total Time), wall, status, major, minor, log)."""
+    from compass_sparse.interfaces.gams_state import gams_refusals, require_gams
     from compass_sparse.interfaces.path_gamspy import parse_path_log
 
     ev = _evaluator(model)
-    m, gm, var, lab = static_container(model)
+    require_gams("solve the static CGE model with PATH")
+    with gams_refusals("solve the static CGE model with PATH"):
+        m, gm, var, lab = static_container(model)
     buf = io.StringIO()
     lg = logging.getLogger("MODEL")
     old = lg.level
@@ -235,7 +241,8 @@ def solve_static_with_path(model, tol=1e-6, options=None):
     opts.update(options or {})
     t0 = time.perf_counter()
     try:
-        gm.solve(solver="PATH", solver_options=opts, output=buf)
+        with gams_refusals("solve the static CGE model with PATH", log=buf.getvalue):
+            gm.solve(solver="PATH", solver_options=opts, output=buf)
     finally:
         lg.setLevel(old)
     wall = time.perf_counter() - t0
