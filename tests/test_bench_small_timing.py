@@ -26,8 +26,12 @@ def _slow_cpu_clock(monkeypatch):
     real = time.process_time
 
     def slow():
-        end = time.perf_counter() + SLOW
-        while time.perf_counter() < end:
+        # Spin for SLOW seconds of this process's CPU time, not of wall time: on a loaded
+        # machine a wall-time spin is preempted, its CPU cost varies from read to read,
+        # and the instrument's calibration (the mean cost of a read) missed by a few ms
+        # (test_bench_small_charges_the_cpu_clock_reads_... failed at 23 ms under load).
+        end = real() + SLOW
+        while real() < end:
             pass
         return real()
 
