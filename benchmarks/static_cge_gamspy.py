@@ -230,6 +230,7 @@ def solve_static_with_path(model, tol=1e-6, options=None):
     from compass_sparse.interfaces.path_gamspy import parse_path_log
 
     ev = _evaluator(model)
+    _general_ces(ev.cva, ev.cA, ev.e)  # (a model this cannot write: said before GAMS' state)
     require_gams("solve the static CGE model with PATH")
     with gams_refusals("solve the static CGE model with PATH"):
         m, gm, var, lab = static_container(model)
