@@ -92,7 +92,8 @@ class VarSet(VarRef):
 
 
 class Parameter(ParamLeaf):
-    """Data that may change between solves: ``p.set(values)``; ``p[label]`` selects."""
+    """Data that may change between solves: ``p.set(values)``, ``p.get()``; ``p[label]``
+    selects elements by label."""
 
     def __init__(self, model, name, value, labels):
         self.model, self.name, self.labels = model, name, labels
@@ -101,8 +102,8 @@ class Parameter(ParamLeaf):
         super().__init__(name, np.arange(n))
         self._where = {} if labels is None else {lab: k for k, lab in enumerate(labels)}
 
-    @property
-    def value(self):
+    def get(self):
+        """The current values (a float for a scalar parameter)."""
         v = self.model.params[self.name]
         return float(v[0]) if self.labels is None else v.copy()
 
@@ -119,7 +120,10 @@ class Parameter(ParamLeaf):
         return np.array([self._where[k] for k in keys], dtype=np.int64)
 
     def __getitem__(self, key):
-        return ParamLeaf(self.name, self._pos(key))
+        if isinstance(key, str) or (isinstance(key, (list, tuple)) and key
+                                    and all(isinstance(k, str) for k in key)):
+            return ParamLeaf(self.name, self._pos(key))
+        return super().__getitem__(key)  # positions: an expression's elements
 
 
 def _as_ref(model, ref, kind, what):

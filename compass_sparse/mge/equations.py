@@ -11,7 +11,7 @@ Rows are paired with variables (row i is the condition of variable i):
 * auxiliary constraints as written  _|_  the auxiliary;
 * nest price indices:  π_n - CES_n(children's prices) = 0  _|_  π_n (free);
 
-with leaf quantities x_e and price indices as in :mod:`.structure`.  CES aggregates are
+with leaf quantities x_e (capped at e^``LOGX_MAX`` times the reference quantity) and price indices as in :mod:`.structure`.  CES aggregates are
 evaluated in log space (a log-sum-exp, so that large elasticities neither overflow nor
 underflow); for |ρ| < ``RHO_CD`` the aggregate uses the second-order expansion
 log π = Σ θ l + (ρ/2)(Σ θ l² - (Σ θ l)²), whose error is O(ρ²) (< 1e-12 here), instead of
@@ -32,6 +32,11 @@ RHO_CD = 1e-6
 
 PRICE_FLOOR = 1e-300
 """Prices below this are floored inside logarithms (a price of exactly 0 has no index)."""
+
+
+LOGX_MAX = 300.0
+"""Cap on log(quantity / reference quantity) of a netput: beyond it, far from a solution
+with a huge elasticity, the quantity is held at e^300 times its reference (finite)."""
 
 
 class Equations:
@@ -132,7 +137,10 @@ class Equations:
         logx = (np.log(st.leaf_q) + st.leaf_a * lell
                 + np.bincount(st.pair_leaf, weights=st.pair_coef * lpin[st.pair_node],
                               minlength=st.n_leaves))
-        xq = np.exp(logx)
+        # Far from consistent nest prices a large elasticity can ask for exp(>709): the
+        # quantity is capped (and its derivative is then that of the cap, zero).
+        capped = logx > LOGX_MAX
+        xq = np.exp(np.minimum(logx, LOGX_MAX))
         act = x[st.leaf_owner] * st.leaf_scale
         flow = st.leaf_flow_sign * act * xq
         F += np.bincount(st.leaf_comm, weights=flow, minlength=self.n)
@@ -191,6 +199,8 @@ class Equations:
         x_val = np.concatenate([
             xq[st.pair_leaf] * st.pair_coef / np.maximum(pin[st.pair_node], PRICE_FLOOR),
             (xq * st.leaf_a / np.maximum(ell, PRICE_FLOOR))[gl_leaf] * gl_val])
+        if capped.any():
+            x_val[capped[x_leaf]] = 0.0
         # Market rows: flow = sign * act * x.
         emit(st.leaf_comm, st.leaf_owner, st.leaf_flow_sign * st.leaf_scale * xq)
         emit(st.leaf_comm[x_leaf], x_col, (st.leaf_flow_sign * act)[x_leaf] * x_val)

@@ -145,11 +145,13 @@ class Solution(_Point):
 
     def residual(self):
         """max |F| over the rows whose variable is strictly inside its bounds, and the
-        complementarity violation elsewhere (recomputed here, not taken from the solver)."""
+        complementarity violation at a bound (recomputed here, not taken from the solver);
+        rows of fixed variables are not conditions (a fixing removes its row)."""
         F, _ = self.eq.evaluate(self.x, deriv=False)
         lb, ub = self.result.lb, self.result.ub
         x = self.x
         r = np.where(x <= lb, np.minimum(F, 0.0), np.where(x >= ub, np.maximum(F, 0.0), F))
+        r[lb == ub] = 0.0
         return float(np.max(np.abs(r))) if r.size else 0.0
 
     def equivalent_variation(self, baseline):
