@@ -43,3 +43,29 @@ def matches(sol, ref, column, getters, rtol=RTOL, atol=None):
         if not math.isclose(ours, theirs, rel_tol=rtol, abs_tol=atol.get(row, 1e-12)):
             bad.append((row, ours, theirs))
     return bad
+
+
+def getters(values=None, inputs=None, outputs=None, finals=None):
+    """Row -> callable(solution): variable values, compensated input demands and output
+    supplies per unit of activity ((sector, commodity) pairs), final demands
+    ((consumer, commodity) pairs)."""
+    g = {}
+    for row, ref in (values or {}).items():
+        g[row] = lambda s, r=ref: s.value(r)
+    for row, (a, b) in (inputs or {}).items():
+        g[row] = lambda s, a=a, b=b: s.compensated_demand(a, b)
+    for row, (a, b) in (outputs or {}).items():
+        g[row] = lambda s, a=a, b=b: s.compensated_demand(a, b, output=True)
+    for row, (a, b) in (finals or {}).items():
+        g[row] = lambda s, a=a, b=b: s.final_demand(a, b)
+    return g
+
+
+def solve_and_match(m, ref, column, gets, atol=None):
+    """Solve, check the returned point solves the model, match the peer's column."""
+    sol = m.solve()
+    assert sol.success, sol.result.message
+    assert sol.residual() <= 1e-9
+    bad = matches(sol, ref, column, gets, atol=atol)
+    assert not bad, f"{column}: {bad}"
+    return sol
