@@ -33,8 +33,12 @@ _BOUNDS = {"sector": (0.0, np.inf), "commodity": (0.0, np.inf),
 class Model:
     """A general-equilibrium model in MPSGE's terms (see :mod:`compass_sparse.mge`)."""
 
-    def __init__(self, name="model"):
+    def __init__(self, name="model", prune=False):
+        """``prune``: sectors and commodities whose data are all zero are dropped (held
+        at their start values) instead of being declaration errors, as data-driven
+        models need (a commodity a dataset happens not to trade, an empty sector)."""
         self.name = name
+        self.prune = prune
         self.sets = []
         self.blocks = []
         self.constraints = []
@@ -204,6 +208,7 @@ class Model:
         st, eq = self.compile()
         x = self.start_point(eq) if x0 is None else np.asarray(x0, float).copy()
         lb, ub = self.bounds(eq.n)
+        lb[st.pruned] = ub[st.pruned] = x[st.pruned]
         self._normalize(st, x, lb, ub, numeraire)
         var, eqn = self.names(st)
         cache = {}
@@ -224,6 +229,7 @@ class Model:
         if not numeraire:
             return
         decl = np.concatenate([vs.cols for vs in self.sets if vs.kind != "auxiliary"])
+        decl = np.setdiff1d(decl, st.pruned)
         if np.any(lb[decl] == ub[decl]):
             return
         cons = st.demand_root[0]

@@ -44,12 +44,14 @@ class Structure:
         self.model = model
         params = model.params
         self.n_decl = model.ncols
+        self.pruned = []   # columns of sectors and commodities without data (prune=True)
         self._leaves(params)
         self._nodes(params)
         self._edges_and_chains()
         self._endowments(params)
         self._aux()
         self._check_markets()
+        self.pruned = np.array(sorted(set(self.pruned)), dtype=np.int64)
         self.n = self.n_decl + self.n_nodes
 
     # ------------------------------------------------------------------ leaves
@@ -169,10 +171,15 @@ class Structure:
         self.leaf_parent = _lookup(ids, self._leaf_block, self._leaf_nest, self._leaf_pos)
 
     def _check_roots(self, blk, names, alive):
+        empty = ~alive.any(axis=0)
+        if self.model.prune and blk.WHAT == "production":
+            # An owner without any data is dropped (MPSGE prunes it): fixed at its start.
+            self.pruned.extend(blk.owner.cols[empty].tolist())
         for k, name in enumerate(names):
             par, _, tree = blk.nests[name]
             if par is None:
-                dead = np.flatnonzero(~alive[k])
+                dead = np.flatnonzero(~alive[k] & ~(empty & self.model.prune
+                                                   & (blk.WHAT == "production")))
                 if dead.size:
                     what = {"input": "no inputs", "output": "no outputs",
                             "demand": "no final demand"}[tree]
@@ -296,6 +303,12 @@ class Structure:
             else:
                 bad = np.flatnonzero(~covered[cols])
                 msg = "has no constraint (declare one with Model.constraint)"
+            if bad.size and model.prune and vs.kind == "commodity":
+                self.pruned.extend(cols[bad].tolist())
+                continue
+            if vs.kind == "sector" and model.prune:
+                bad = np.setdiff1d(cols[bad], self.pruned)
+                bad = np.searchsorted(cols, bad)
             if bad.size:
                 raise DeclarationError(f"{vs.element_name(int(bad[0]))} {msg} "
                                        f"({bad.size} such elements of {vs.name})")
