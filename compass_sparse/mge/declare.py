@@ -15,6 +15,7 @@ endowments may also depend on auxiliary variables.
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 from ..exceptions import ModelError
 from .expr import Expr, ParamLeaf, VarLeaf, as_expr
@@ -97,7 +98,7 @@ class Parameter(ParamLeaf):
 
     def __init__(self, model, name, value, labels):
         self.model, self.name, self.labels = model, name, labels
-        n = 1 if labels is None else len(labels)
+        n = int(np.size(value)) if labels is None else len(labels)
         model.params[name] = np.broadcast_to(np.asarray(value, float), (n,)).copy()
         super().__init__(name, np.arange(n))
         self._where = {} if labels is None else {lab: k for k, lab in enumerate(labels)}
@@ -105,7 +106,7 @@ class Parameter(ParamLeaf):
     def get(self):
         """The current values (a float for a scalar parameter)."""
         v = self.model.params[self.name]
-        return float(v[0]) if self.labels is None else v.copy()
+        return float(v[0]) if v.shape[0] == 1 and self.labels is None else v.copy()
 
     def set(self, value, at=None):
         """Set the values (all, or those of the labels ``at``)."""
@@ -182,8 +183,8 @@ class _Block:
             raise DeclarationError(f"{where}: nest {nest!r} belongs to the {self.nests[nest][2]} "
                                    f"tree, not the {tree} tree ({c!r})")
         pairs = _pairing(self.n, c.size, quantity, where, c)
-        q = _flat(quantity, pairs, where, f"quantity of {c!r}")
-        p = _flat(price, pairs, where, f"reference price of {c!r}")
+        q = _flat(_values(quantity), pairs, where, f"quantity of {c!r}")
+        p = _flat(_values(price), pairs, where, f"reference price of {c!r}")
         tx = []
         for tax in taxes or ():
             try:
@@ -193,44 +194,66 @@ class _Block:
             agent = _as_ref(self.model, agent, "consumer", f"{where}, tax on {c!r}")
             if agent.size != 1:
                 raise DeclarationError(f"{where}: a tax goes to one consumer, not {agent!r}")
-            tx.append((int(agent.cols[0]), _flat(rate, pairs, where, f"tax on {c!r}", True)))
+            tx.append((int(agent.cols[0]), _flat(_values(rate), pairs, where, f"tax on {c!r}",
+                                                 True)))
         self.netputs.append(dict(tree=tree, comm=c, nest=nest, pairs=pairs, q=q, p=p, taxes=tx))
         return self
+
+
+def _values(value):
+    """A scipy.sparse datum as the vector of its entries in row-major order."""
+    if sp.issparse(value):
+        csr = sp.csr_matrix(value)
+        csr.sort_indices()
+        return csr.data
+    return value
 
 
 def _pairing(n, k, quantity, where, c):
     """(owner positions, commodity positions, shape) of a netput declaration.
 
-    A quantity of shape (n, k) pairs every owner with every commodity; a vector or a
-    scalar pairs owner i with commodity i when k == n, or every owner with the single
-    commodity when k == 1."""
-    shape = np.shape(quantity.values if hasattr(quantity, "values") else quantity) \
-        if not isinstance(quantity, Expr) else ((quantity.size,) if quantity.size > 1 else ())
+    A quantity of shape (n, k) pairs every owner with every commodity; a scipy.sparse
+    (n, k) matrix pairs the owners and commodities of its stored entries (row-major order;
+    other data of the netput are then per owner or per entry); a vector or a scalar pairs
+    owner i with commodity i when k == n, or every owner with the single commodity when
+    k == 1."""
+    if sp.issparse(quantity):
+        if quantity.shape != (n, k):
+            raise DeclarationError(f"{where}: quantity of {c!r} has shape {quantity.shape}, "
+                                   f"expected ({n}, {k})")
+        csr = sp.csr_matrix(quantity)
+        csr.sort_indices()
+        own = np.repeat(np.arange(n), np.diff(csr.indptr))
+        return own, csr.indices.astype(np.int64), "sparse", n
+    if isinstance(quantity, Expr):
+        shape = (quantity.size,) if quantity.size > 1 else ()
+    else:
+        shape = np.shape(quantity)
     if len(shape) == 2:
         if shape != (n, k):
             raise DeclarationError(f"{where}: quantity of {c!r} has shape {shape}, "
                                    f"expected ({n}, {k})")
-        return np.repeat(np.arange(n), k), np.tile(np.arange(k), n), "matrix"
+        return np.repeat(np.arange(n), k), np.tile(np.arange(k), n), "matrix", n
     if k == 1:
-        return np.arange(n), np.zeros(n, np.int64), "vector"
+        return np.arange(n), np.zeros(n, np.int64), "vector", n
     if k == n:
-        return np.arange(n), np.arange(n), "vector"
+        return np.arange(n), np.arange(n), "vector", n
     if shape == (n * k,):
-        return np.repeat(np.arange(n), k), np.tile(np.arange(k), n), "matrix"
+        return np.repeat(np.arange(n), k), np.tile(np.arange(k), n), "matrix", n
     raise DeclarationError(f"{where}: {c!r} has {k} elements for {n} owners; give the "
                            f"quantity as an ({n}, {k}) array")
 
 
 def _flat(value, pairs, where, what, allow_variables=False):
-    """Data as an expression with one value per (owner, commodity) pair."""
-    own, com, form = pairs
+    """Data as an expression with one value per (owner, commodity) pair: a scalar, one
+    value per owner, or one per pair."""
+    own, com, form, n = pairs
     m = own.shape[0]
     e = as_expr(np.asarray(value, float).reshape(-1) if not isinstance(value, Expr) else value)
     if e.has_variables() and not allow_variables:
         raise DeclarationError(f"{where}: the {what} cannot depend on variables")
     if e.size in (1, m):
         return e
-    n = int(own.max()) + 1 if m else 0
     if e.size == n:
         return e[own]
     raise DeclarationError(f"{where}: the {what} has {e.size} values; expected 1, {n} "
@@ -280,6 +303,6 @@ class Demand(_Block):
         where = self._where()
         c = _as_ref(self.model, commodity, "commodity", where)
         pairs = _pairing(self.n, c.size, quantity, where, c)
-        q = _flat(quantity, pairs, where, f"endowment of {c!r}", allow_variables=True)
+        q = _flat(_values(quantity), pairs, where, f"endowment of {c!r}", allow_variables=True)
         self.endowments.append(dict(comm=c, pairs=pairs, q=q))
         return self

@@ -62,7 +62,7 @@ class Structure:
         for b, blk in enumerate(self.model.blocks):
             names = list(blk.nests)
             for np_ in blk.netputs:
-                own, com, _ = np_["pairs"]
+                own, com = np_["pairs"][:2]
                 q = np.broadcast_to(np_["q"].value(params), own.shape).astype(float)
                 p = np.broadcast_to(np_["p"].value(params), own.shape).astype(float)
                 bad = np.flatnonzero(q < 0)
@@ -252,7 +252,7 @@ class Structure:
         cons, comm, exprs = [], [], []
         for blk in self.model.blocks:
             for en in getattr(blk, "endowments", ()):
-                own, com, _ = en["pairs"]
+                own, com = en["pairs"][:2]
                 q = en["q"]
                 if not q.has_variables():
                     v = np.broadcast_to(q.value(params), own.shape)
@@ -315,13 +315,16 @@ class Structure:
 
     # ------------------------------------------------------------------ naming
     def node_names(self):
-        blocks = self.model.blocks
-        out = []
-        for b, k, p in zip(self.node_block.tolist(), self.node_nest.tolist(),
-                           self.node_pos.tolist()):
-            blk = blocks[b]
-            out.append(f"{blk.owner.names[p]}.{list(blk.nests)[k]}")
-        return out
+        """'owner.nest' for every node (one pass per block)."""
+        out = np.empty(self.n_nodes, dtype=object)
+        for b, blk in enumerate(self.model.blocks):
+            sel = np.flatnonzero(self.node_block == b)
+            if sel.size:
+                owners = blk.owner.names
+                nests = list(blk.nests)
+                out[sel] = [f"{owners[p]}.{nests[k]}" for p, k in
+                            zip(self.node_pos[sel].tolist(), self.node_nest[sel].tolist())]
+        return out.tolist()
 
 
 def _owner_cols(owners, block, pos):
