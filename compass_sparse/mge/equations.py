@@ -13,9 +13,13 @@ Rows are paired with variables (row i is the condition of variable i):
 
 with leaf quantities x_e (capped at e^``LOGX_MAX`` times the reference quantity) and price indices as in :mod:`.structure`.  CES aggregates are
 evaluated in log space (a log-sum-exp, so that large elasticities neither overflow nor
-underflow); for |ρ| < ``RHO_CD`` the aggregate uses the second-order expansion
-log π = Σ θ l + (ρ/2)(Σ θ l² - (Σ θ l)²), whose error is O(ρ²) (< 1e-12 here), instead of
-dividing by ρ.  Prices are floored at ``PRICE_FLOOR`` inside logarithms.
+underflow).  Near Cobb–Douglas the log-sum-exp divided by ρ loses about eps/|ρ| to
+rounding, so for |ρ| < ``RHO_CD`` = 1e-3 the aggregate is the cumulant expansion
+
+    log π = μ + (ρ/2) κ2 + (ρ²/6) κ3,   μ = Σ θ l,  κ_k = Σ θ (l - μ)^k,
+
+whose error is ρ³ κ4 / 24 (< 1e-11 for log prices within ±1 of each other), and its
+exact derivative, θ_c (1 + ρ d_c + (ρ²/2)(d_c² - κ2)) with d = l - μ, is used in J.  Prices are floored at ``PRICE_FLOOR`` inside logarithms.
 
 J is assembled from triplets whose positions are fixed at compilation: one ``bincount``
 into the CSC data array per evaluation.
@@ -27,7 +31,7 @@ import scipy.sparse as sp
 
 from .expr import Context, triplets
 
-RHO_CD = 1e-6
+RHO_CD = 1e-3
 """|ρ| below which a CES nest uses the expansion about Cobb–Douglas (ρ = 0)."""
 
 PRICE_FLOOR = 1e-300
@@ -70,8 +74,9 @@ class Equations:
         v, t = st.end_expr.evaluate(ctx)
         return v, triplets(t)
 
-    def _nest_prices(self, lc):
-        """log π of every node from its children's log prices ``lc`` (by edge)."""
+    def _nest_prices(self, lc, shares=False):
+        """log π of every node from its children's log prices ``lc`` (by edge), and with
+        ``shares`` the derivatives w = d log π_parent / d lc of every edge."""
         st = self.st
         rho, th = self.edge_rho, self.edge_theta
         starts = st.edge_starts
@@ -82,11 +87,18 @@ class Equations:
         node_rho = st.node_rho
         safe = np.where(self.tiny, 1.0, node_rho)
         logp = (m + np.log(s)) / safe
+        w = th * np.exp(rho * (lc - logp[parent])) if shares else None
         if self.tiny.any():
-            mean = np.add.reduceat(th * lc, starts)
-            sq = np.add.reduceat(th * lc * lc, starts)
-            logp = np.where(self.tiny, mean + 0.5 * node_rho * (sq - mean * mean), logp)
-        return logp
+            mu = np.add.reduceat(th * lc, starts)
+            dev = lc - mu[parent]
+            k2 = np.add.reduceat(th * dev ** 2, starts)
+            k3 = np.add.reduceat(th * dev ** 3, starts)
+            logp = np.where(self.tiny, mu + node_rho * (0.5 * k2 + node_rho * k3 / 6.0), logp)
+            if shares:
+                t = self.tiny[parent]
+                w = np.where(t, th * (1.0 + rho * dev + 0.5 * rho ** 2 * (dev ** 2 - k2[parent])),
+                             w)
+        return (logp, w) if shares else logp
 
     def start_nest_prices(self, x):
         """Fill the nest prices of x bottom-up from the other variables (in place)."""
@@ -125,12 +137,11 @@ class Equations:
 
         ell, (t, tt, mult, p) = self._leaf_prices(x, ctx)
         lc = self._child_logs(x, ell)
-        logp = self._nest_prices(lc)
+        logp, w = self._nest_prices(lc, shares=True)
         P = np.exp(logp)
         pin = x[st.node_col]
         # Nest rows: π_n - P_n.
         F[st.node_col] = pin - P
-        w = self.edge_theta * np.exp(self.edge_rho * (lc - logp[st.edge_parent]))
         # log x_e and x_e.
         lpin = np.log(np.maximum(pin, PRICE_FLOOR))
         lell = np.log(np.maximum(ell, PRICE_FLOOR))
