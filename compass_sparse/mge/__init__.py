@@ -17,6 +17,22 @@ from .model import Model
 from .report import BenchmarkCheck, Solution, UnbalancedBenchmark
 from .structure import SIGMA_INF
 
-__all__ = ["Model", "Expr", "esum", "exp", "log", "Solution", "BenchmarkCheck",
-           "DeclarationError", "UnbalancedBenchmark", "Parameter", "Production", "Demand",
-           "VarRef", "VarSet", "SIGMA_INF", "RHO_CD", "PRICE_FLOOR"]
+__all__ = [
+           "PRICE_FLOOR",
+           "RHO_CD",
+           "SIGMA_INF",
+           "BenchmarkCheck",
+           "DeclarationError",
+           "Demand",
+           "Expr",
+           "Model",
+           "Parameter",
+           "Production",
+           "Solution",
+           "UnbalancedBenchmark",
+           "VarRef",
+           "VarSet",
+           "esum",
+           "exp",
+           "log",
+]

@@ -20,7 +20,7 @@ import scipy.sparse as sp
 from ..exceptions import ModelError
 from .expr import Expr, ParamLeaf, VarLeaf, as_expr
 
-__all__ = ["DeclarationError", "VarSet", "VarRef", "Parameter", "Production", "Demand"]
+__all__ = ["DeclarationError", "Demand", "Parameter", "Production", "VarRef", "VarSet"]
 
 KINDS = ("sector", "commodity", "consumer", "auxiliary")
 
@@ -196,7 +196,7 @@ class _Block:
                 raise DeclarationError(f"{where}: a tax goes to one consumer, not {agent!r}")
             tx.append((int(agent.cols[0]), _flat(_values(rate), pairs, where, f"tax on {c!r}",
                                                  True)))
-        self.netputs.append(dict(tree=tree, comm=c, nest=nest, pairs=pairs, q=q, p=p, taxes=tx))
+        self.netputs.append({"tree": tree, "comm": c, "nest": nest, "pairs": pairs, "q": q, "p": p, "taxes": tx})
         return self
 
 
@@ -247,7 +247,7 @@ def _pairing(n, k, quantity, where, c):
 def _flat(value, pairs, where, what, allow_variables=False):
     """Data as an expression with one value per (owner, commodity) pair: a scalar, one
     value per owner, or one per pair."""
-    own, com, form, n = pairs
+    own, _com, _form, n = pairs
     m = own.shape[0]
     e = as_expr(np.asarray(value, float).reshape(-1) if not isinstance(value, Expr) else value)
     if e.has_variables() and not allow_variables:
@@ -304,5 +304,5 @@ class Demand(_Block):
         c = _as_ref(self.model, commodity, "commodity", where)
         pairs = _pairing(self.n, c.size, quantity, where, c)
         q = _flat(_values(quantity), pairs, where, f"endowment of {c!r}", allow_variables=True)
-        self.endowments.append(dict(comm=c, pairs=pairs, q=q))
+        self.endowments.append({"comm": c, "pairs": pairs, "q": q})
         return self

@@ -130,11 +130,6 @@ class Equations:
         st = self.st
         ctx = Context(x, self.params, deriv)
         F = np.zeros(self.n)
-        R, C, Vv = [], [], []
-
-        def emit(r, c, v):
-            R.append(r), C.append(c), Vv.append(v)
-
         ell, (t, tt, mult, p) = self._leaf_prices(x, ctx)
         lc = self._child_logs(x, ell)
         logp, w = self._nest_prices(lc, shares=True)
@@ -174,13 +169,23 @@ class Equations:
         F[yin] += st.node_value[nin] * pin[nin]
         F[yout] -= st.node_value[nout] * pin[nout]
         # Auxiliary constraints.
+        at = None
         if st.aux_expr is not None:
             av, at = st.aux_expr.evaluate(ctx)
             F[st.aux_rows] += av
         if not deriv:
             return F, None
+        return F, self._triplets(x, ell, t, tt, mult, p, w, P, pin, xq, capped, act, om, omt,
+                                 at)
 
-        # ---- Jacobian ----
+    def _triplets(self, x, ell, t, tt, mult, p, w, P, pin, xq, capped, act, om, omt, at):
+        """The Jacobian's triplets from the intermediate values of :meth:`evaluate`."""
+        st = self.st
+        R, C, Vv = [], [], []
+
+        def emit(r, c, v):
+            R.append(r), C.append(c), Vv.append(v)
+
         # Gradient of the leaf price ℓ_e: (leaf, col, value).
         g_leaf = [np.arange(st.n_leaves)]
         g_col = [st.leaf_comm]
@@ -223,13 +228,15 @@ class Equations:
                 emit(st.end_cons[r], c, -x[st.end_comm[r]] * v)
         if t.size:
             self._tax_jac(emit, x, t, tt, p, xq, x_leaf, x_col, x_val)
+        cons = st.demand_root[0]
+        (yin, nin), (yout, nout) = st.zp_in, st.zp_out
         emit(cons, cons, np.ones(cons.shape[0]))
         emit(yin, st.node_col[nin], st.node_value[nin])
         emit(yout, st.node_col[nout], -st.node_value[nout])
-        if st.aux_expr is not None:
+        if at is not None:
             r, c, v = triplets(at)
             emit(st.aux_rows[r], c, v)
-        return F, (np.concatenate(R), np.concatenate(C), np.concatenate(Vv))
+        return np.concatenate(R), np.concatenate(C), np.concatenate(Vv)
 
     def _tax_jac(self, emit, x, t, tt, p, xq, x_leaf, x_col, x_val):
         """Derivatives of -t p Y x_e in the income row of the tax's consumer."""

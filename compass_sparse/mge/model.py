@@ -17,8 +17,7 @@ import numpy as np
 
 import compass_sparse as cs
 
-from .declare import (DeclarationError, Demand, Parameter, Production, VarRef, VarSet,
-                      _labels)
+from .declare import DeclarationError, Demand, Parameter, Production, VarRef, VarSet, _labels
 from .equations import Equations
 from .expr import Context, as_expr
 from .report import BenchmarkCheck, Solution

@@ -82,10 +82,10 @@ def synthetic_data(R, S, H, n_inputs=5, n_partners=4, tariff=0.1, seed=0):
     share /= share.sum(axis=1, keepdims=True)
     va_r = va.reshape(R, S).sum(axis=1)
     c = _ras(rng.uniform(0.5, 1.5, (R, H, S)), hh_total, share * va_r[:, None])
-    return dict(R=R, S=S, H=H, y0=y0, idq=idq, va=va, lab=lab, src=src, dst=dst,
-                trade=trade, tm0=tm0, dom=dom, a0=a0, gov=gov, c=c, share=share,
-                labour=(va * lab).reshape(R, S).sum(axis=1),
-                capital=(va * (1 - lab)).reshape(R, S).sum(axis=1))
+    return {"R": R, "S": S, "H": H, "y0": y0, "idq": idq, "va": va, "lab": lab, "src": src, "dst": dst,
+                "trade": trade, "tm0": tm0, "dom": dom, "a0": a0, "gov": gov, "c": c, "share": share,
+                "labour": (va * lab).reshape(R, S).sum(axis=1),
+                "capital": (va * (1 - lab)).reshape(R, S).sum(axis=1)}
 
 
 def _ras(seed, col_totals, row_totals, iters=200):
@@ -155,5 +155,5 @@ def multiregion_model(R, S, H, n_inputs=5, n_partners=4, tariff=0.1, seed=0):
     g = m.demand(GOV, s=1.0)
     grows = np.repeat(np.arange(R), S)
     g.final(PA, sp.csr_matrix((d["gov"].ravel(), (grows, np.arange(RS))), (R, RS)))
-    handles = dict(Y=Y, A=A, PY=PY, PA=PA, PL=PL, PK=PK, HH=HH, GOV=GOV, tm=tm)
+    handles = {"Y": Y, "A": A, "PY": PY, "PA": PA, "PL": PL, "PK": PK, "HH": HH, "GOV": GOV, "tm": tm}
     return m, handles, d

@@ -18,7 +18,7 @@ import numpy as np
 from .declare import DeclarationError
 from .expr import Context, as_expr
 
-__all__ = ["Solution", "BenchmarkCheck", "UnbalancedBenchmark"]
+__all__ = ["BenchmarkCheck", "Solution", "UnbalancedBenchmark"]
 
 _ROW_KIND = {"sector": "zero_profit", "commodity": "market", "consumer": "income",
              "auxiliary": "constraint"}

@@ -118,7 +118,7 @@ class Structure:
     def _nodes(self, params):
         """One node per (block, nest, owner) with leaves beneath it."""
         model = self.model
-        node_block, node_nest, node_pos, node_parent_key = [], [], [], []
+        node_block, node_nest, node_pos = [], [], []
         self._node_id = []
         total = 0
         ids = []

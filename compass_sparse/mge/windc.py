@@ -52,7 +52,7 @@ def load_national():
     VA = [v for v in _set("va") if v != "othtax"]
     FD = _set("fd")
     M = _set("m")
-    d = dict(I=I, VA=VA, FD=FD, M=M)
+    d = {"I": I, "VA": VA, "FD": FD, "M": M}
     d.update(a0=_table("a_0", I), id0=_table("id_0", I, I), ys0=_table("ys_0", I, I),
              ms0=_table("ms_0", I, M), x0=_table("x_0", I), fs0=_table("fs_0", I),
              tm0=_table("tm_0", I), va0=_table("va_0", VA, I), md0=_table("md_0", M, I),
@@ -96,6 +96,6 @@ def national_model(data=None):
     dem.endowment(PFX, d["bopdef0"])
     dem.endowment(PA, -d["fd0"][:, other_fd].sum(axis=1)[None, :])
     dem.endowment(PVA, d["va0"].sum(axis=1)[None, :])
-    handles = dict(Y=Y, A=A, MS=MS, PA=PA, PY=PY, PVA=PVA, PM=PM, PFX=PFX, RA=RA, ta=ta,
-                   ty=ty, tm=tm, d_elas_ra=d_elas)
+    handles = {"Y": Y, "A": A, "MS": MS, "PA": PA, "PY": PY, "PVA": PVA, "PM": PM, "PFX": PFX, "RA": RA, "ta": ta,
+                   "ty": ty, "tm": tm, "d_elas_ra": d_elas}
     return m, handles

@@ -20,7 +20,7 @@ def sheet(name, keys=1):
     out = {}
     for r in rows[1:]:
         key = ".".join(r[:keys]) if keys > 1 else r[0]
-        key = key[:-2] if key.endswith(".L") else key
+        key = key.removesuffix(".L")
         for col, v in zip(head, r[keys:]):
             try:
                 out[key, col] = float(v)

@@ -21,7 +21,7 @@ def test_errors_are_model_errors():
 
 
 def test_unknown_commodity_in_a_block():
-    m, X, PX, PL, RA = _base()
+    m, X, _PX, _PL, _RA = _base()
     other = Model().commodity("PZ")
     with pytest.raises(DeclarationError, match="PZ.*not a commodity of this model"):
         m.production(X).output(other, 10)
@@ -78,7 +78,7 @@ def test_unbalanced_benchmark_names_the_worst_rows():
 
 
 def test_bad_nests_elasticities_and_shapes():
-    m, X, PX, PL, RA = _base()
+    m, X, PX, PL, _RA = _base()
     with pytest.raises(DeclarationError, match="unknown parent 'nope'"):
         m.production(X, nests={"va": ("nope", 1.0)})
     with pytest.raises(DeclarationError, match="unknown nest 'vb'"):
@@ -99,7 +99,7 @@ def test_bad_nests_elasticities_and_shapes():
 
 
 def test_names_and_constraints_are_checked():
-    m, X, PX, PL, RA = _base()
+    m, X, PX, _PL, _RA = _base()
     with pytest.raises(DeclarationError, match="already used"):
         m.sector("X")
     with pytest.raises(DeclarationError, match="paired with an auxiliary"):

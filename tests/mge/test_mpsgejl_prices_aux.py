@@ -27,10 +27,10 @@ def _xyu(m, x_out, x_in, u_q, endow_l, x_out_price=1.0, x_in_price=1.0, demand=N
     else:
         d = m.demand(RA).final(PU, u_q[0])
     d.endowment(PL, endow * endow_l).endowment(PK, 80)
-    g = getters(dict(X=X, Y=Y, U=U, PX=PX, PY=PY, PU=PU, PL=PL, PK=PK, RA=RA),
-                inputs=dict(DXL=(X, PL), DXK=(X, PK), DYL=(Y, PL), DYK=(Y, PK), DUX=(U, PX),
-                            DUY=(U, PY)),
-                outputs=dict(SX=(X, PX), SY=(Y, PY), SU=(U, PU)),
+    g = getters({"X": X, "Y": Y, "U": U, "PX": PX, "PY": PY, "PU": PU, "PL": PL, "PK": PK, "RA": RA},
+                inputs={"DXL": (X, PL), "DXK": (X, PK), "DYL": (Y, PL), "DYK": (Y, PK), "DUX": (U, PX),
+                            "DUY": (U, PY)},
+                outputs={"SX": (X, PX), "SY": (Y, PY), "SU": (U, PU)},
                 finals=dict(DU=(RA, PU), **({"DY": (RA, PY)} if demand else {})))
     return dict(endow=endow, otax=otax, itax=itax, PU=PU, PX=PX, PL=PL, g=g, **p)
 
@@ -73,7 +73,7 @@ def test_reference_price_in_demand_mirrors_mpsgejl_test_twobytwo_price_demand():
     ref = sheet("two_by_two_PriceinDem")
     m = Model()
     v = _xyu(m, (80, 0.0), (30, 0.0), (124, 44), 54,
-             demand=dict(params=dict(esub_ra=1.0, pr_Ud=1.0), otax=0.0, itax=0.0))
+             demand={"params": {"esub_ra": 1.0, "pr_Ud": 1.0}, "otax": 0.0, "itax": 0.0})
     g = v["g"]
     m.fix(v["PU"], 1.0)
     solve_and_match(m, ref, "benchmark", g)
@@ -106,11 +106,11 @@ def test_auxiliary_in_endowment_mirrors_mpsgejl_test_twobytwo_aux_in_demand():
     m.production(W, s=1).output(PW, 200).input(PX, 100).input(PY, 100)
     m.demand(CONS).final(PW, 200).endowment(PL, 120 - 80 / (1 - uo) * U).endowment(PK, 90)
     m.constraint(U, PL - PW)
-    g = getters(dict(X=X, Y=Y, W=W, PX=PX, PY=PY, PW=PW, PL=PL, PK=PK, U=U, CONS=CONS),
-                inputs=dict(DKX=(X, PK), DLX=(X, PL), DLY=(Y, PL), DKY=(Y, PK), DXW=(W, PX),
-                            DYW=(W, PY)),
-                outputs=dict(SXX=(X, PX), SYY=(Y, PY), SWW=(W, PW)),
-                finals=dict(CWCONS=(CONS, PW)))
+    g = getters({"X": X, "Y": Y, "W": W, "PX": PX, "PY": PY, "PW": PW, "PL": PL, "PK": PK, "U": U, "CONS": CONS},
+                inputs={"DKX": (X, PK), "DLX": (X, PL), "DLY": (Y, PL), "DKY": (Y, PK), "DXW": (W, PX),
+                            "DYW": (W, PY)},
+                outputs={"SXX": (X, PX), "SYY": (Y, PY), "SWW": (W, PW)},
+                finals={"CWCONS": (CONS, PW)})
     assert m.benchmark().ok(1e-10)
     solve_and_match(m, ref, "benchmark", g)
     m.set_start(U, 0.1)
@@ -146,14 +146,14 @@ def test_endogenous_input_tax_mirrors_mpsgejl_test_twobytwo_aux_in_inputs():
     m.production(TK, s=1).output(PKS, 120).input(PK, 100, taxes=[(CONS, txk * TAU)])
     m.demand(CONS).final(PW, 340).endowment(PL, 200).endowment(PK, 100)
     m.constraint(TAU, W * PW * 340 - PL * 200 - PK * 100 - 40 * (PX + PY) / 2)
-    g = getters(dict(X=X, Y=Y, W=W, TL=TL, TK=TK, PX=PX, PY=PY, PW=PW, PL=PL, PK=PK,
-                     PKS=PKS, PLS=PLS, TAU=TAU, CONS=CONS),
-                inputs=dict(DLSX=(X, PLS), DKSX=(X, PKS), DLSY=(Y, PLS), DKSY=(Y, PKS),
-                            DXW=(W, PX), DYW=(W, PY), DLW=(W, PL), DLTL=(TL, PL),
-                            DKTK=(TK, PK)),
-                outputs=dict(SXX=(X, PX), SYY=(Y, PY), SWW=(W, PW), SLSTL=(TL, PLS),
-                             SKSTK=(TK, PKS)),
-                finals=dict(CWCONS=(CONS, PW)))
+    g = getters({"X": X, "Y": Y, "W": W, "TL": TL, "TK": TK, "PX": PX, "PY": PY, "PW": PW, "PL": PL, "PK": PK,
+                     "PKS": PKS, "PLS": PLS, "TAU": TAU, "CONS": CONS},
+                inputs={"DLSX": (X, PLS), "DKSX": (X, PKS), "DLSY": (Y, PLS), "DKSY": (Y, PKS),
+                            "DXW": (W, PX), "DYW": (W, PY), "DLW": (W, PL), "DLTL": (TL, PL),
+                            "DKTK": (TK, PK)},
+                outputs={"SXX": (X, PX), "SYY": (Y, PY), "SWW": (W, PW), "SLSTL": (TL, PLS),
+                             "SKSTK": (TK, PKS)},
+                finals={"CWCONS": (CONS, PW)})
     m.fix(CONS, 340.0)
     assert m.benchmark().ok(1e-10)
     solve_and_match(m, ref, "benchmark", g)
@@ -191,12 +191,12 @@ def test_endogenous_markup_mirrors_mpsgejl_test_twobytwo_aux_in_outputs():
     # is part of a solution; it is held at its start (free, it leaves the Jacobian with a
     # zero row and column, on which the last scenario's solve stalls at |F| ~ 3e-8).
     m.fix(MARKUP["b"], 0.2)
-    g = getters(dict(X=X, Y=Y, W=W, PX=PX, PY=PY, PW=PW, PL=PL, PK=PK, SHAREX=SHAREX,
-                     CONS=CONS),
-                inputs=dict(DLX=(X, PL), DKX=(X, PK), DLY=(Y, PL), DKY=(Y, PK), DXW=(W, PX),
-                            DYW=(W, PY)),
-                outputs=dict(SXX=(X, PX), SYY=(Y, PY), SWW=(W, PW)),
-                finals=dict(CWCONS=(CONS, PW)))
+    g = getters({"X": X, "Y": Y, "W": W, "PX": PX, "PY": PY, "PW": PW, "PL": PL, "PK": PK, "SHAREX": SHAREX,
+                     "CONS": CONS},
+                inputs={"DLX": (X, PL), "DKX": (X, PK), "DLY": (Y, PL), "DKY": (Y, PK), "DXW": (W, PX),
+                            "DYW": (W, PY)},
+                outputs={"SXX": (X, PX), "SYY": (Y, PY), "SWW": (W, PW)},
+                finals={"CWCONS": (CONS, PW)})
     g["MARKUP"] = lambda s: s.value(MARKUP["a"])
     m.fix(CONS, 180.0)
     assert m.benchmark().ok(1e-10)

@@ -38,7 +38,7 @@ def _scalar_economy(m, endow=None, x_in=(50, 50), y_in=(20, 30), nest=False):
 
 def _scalar_getters(X, Y, U, PX, PY, PU, PL, PK, RA):
     g = {n: (lambda s, v=v: s.value(v)) for n, v in
-         dict(X=X, Y=Y, U=U, PX=PX, PY=PY, PU=PU, PL=PL, PK=PK, RA=RA).items()}
+         {"X": X, "Y": Y, "U": U, "PX": PX, "PY": PY, "PU": PU, "PL": PL, "PK": PK, "RA": RA}.items()}
     cd = {"LX": (X, PL), "LY": (Y, PL), "KX": (X, PK), "KY": (Y, PK), "DX": (U, PX),
           "DY": (U, PY)}
     g.update({n: (lambda s, a=a, b=b: s.compensated_demand(a, b)) for n, (a, b) in cd.items()})
@@ -50,7 +50,7 @@ def test_two_by_two_scalar_mirrors_mpsgejl_test_twobytwo_macro():
     m = Model()
     endow = m.parameter("endow", 2.0)
     v = _scalar_economy(m, endow=endow)
-    X, Y, U, PX, PY, PU, PL, PK, RA = v
+    _X, _Y, _U, PX, _PY, _PU, PL, _PK, _RA = v
     g = _scalar_getters(*v)
     assert m.benchmark().ok(1e-10)
     _solve_and_match(m, ref, "benchmark", g)
@@ -78,8 +78,8 @@ def test_two_by_two_indexed_mirrors_mpsgejl_test_twobytwo_indexed():
     p.input(PF["l"], [50.0, 20.0], taxes=[(C, intax)]).input(PF["k"], [50.0, 30.0])
     m.production(U, s=1).output(PU, 150).input(PC, np.array([[100.0, 50.0]]))
     m.demand(C).final(PU, 150).endowment(PF, endow)
-    names = dict(X=Y["x"], Y=Y["y"], U=U, PX=PC["x"], PY=PC["y"], PU=PU, PL=PF["l"],
-                 PK=PF["k"], RA=C)
+    names = {"X": Y["x"], "Y": Y["y"], "U": U, "PX": PC["x"], "PY": PC["y"], "PU": PU, "PL": PF["l"],
+                 "PK": PF["k"], "RA": C}
     g = _scalar_getters(*names.values())
     _solve_and_match(m, scalar, "benchmark", g)
     m.fix(PC["x"], 1.0)
@@ -181,7 +181,7 @@ def test_two_by_two_cet_mirrors_mpsgejl_test_twobytwo_transformation_elasticitie
     m.production(W, s=sw).output(PW, 200).input(PX, diff + 100).input(PY, 100)
     m.demand(CONS).final(PW, 200).endowment(PL, 100).endowment(PK, 100)
     g = {n: (lambda s, v=v: s.value(v)) for n, v in
-         dict(A=A, B=B, W=W, PX=PX, PY=PY, PW=PW, PL=PL, PK=PK, CONS=CONS).items()}
+         {"A": A, "B": B, "W": W, "PX": PX, "PY": PY, "PW": PW, "PL": PL, "PK": PK, "CONS": CONS}.items()}
     cd = {"DAL": (A, PL), "DAK": (A, PK), "DBL": (B, PL), "DBK": (B, PK), "DWX": (W, PX),
           "DWY": (W, PY)}
     g.update({n: (lambda s, a=a, b=b: s.compensated_demand(a, b)) for n, (a, b) in cd.items()})

@@ -101,7 +101,7 @@ def test_quantities_stay_finite_far_from_consistent_nest_prices():
 def test_zero_price_gives_finite_residuals():
     """A price of exactly 0 (a free good) keeps F finite (PRICE_FLOOR inside logs)."""
     m = _one_nest(0.5, (1.0, 1.0, 1.0))
-    st, eq = m.compile()
+    _st, eq = m.compile()
     x = m.start_point(eq)
     x[m.sets[0].cols[0]] = 0.0
     F, _ = eq.evaluate(x, deriv=False)

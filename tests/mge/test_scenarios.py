@@ -24,12 +24,12 @@ def _economy():
         .endowment(PK, 80)
     m.demand(GOV).final(PY, np.array([[10.0, 16.0]]))
     m.fix(PL, 1.0)
-    return m, dict(Y=Y, PY=PY, PL=PL, PK=PK, HH=HH, GOV=GOV, tax=tax, esub=esub)
+    return m, {"Y": Y, "PY": PY, "PL": PL, "PK": PK, "HH": HH, "GOV": GOV, "tax": tax, "esub": esub}
 
 
 def test_names_name_every_row_and_column():
-    m, h = _economy()
-    problem, st, _ = m.mcp()
+    m, _h = _economy()
+    problem, _st, _ = m.mcp()
     assert problem.var_names[:2] == ["Y[agr]", "Y[man]"]
     assert "PY[man]" in problem.var_names and "HH" in problem.var_names
     assert "market:PY[agr]" in problem.eqn_names and "income:GOV" in problem.eqn_names
