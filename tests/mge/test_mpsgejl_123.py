@@ -12,12 +12,12 @@ from ._peer import getters, sheet, solve_and_match
 def _data():
     """The micro-consistent matrix of the peer's test (rows: accounts, columns S, D,
     GOVT, HH, INVEST), and the benchmark values derived from it."""
-    S, D, GOVT, HH, INVEST = range(5)
-    mcm = dict(PFX=[106.386, -144.701, 38.315, 0, 0], PD=[218.308, -218.308, 0, 0, 0],
-               TA=[0, -32.027, 32.027, 0, 0], TM=[0, -18.617, 18.617, 0, 0],
-               TX=[-1.136, 0, 1.136, 0, 0], TK=[-12.837, 0, 12.837, 0, 0],
-               TL=[-3.539, 0, 3.539, 0, 0], RK=[-143.862, 0, 0, 143.862, 0],
-               PL=[-163.320, 0, 0, 163.320, 0], PA=[0, 413.653, -35.583, -291.694, -86.376])
+    S, D, GOVT, _HH, INVEST = range(5)
+    mcm = {"PFX": [106.386, -144.701, 38.315, 0, 0], "PD": [218.308, -218.308, 0, 0, 0],
+               "TA": [0, -32.027, 32.027, 0, 0], "TM": [0, -18.617, 18.617, 0, 0],
+               "TX": [-1.136, 0, 1.136, 0, 0], "TK": [-12.837, 0, 12.837, 0, 0],
+               "TL": [-3.539, 0, 3.539, 0, 0], "RK": [-143.862, 0, 0, 143.862, 0],
+               "PL": [-163.320, 0, 0, 163.320, 0], "PA": [0, 413.653, -35.583, -291.694, -86.376]}
     d = {"d0": mcm["PD"][S], "x0": mcm["PFX"][S], "kd0": -mcm["RK"][S], "ly0": -mcm["PL"][S]}
     d.update(tk=mcm["TK"][S] / mcm["RK"][S], tl=mcm["TL"][S] / mcm["PL"][S],
              ta=-mcm["TA"][D] / mcm["PA"][D], tx=-mcm["TX"][S] / mcm["PFX"][S],
@@ -57,12 +57,12 @@ def test_one_two_three_model_mirrors_mpsgejl_test_123():
     hh = m.demand(HH, s=0.4).final(PA, d["c0"]).final(PL, d["l0"])
     hh.endowment(PA, -d["g0"] * TAU_LS - d["dtax"] - d["i0"]).endowment(RK, d["kd0"])
     hh.endowment(PL, (d["ly0"] + d["l0"]) * (1 - UR))
-    g = getters(dict(PFX=PFX, PD=PD, RK=RK, PL=PL, PA=PA, GOVT=GOVT, HH=HH, PX=PX, Y=Y, A=A,
-                     M=M, X=X, PM=PM),
-                inputs=dict(KD=(Y, RK), LY=(Y, PL), DA=(A, PD), MA=(A, PM), PFXM=(M, PFX),
-                            PXX=(X, PX)),
-                outputs=dict(YD=(Y, PD), YX=(Y, PX), PAA=(A, PA), PMM=(M, PM), PFXX=(X, PFX)),
-                finals=dict(CAHH=(HH, PA), CAG=(GOVT, PA), LD=(HH, PL)))
+    g = getters({"PFX": PFX, "PD": PD, "RK": RK, "PL": PL, "PA": PA, "GOVT": GOVT, "HH": HH, "PX": PX, "Y": Y, "A": A,
+                     "M": M, "X": X, "PM": PM},
+                inputs={"KD": (Y, RK), "LY": (Y, PL), "DA": (A, PD), "MA": (A, PM), "PFXM": (M, PFX),
+                            "PXX": (X, PX)},
+                outputs={"YD": (Y, PD), "YX": (Y, PX), "PAA": (A, PA), "PMM": (M, PM), "PFXX": (X, PFX)},
+                finals={"CAHH": (HH, PA), "CAG": (GOVT, PA), "LD": (HH, PL)})
     m.fix(HH, 414.184)
     assert m.benchmark().ok(1e-9)
     base = solve_and_match(m, ref, "Benchmark", g)
