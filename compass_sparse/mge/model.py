@@ -152,6 +152,10 @@ class Model:
         x[ref.cols] = value
         self._x_last = x
 
+    def reset_start(self):
+        """Forget the last solution: the next solve starts from the declared starts."""
+        self._x_last = None
+
     # ------------------------------------------------------------------ the MCP
     def compile(self):
         """(Structure, Equations) at the current parameter values."""

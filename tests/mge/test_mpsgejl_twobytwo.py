@@ -205,7 +205,7 @@ def test_two_by_two_cet_mirrors_mpsgejl_test_twobytwo_transformation_elasticitie
         p.set(0.0)
     m.unfix(PW)
     m.unfix(CONS)
-    m._x_last = None
+    m.reset_start()
     _solve_and_match(m, ref, "benchmark", g)
     diff.set(10.0)
     m.fix(CONS, 200.0)
