@@ -19,8 +19,8 @@ def sheet(name, keys=1):
     head = rows[0][keys:]
     out = {}
     for r in rows[1:]:
-        key = ".".join(r[:keys]) if keys > 1 else r[0]
-        key = key.removesuffix(".L")
+        # GAMS' level suffix: "X.L" is X (a two-column key like "PF.L" is PF of L).
+        key = ".".join(r[:keys]) if keys > 1 else r[0].removesuffix(".L")
         for col, v in zip(head, r[keys:]):
             try:
                 out[key, col] = float(v)

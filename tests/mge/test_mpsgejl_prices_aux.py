@@ -210,3 +210,48 @@ def test_endogenous_markup_mirrors_mpsgejl_test_twobytwo_aux_in_outputs():
     m.unfix(MARKUP["a"])
     m.set_start(MARKUP["a"], 0.5)
     solve_and_match(m, ref, "S.FX.2,M.5", g)
+
+
+def _indexed_demand_prices(nested):
+    """U makes two utility goods PU[l], PU[k] bought by C at reference prices pricepu
+    (in a nest of their own when ``nested``: the same economy)."""
+    m = Model()
+    goods, factors = ["x", "y"], ["l", "k"]
+    endow = m.parameter("endow", [70.0, 80.0], index=factors)
+    pricepu = m.parameter("pricepu", [1.0, 1.0], index=factors)
+    Y, U = m.sectors("Y", goods), m.sector("U")
+    PC, PU, PF = (m.commodities(n, idx) for n, idx in (("PC", goods), ("PU", factors),
+                                                       ("PF", factors)))
+    C = m.consumers("C", ["ra"])
+    m.production(Y, s=1).output(PC, [100.0, 50.0]) \
+        .input(PF, [[50.0, 50.0], [20.0, 30.0]])
+    m.production(U, s=1).output(PU, [[75.0, 75.0]]).input(PC, [[100.0, 50.0]])
+    d = m.demand(C, s=1.0, nests={"CU": ("s", 1.0)} if nested else None)
+    d.final(PU, [[75.0, 75.0]], price=pricepu, nest="CU" if nested else None)
+    d.endowment(PF, endow)
+    rows = {"y.x": Y["x"], "y.y": Y["y"], "U._": U, "RA._": C, "PC.x": PC["x"],
+            "PC.y": PC["y"], "PF.L": PF["l"], "PF.K": PF["k"], "PU.L": PU["l"], "PU.K": PU["k"]}
+    g = getters(rows, inputs={"x.L": (Y["x"], PF["l"]), "x.K": (Y["x"], PF["k"]),
+                              "y.L": (Y["y"], PF["l"]), "y.K": (Y["y"], PF["k"]),
+                              "DU.x": (U, PC["x"]), "DU.y": (U, PC["y"])},
+                outputs={"SU.L": (U, PU["l"]), "SU.K": (U, PU["k"]), "SY.x": (Y["x"], PC["x"]),
+                         "SY.y": (Y["y"], PC["y"])},
+                finals={"FDRA.L": (C, PU["l"]), "FDRA.K": (C, PU["k"])})
+    return m, dict(endow=endow, pricepu=pricepu, C=C, PU=PU, PF=PF), g
+
+
+def test_indexed_demand_reference_prices_mirror_mpsgejl_test_twobytwo_indexed_demand():
+    for nested in (False, True):
+        ref = sheet("TwoxTwo_DemandIndPrice_Nest", keys=2)
+        m, h, g = _indexed_demand_prices(nested)
+        solve_and_match(m, ref, "benchmark", g)
+        h["endow"].set(77.0, at="l")
+        m.fix(h["C"], 157.0)
+        solve_and_match(m, ref, "RA=157", g)
+        m.unfix(h["C"])
+        m.fix(h["PU"]["k"], 1.0)
+        solve_and_match(m, ref, "PC.x=1", g)
+        h["pricepu"].set(1.5, at="l")
+        solve_and_match(m, ref, "Pr.l=1.5", g, atol={"PU.L": 1e-7})
+        m.fix(h["PF"]["l"], 1.0)    # with PU[k] still fixed, as the peer
+        solve_and_match(m, ref, "PF.l=1", g)
