@@ -237,7 +237,7 @@ def _indexed_demand_prices(nested):
                 outputs={"SU.L": (U, PU["l"]), "SU.K": (U, PU["k"]), "SY.x": (Y["x"], PC["x"]),
                          "SY.y": (Y["y"], PC["y"])},
                 finals={"FDRA.L": (C, PU["l"]), "FDRA.K": (C, PU["k"])})
-    return m, dict(endow=endow, pricepu=pricepu, C=C, PU=PU, PF=PF), g
+    return m, {"endow": endow, "pricepu": pricepu, "C": C, "PU": PU, "PF": PF}, g
 
 
 def test_indexed_demand_reference_prices_mirror_mpsgejl_test_twobytwo_indexed_demand():
