@@ -13,6 +13,8 @@ by hand; the last solution is the next solve's start (a warm start).
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 import compass_sparse as cs
@@ -214,15 +216,12 @@ class Model:
         lb[st.pruned] = ub[st.pruned] = x[st.pruned]
         self._normalize(st, x, lb, ub, numeraire)
         var, eqn = self.names(st)
-        cache = {}
 
         def F(z):
             return eq.evaluate(z, deriv=False)[0]
 
         def J(z):
-            f, Jz = eq.jacobian(z)
-            cache["f"] = f
-            return Jz
+            return eq.jacobian(z)[1]
 
         problem = cs.MCP(F, J, lb, ub, x, jac_sparsity=eq.sparsity(x), var_names=var,
                          eqn_names=eqn)
@@ -241,11 +240,13 @@ class Model:
             lb[c] = ub[c] = x[c]
 
     def solve(self, options=None, x0=None, numeraire=True) -> Solution:
-        """Solve at the current data; the solution becomes the next start."""
+        """Solve at the current data; the solution becomes the next start.  ``options``
+        (a dict or ``compass_sparse.Options``) go to the solver; the default convergence
+        tolerance here is 1e-10, so that values match published ones to 1e-8."""
         problem, st, eq = self.mcp(x0=x0, numeraire=numeraire)
         opts = {"convergence_tolerance": 1e-10}
         if options is not None:
-            opts.update(options if isinstance(options, dict) else options.__dict__)
+            opts.update(options if isinstance(options, dict) else dataclasses.asdict(options))
         res = cs.solve_mcp(problem, options=opts)
         sol = Solution(self, st, eq, res.x.copy(), res)
         if res.success:

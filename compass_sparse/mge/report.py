@@ -94,10 +94,8 @@ class _Point:
         """The consumer's root price index π_h (1 at reference prices)."""
         st = self.st
         owners, nodes = st.demand_root
-        col = as_expr(consumer).cols
-        return self.x[st.node_col[nodes[np.searchsorted(owners, col)]]] \
-            if np.all(np.diff(owners) > 0) else self.x[st.node_col[
-                nodes[[int(np.flatnonzero(owners == c)[0]) for c in col]]]]
+        col = int(as_expr(consumer).cols[0])
+        return float(self.x[st.node_col[nodes[np.flatnonzero(owners == col)[0]]]])
 
 
 class BenchmarkCheck(_Point):

@@ -107,3 +107,16 @@ def test_auxiliary_numeraire_and_bounds():
     assert sol.success and sol.value(Y) == pytest.approx(0.9)
     F, _ = sol.eq.evaluate(sol.x, deriv=False)
     assert F[int(Y.cols[0])] <= 1e-10    # at its upper bound, F <= 0
+
+
+def test_price_index_and_options_object():
+    """The consumer's price index is 1 at the reference prices and moves with them; an
+    Options object is accepted by solve."""
+    import compass_sparse as cs
+
+    m, h = _economy()
+    base = m.solve(options=cs.Options(convergence_tolerance=1e-10))
+    assert base.price_index(h["HH"]) == pytest.approx(1.0, abs=1e-12)
+    h["tax"].set([0.3, 0.3])
+    sol = m.solve()
+    assert sol.price_index(h["HH"]) > 1.0    # dearer goods at a fixed wage
