@@ -1,7 +1,8 @@
 """Build, evaluation and solve times of compass_sparse.mge models from 1e3 to 1e6 variables.
 
 The model is the synthetic multi-region economy of ``compass_sparse.mge.multiregion``
-(20 sectors and 2 households per region; the number of regions sets the size).  For each
+(``--sectors`` and ``--households`` per region, default 10 and 2; the number of regions
+sets the size).  For each
 size:
 
 * build: declaring the model, compiling it (flat arrays, nests, names), the start point
@@ -15,7 +16,7 @@ size:
 
 Usage (from the repository root):
 
-    python3 benchmarks/bench_mge.py --regions 5 50 500 5000 --repeats 3
+    python3 benchmarks/bench_mge.py --regions 10 100 1000 10000 --repeats 3
 
 writes ``benchmarks/results/mge.csv`` and prints the table of ``benchmarks/mge.md``.
 """
@@ -39,12 +40,13 @@ sys.path.insert(0, str(HERE.parent))
 import compass_sparse as cs
 from compass_sparse.mge.multiregion import multiregion_model
 
-SECTORS, HOUSEHOLDS = 20, 2
+SHAPE = {"S": 10, "H": 2}
+"""Sectors and households per region (set from the command line)."""
 
 
 def _build(R):
     t0 = time.perf_counter()
-    m, h, _ = multiregion_model(R, SECTORS, HOUSEHOLDS)
+    m, h, _ = multiregion_model(R, SHAPE["S"], SHAPE["H"])
     problem, st, eq = m.mcp()
     return time.perf_counter() - t0, m, h, problem, st, eq
 
@@ -105,11 +107,14 @@ def run(R, repeats, evals):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--regions", type=int, nargs="+", default=[5, 50, 500, 5000])
+    ap.add_argument("--regions", type=int, nargs="+", default=[10, 100, 1000, 10000])
+    ap.add_argument("--sectors", type=int, default=10)
+    ap.add_argument("--households", type=int, default=2)
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--evals", type=int, default=5)
     ap.add_argument("--out", default=str(HERE / "results" / "mge.csv"))
     a = ap.parse_args(argv)
+    SHAPE.update(S=a.sectors, H=a.households)
     rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
                          text=True, cwd=HERE, check=False).stdout.strip()
     print(f"revision {rev}; {platform.platform()}; {os.cpu_count()} cores; "
