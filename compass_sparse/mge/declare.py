@@ -192,10 +192,17 @@ class _Block:
             except (TypeError, ValueError):
                 raise DeclarationError(f"{where}: a tax is (consumer, rate)") from None
             agent = _as_ref(self.model, agent, "consumer", f"{where}, tax on {c!r}")
-            if agent.size != 1:
-                raise DeclarationError(f"{where}: a tax goes to one consumer, not {agent!r}")
-            tx.append((int(agent.cols[0]), _flat(_values(rate), pairs, where, f"tax on {c!r}",
-                                                 True)))
+            own, m = pairs[0], pairs[0].shape[0]
+            if agent.size == 1:
+                cols = np.full(m, agent.cols[0])
+            elif agent.size == self.n:
+                cols = agent.cols[own]         # one receiving consumer per owner
+            elif agent.size == m:
+                cols = agent.cols              # one per (owner, commodity) entry
+            else:
+                raise DeclarationError(f"{where}: the tax on {c!r} goes to {agent.size} "
+                                       f"consumers; expected 1, {self.n} (one per owner) or {m}")
+            tx.append((cols, _flat(_values(rate), pairs, where, f"tax on {c!r}", True)))
         self.netputs.append({"tree": tree, "comm": c, "nest": nest, "pairs": pairs, "q": q, "p": p, "taxes": tx})
         return self
 
@@ -274,7 +281,8 @@ class Production(_Block):
 
     def input(self, commodity, quantity, nest=None, price=1.0, taxes=()):
         """Input of ``commodity``: reference ``quantity`` at reference ``price`` (the price
-        the producer pays, taxes included); ``taxes`` are (consumer, ad-valorem rate)."""
+        the producer pays, taxes included); ``taxes`` are (consumer, ad-valorem rate), the
+        consumer one, one per owner or one per entry."""
         return self._netput("input", commodity, quantity, nest, price, taxes)
 
     def output(self, commodity, quantity, nest=None, price=1.0, taxes=()):

@@ -129,18 +129,10 @@ def multiregion_model(R, S, H, n_inputs=5, n_partners=4, tariff=0.1, seed=0):
     rows = np.repeat(d["dst"], S) * S + s_idx
     cols = np.repeat(d["src"], S) * S + s_idx
     order = np.lexsort((cols, rows))
-    imp = None
-    del imp
-    flows = d["trade"].ravel()[order]
-    gov_of_entry = np.repeat(d["dst"], S)[order]
-    # One tax agent per netput call: tariffs go to the importing region's government.
-    for r in range(R):
-        sel = gov_of_entry == r
-        if not sel.any():
-            continue
-        sub = sp.csr_matrix((flows[sel], (rows[order][sel], cols[order][sel])), (RS, RS))
-        a.input(PY, sub, nest="m", price=1.0 + d["tm0"].ravel()[order][sel],
-                taxes=[(GOV[regions[r]], tm[order[sel]])])
+    imp = sp.csr_matrix((d["trade"].ravel()[order], (rows[order], cols[order])), (RS, RS))
+    # Tariffs go to the importing region's government: one receiving consumer per owner.
+    a.input(PY, imp, nest="m", price=1.0 + d["tm0"].ravel()[order],
+            taxes=[(GOV[region_of], tm[order])])
     hh_region = np.repeat(np.arange(R), H)
     dem = m.demand(HH, s=1.0, nests={"g": ("s", 0.5)})
     cmat = d["c"].reshape(R * H, S)

@@ -91,7 +91,7 @@ class Structure:
                 for agent, rate in np_["taxes"]:
                     r = rate if rate.size == 1 else rate[keep]
                     tax_leaf.append(count + np.arange(keep.size))
-                    tax_agent.append(np.full(keep.size, agent))
+                    tax_agent.append(np.asarray(agent, np.int64)[keep])
                     tax_expr.append(r[np.zeros(keep.size, np.int64)] if rate.size == 1 else r)
                 count += keep.size
         cat = {k: (np.concatenate(v) if v else np.zeros(0)) for k, v in cols.items()}

@@ -108,7 +108,7 @@ def test_names_and_constraints_are_checked():
     m.constraint(T, T - 1)
     with pytest.raises(DeclarationError, match="already has a constraint"):
         m.constraint(T, T - 2)
-    with pytest.raises(DeclarationError, match="one consumer"):
+    with pytest.raises(DeclarationError, match="goes to 2 consumers"):
         m.production(X).output(PX, 1, taxes=[(m.consumers("H", ["a", "b"]), 0.1)])
 
 
@@ -126,3 +126,24 @@ def test_prune_drops_data_less_sectors_and_commodities():
     assert sorted(st.pruned.tolist()) == [int(Y.cols[1]), int(P.cols[1])]
     sol = m.solve()
     assert sol.success and sol.value(Y["b"]) == 1.0 and sol.value(P["b"]) == 1.0
+
+
+def test_tax_receivers_one_per_owner_or_per_entry():
+    """A tax may go to one consumer, to one per owner, or to one per (owner, commodity)
+    entry: each government's income at the benchmark is the revenue routed to it."""
+    m = Model()
+    Y = m.sectors("Y", ["a", "b"])
+    P, F = m.commodities("P", ["a", "b"]), m.commodities("F", ["l", "k"])
+    HH = m.consumer("HH")
+    G = m.consumers("G", ["g1", "g2", "g3", "g4"])
+    q = np.array([[20.0, 30.0], [40.0, 10.0]])
+    rates = np.array([0.1, 0.2, 0.3, 0.4])           # per entry, row-major
+    b = m.production(Y).output(P, [60.0, 60.0])
+    b.input(F, q, price=1 + rates, taxes=[(G, rates)])           # per entry
+    b.output(P, [1e-9, 1e-9], taxes=[(G[["g1", "g2"]], 0.0)])    # per owner
+    spend = [2.0, 6.0, 12.0, 4.0]
+    m.demand(HH).final(P, [[60.0 - 8.0, 60.0 - 16.0]]).endowment(F, [[60.0, 40.0]])
+    d = m.demand(G, s=1.0)
+    d.final(P["a"], np.array(spend) / 2).final(P["b"], np.array(spend) / 2)
+    x = m.benchmark().x
+    np.testing.assert_allclose(x[G.cols], rates * q.ravel(), rtol=1e-12)
