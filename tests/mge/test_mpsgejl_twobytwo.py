@@ -222,3 +222,28 @@ def test_two_by_two_cet_mirrors_mpsgejl_test_twobytwo_transformation_elasticitie
         ta.set(a)
         tb.set(b)
         _solve_and_match(m, ref, col, g)
+
+
+def test_two_by_two_ces_production_mirrors_mpsgejl_test_twobytwo_ces_functional():
+    """X with σ = 0.5 and Y with σ = 0.6 (general CES, neither 0 nor 1)."""
+    ref = sheet("TwoxTwoCESProd")
+    m = Model()
+    endow = m.parameter("endow", 2.0)
+    X, Y, U = m.sector("X"), m.sector("Y"), m.sector("U")
+    PX, PY, PU, PL, PK = (m.commodity(n) for n in ("PX", "PY", "PU", "PL", "PK"))
+    RA = m.consumer("RA")
+    m.production(X, s=0.5).output(PX, 100).input(PL, 50).input(PK, 50)
+    m.production(Y, s=0.6).output(PY, 50).input(PL, 20).input(PK, 30)
+    m.production(U, s=1).output(PU, 150).input(PX, 100).input(PY, 50)
+    m.demand(RA).final(PU, 150).endowment(PL, endow * 35).endowment(PK, 80)
+    g = _scalar_getters(X, Y, U, PX, PY, PU, PL, PK, RA)
+    _solve_and_match(m, ref, "benchmark", g)
+    endow.set(2.2)
+    m.fix(RA, 157.0)
+    _solve_and_match(m, ref, "RA=157", g)
+    m.unfix(RA)
+    m.fix(PX, 1.0)
+    _solve_and_match(m, ref, "PX=1", g)
+    m.unfix(PX)
+    m.fix(PL, 1.0)
+    _solve_and_match(m, ref, "PL=1", g)
