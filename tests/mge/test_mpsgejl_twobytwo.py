@@ -11,7 +11,7 @@ import pytest
 
 from compass_sparse.mge import Model
 
-from ._peer import matches, sheet
+from ._peer import RTOL, matches, sheet
 
 
 def _solve_and_match(m, ref, column, getters, atol=None):
@@ -247,3 +247,42 @@ def test_two_by_two_ces_production_mirrors_mpsgejl_test_twobytwo_ces_functional(
     m.unfix(PX)
     m.fix(PL, 1.0)
     _solve_and_match(m, ref, "PL=1", g)
+
+
+# The peer's published values for its outputdiff "theta" test (test_Benchmark-Theta.jl):
+# X's output raised to 110 while its inputs stay at 100, the labour endowment raised 10%,
+# RA's income fixed at 157.  Values as printed there (8 to 10 digits), compared at the
+# peer's tolerance (sqrt(eps) relative, 1e-4 and 1e-5 absolute where it says so).
+THETA = {"X": 1.04880885, "Y": 1.03886012, "U": 1.11406803, "PX": 0.90723410,
+         "PY": 1.00751453, "PU": 0.93949978, "PL": 0.95151515, "PK": 1.04666667,
+         "LX": 52.44044241, "KX": 47.67312946, "LY": 21.17705706, "KY": 28.87780508,
+         "DX": 103.5565, "DY": 46.62462680, "SX": 110.0, "SY": 50.0, "SU": 150.0,
+         "RA": 157.0, "DU": 167.1102}
+
+
+def test_output_not_equal_to_inputs_mirrors_mpsgejl_test_benchmark_theta():
+    m = Model()
+    endow, diff = m.parameter("endow", 1.0), m.parameter("diff", 0.0)
+    X, Y, U = m.sector("X"), m.sector("Y"), m.sector("U")
+    PX, PY, PU, PL, PK = (m.commodity(n) for n in ("PX", "PY", "PU", "PL", "PK"))
+    RA = m.consumer("RA")
+    m.production(X, s=1).output(PX, 100 + diff).input(PL, 50).input(PK, 50)
+    m.production(Y, s=1).output(PY, 50).input(PL, 20).input(PK, 30)
+    m.production(U, s=1).output(PU, 150).input(PX, 100).input(PY, 50)
+    m.demand(RA).final(PU, 150).endowment(PL, endow * 70).endowment(PK, 80)
+    g = _scalar_getters(X, Y, U, PX, PY, PU, PL, PK, RA)
+    g.update(SX=lambda s: s.compensated_demand(X, PX, output=True),
+             SY=lambda s: s.compensated_demand(Y, PY, output=True),
+             SU=lambda s: s.compensated_demand(U, PU, output=True),
+             DU=lambda s: s.final_demand(RA, PU))
+    assert m.benchmark().ok(1e-10)
+    diff.set(10.0)
+    endow.set(1.1)
+    m.fix(RA, 157.0)
+    # With diff = 10, X's block no longer balances at the reference point:
+    assert m.benchmark().by_block["zero_profit"][0] > 1.0
+    sol = m.solve()
+    assert sol.success and sol.residual() <= 1e-9
+    atol = {"DX": 1e-4, "DU": 1e-5}
+    for row, theirs in THETA.items():
+        assert np.isclose(g[row](sol), theirs, rtol=RTOL, atol=atol.get(row, 0.0)), row
