@@ -21,7 +21,8 @@ from .exceptions import (BoundsError, CompassError, EvaluationError, JacobianPat
                          OptionError, ProblemError, ShapeError, StartPointError)
 from .options import Options
 from .problem import MCP
-from .result import IntermediateResult, Iteration, PassStats, PointStatus, Result, Status
+from .result import Result
+from .status import IntermediateResult, Iteration, PassStats, PointStatus, Status
 from .solve import MCPSolver, solve_lcp, solve_mcp
 
 __version__ = "0.1.0"

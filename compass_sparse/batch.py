@@ -51,7 +51,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .options import Options
-from .result import Status
+from .status import Status
 
 logger = logging.getLogger("compass_sparse")
 

@@ -225,7 +225,7 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
     :class:`~compass_sparse.evaluation.Evaluator`; ``f0``, ``J0``: F and J at z0 when known.
     ``on_point(z, f)`` sees every trial point where F was evaluated (the caller's best point
     may be among them, and it may stop the crash by raising).  ``stats`` (a
-    :class:`~compass_sparse.result.PassStats`) counts the accepted steps and the
+    :class:`~compass_sparse.status.PassStats`) counts the accepted steps and the
     factorizations as they happen, so that they are reported when ``on_point`` stops the
     crash at a solution."""
     kw = dict(f0=f0, J0=J0, tol=tol, deadline=deadline, log=log, on_point=on_point,

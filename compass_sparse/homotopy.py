@@ -105,7 +105,7 @@ from .merit import dot_norm, fb_phi, fb_psi, float_vector, max_abs, project
 from .options import HOMOTOPY_DENSE_DENSITY, HOMOTOPY_DENSE_MAX_N
 from .path import _floats
 from .restarts import random_point
-from .result import PassStats
+from .status import PassStats
 
 logger = logging.getLogger("compass_sparse")
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .result import Status
+from .status import Status
 
 __all__ = ["solve_free_lcp", "FreeSystemOutcome", "CERTIFICATE_RTOL", "DENSE_MAX_N"]
 

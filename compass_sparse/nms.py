@@ -65,7 +65,7 @@ from .merit import (_solver_vectors, fb_directional, fb_phi, fb_psi, max_abs_dif
 from .path import LinearCode, WarmBasis, dense_newton_result, solve_linear_mcp
 from .progress import ProgressLine
 from .restarts import FROM_RANDOM, FROM_START, RestartSchedule, near_point, random_point
-from .result import Iteration, PassStats, Status
+from .status import Iteration, PassStats, Status
 from .stationary import stationarity, worst_rows
 
 logger = logging.getLogger("compass_sparse")
@@ -391,7 +391,7 @@ class NMSSolver:
     def _callback(self, cur: Point):
         if self.callback is None:
             return
-        from .result import IntermediateResult
+        from .status import IntermediateResult
 
         z, f = self.acceptance.user_point(cur.z, cur.f)  # the user's units
         a = self.acceptance

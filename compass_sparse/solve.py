@@ -27,7 +27,8 @@ from .options import Options
 from .exceptions import ShapeError
 from .path import LinearCode, WarmBasis, default_basis, solve_linear_mcp
 from .problem import MCP
-from .result import Iteration, PassStats, PointStatus, Result, Status
+from .result import Result
+from .status import Iteration, PassStats, PointStatus, Status
 from ._blas import BLAS_LIMIT_MIN_N, single_threaded_blas
 from ._eval_kernels import any_equal, csc_scaled_all_finite
 from .scaling import SPREAD_TRIGGER, equilibrate, scale_problem, spread

@@ -480,7 +480,7 @@ def test_compiled_crash_gives_the_python_routes_points_bit_for_bit(monkeypatch):
     path: the same points (z, F, x), iterations, norms, stop reasons, factorizations,
     log rows and lines, counts, evaluations and trial points offered, bit for bit."""
     import compass_sparse.crash as C
-    from compass_sparse.result import PassStats
+    from compass_sparse.status import PassStats
 
     used = []
     real = C.ck.crash_dense

@@ -12,7 +12,7 @@ from compass_sparse import MCP, Options, solve_mcp
 from compass_sparse.generators import thesis_family
 from compass_sparse.homotopy import HomotopyStatus, SmoothedNormalMap, track_paths
 from compass_sparse.merit import fb_gradient, fb_phi, natural_residual
-from compass_sparse.result import Status
+from compass_sparse.status import Status
 
 
 def _quadratic(D, A, b):
