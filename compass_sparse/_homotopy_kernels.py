@@ -296,7 +296,7 @@ def _predict(sf, si, W, n):
         for i in range(n + 1):
             yp[i] = y[i] + s * tau[i]
     # the corrector's start, as _Tracker._correct: its distances are BLAS products as
-    # merit.dot_norm takes them
+    # box.dot_norm takes them
     for i in range(n + 1):
         yc[i] = yp[i]
         t[i] = yp[i] - y[i]

@@ -352,7 +352,7 @@ def residual_maxima_kernel(z, f, lb, ub, phi, mm):
 def residual_report_kernel(z, f, lb, ub, phi, mm, idx):
     """The numbers of merit.residual_report in one call (a Python route of six array
     operations and calls cost a small solve ~10 us): the maxima of
-    :func:`residual_maxima_kernel`, ||Phi||_2 as merit._norm2 takes it (scaled by
+    :func:`residual_maxima_kernel`, ||Phi||_2 as box.norm2 takes it (scaled by
     ||Phi||_inf against over- and underflow: m sqrt(s . s), s = Phi / m; m itself when
     it is 0 or not finite), Phi . Phi (merit.fb_psi's product) and the rows of the
     len(idx) largest |Phi_i| by :func:`top_abs_distinct` (whose answer, False on a tie,

@@ -35,7 +35,8 @@ import scipy.sparse as sp
 from ._csc import without_duplicates
 from ._merit_kernels import (flat_step_kernel, min_map_within,
                              scale_test_kernel)
-from .merit import dot_norm, fb_jacobian_diagonals, fb_phi, max_abs, min_map
+from .box import dot_norm, max_abs
+from .merit import fb_jacobian_diagonals, fb_phi, min_map
 from .path import _floats
 from .scaling import scale_entries
 

@@ -46,7 +46,8 @@ from .direct_step import (DIRECT_MAX_N, KLU_FILL_LIMIT, REUSE_BEATS_REFACTOR_NNZ
                           DirectFactors, automatic_lu, klu_available, reduced_system)
 from .evaluation import all_finite
 from .exceptions import FactorBudgetError
-from .merit import _solver_vectors, dot_norm, fb_phi, max_abs, normal_map_at, project
+from .box import dot_norm, max_abs, project, solver_vectors
+from .merit import fb_phi, normal_map_at
 
 __all__ = ["CrashResult", "crash"]
 
@@ -246,7 +247,7 @@ def _crash(evalr, z0, lb, ub, options, *, f0, J0, tol, deadline, log, on_point,
     tol = opt.convergence_tolerance if tol is None else tol
     z = np.asarray(z0, dtype=float)
     if (COMPILED_CRASH and f0 is not None and 0 < z.size <= DENSE_SOLVE_MAX_N
-            and _solver_vectors(z, f0, lb, ub)):
+            and solver_vectors(z, f0, lb, ub)):
         return _crash_dense(evalr, z, f0, J0, lb, ub, opt, tol, deadline, log, on_point,
                             stats, t0)
     f = evalr.f(z) if f0 is None else f0
@@ -297,7 +298,7 @@ def _crash(evalr, z0, lb, ub, options, *, f0, J0, tol, deadline, log, on_point,
         # Rows are scaled by |J_ii| so that F and z are compared in the same units (the
         # minimum map of the row-scaled problem has the same solutions).
         if (z.size <= DENSE_SOLVE_MAX_N and sp.issparse(J) and J.format == "csc"
-                and J.shape[0] == z.size and _solver_vectors(z, f, lb, ub)
+                and J.shape[0] == z.size and solver_vectors(z, f, lb, ub)
                 and (deadline is None or time.perf_counter() <= deadline)):
             # Every block of this problem is factored densely: the direction in one
             # compiled call of the kernels below, in their order on the same arrays (the
@@ -331,7 +332,7 @@ def _crash(evalr, z0, lb, ub, options, *, f0, J0, tol, deadline, log, on_point,
             # ones solve F_I(z) + J_II d_I + J_IA d_A = 0 for the step d = z - z_new.
             free = np.empty(z.size, dtype=np.bool_)
             d = np.empty(z.size)
-            if _solver_vectors(z, f, lb, ub):  # (every crash of the solver: no conversions)
+            if solver_vectors(z, f, lb, ub):  # (every crash of the solver: no conversions)
                 crash_active_set(z, f, lb, ub, dg, free, d)
             else:
                 crash_active_set(*(np.ascontiguousarray(a, dtype=float) for a in (z, f, lb, ub)),

@@ -50,7 +50,7 @@ from ._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
 from ._slot_kernels import components, start_basis
 from .basis.types import BasisOptions
 from .evaluation import all_finite
-from .merit import float_vector, max_abs
+from .box import float_vector, max_abs
 
 __all__ = ["DIRECT_MAX_DENSITY", "DIRECT_MAX_N", "DIRECT_MIN_N", "KLU_FILL_LIMIT",
            "automatic_lu", "klu_available",

@@ -48,7 +48,7 @@ from ._eval_kernels import csc_copy_on_pattern, csc_same_pattern
 from ._merit_kernels import all_finite_kernel, csc_is_canonical, memo_key_kernel
 from .exceptions import (CompassError, EvaluationError, JacobianPatternError, ProblemError,
                          ShapeError)
-from .merit import _F64, float_vector
+from .box import F64, float_vector
 
 __all__ = ["Evaluator", "EvalCounters", "canonical_csc"]
 
@@ -354,7 +354,7 @@ class Evaluator:
             return self._fix_pattern(C)
         # (the dtypes by identity: a tenth of ``==``'s cost; a non-native byte order
         # takes the general route)
-        if (P is not None and is_csc(J) and J.shape == (n, n) and J.data.dtype is _F64
+        if (P is not None and is_csc(J) and J.shape == (n, n) and J.data.dtype is F64
                 and J.indices.dtype is _I32 and J.indptr.dtype is _I32
                 and P.indices.dtype is _I32 and P.indptr.dtype is _I32):
             data = np.empty(P.indices.shape[0])

@@ -26,7 +26,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from .basis.backends import DENSE_SOLVE_MAX_N
-from .merit import fb_jacobian_diagonals, fb_phi, fb_psi, project
+from .box import project
+from .merit import fb_jacobian_diagonals, fb_phi, fb_psi
 
 __all__ = ["gradient_steps", "lm_step", "spd_solve", "cholmod_available"]
 

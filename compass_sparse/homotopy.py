@@ -101,7 +101,8 @@ from ._homotopy_kernels import (bordered_pivots_ok, bordered_values, chord_step,
 from ._jit import NO_INDICES, NO_VALUES, cold_start
 from ._merit_kernels import csc_to_dense
 from .evaluation import all_finite
-from .merit import dot_norm, fb_phi, fb_psi, float_vector, max_abs, project
+from .box import dot_norm, float_vector, max_abs, project
+from .merit import fb_phi, fb_psi
 from .options import HOMOTOPY_DENSE_DENSITY, HOMOTOPY_DENSE_MAX_N
 from .path import _floats
 from .restarts import random_point

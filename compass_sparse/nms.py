@@ -60,8 +60,8 @@ from .direct_step import (DIRECT_MIN_N, FEASIBILITY_TOLERANCE, RESIDUAL_TOLERANC
 from .evaluation import all_finite
 from .exceptions import FactorBudgetError
 from .fallback import gradient_steps, lm_step
-from .merit import (_solver_vectors, fb_directional, fb_phi, fb_psi, max_abs_diff,
-                    normal_map_at, project)
+from .box import max_abs_diff, project, solver_vectors
+from .merit import fb_directional, fb_phi, fb_psi, normal_map_at
 from .path import LinearCode, WarmBasis, dense_newton_result, solve_linear_mcp
 from .progress import ProgressLine
 from .restarts import FROM_RANDOM, FROM_START, RestartSchedule, near_point, random_point
@@ -185,7 +185,7 @@ class Linearizer:
         major iteration); the same bits either way."""
         n = self.n
         if (J.data.dtype == np.float64 and J.data.shape[0] == J.nnz
-                and _solver_vectors(z, f, x, x) and z.shape[0] == n):
+                and solver_vectors(z, f, x, x) and z.shape[0] == n):
             data = np.empty(self.M.data.shape[0])
             q, r = np.empty(n), np.empty(n)
             scatter = self.pos_J is not None
@@ -676,7 +676,7 @@ class NMSSolver:
         start the Python loop is the faster)."""
         return (COMPILED_NMS and self.callback is None and self.log_major is None
                 and self.acceptance.row is None and 0 < self.n <= COMPILED_NMS_MAX_N
-                and _solver_vectors(self.lb, self.ub, self.lb, self.ub)  # float vectors
+                and solver_vectors(self.lb, self.ub, self.lb, self.ub)  # float vectors
                 and not cold_start()["interpreting"])
 
     def _run_compiled(self, st, opt, stall_limit):

@@ -86,7 +86,7 @@ from .direct_step import (FEASIBILITY_TOLERANCE, RESIDUAL_TOLERANCE, DirectFacto
                           dense_direct_path, dense_newton_direct, direct_step,
                           failed_direct_start)
 from .exceptions import ShapeError, SingularBasisError
-from .merit import _F64, max_abs
+from .box import F64, max_abs
 
 _VAR_NAMES = "zwvatS"
 
@@ -145,8 +145,8 @@ def _floats(n, *arrays) -> bool:
     """All float64 vectors of length n (the compiled kernels' arguments)."""
     shape = (n,)
     for a in arrays:  # (a loop, not all(...): this runs several times per path)
-        # (the dtype by identity, as merit.float_vector: ``==`` converts np.float64 first)
-        if not (isinstance(a, np.ndarray) and a.dtype is _F64 and a.shape == shape):
+        # (the dtype by identity, as box.float_vector: ``==`` converts np.float64 first)
+        if not (isinstance(a, np.ndarray) and a.dtype is F64 and a.shape == shape):
             return False
     return True
 

@@ -40,7 +40,7 @@ import scipy.sparse as sp
 from ._eval_kernels import clean_bounds
 from .evaluation import EvalCounters, Evaluator, all_finite
 from .exceptions import BoundsError, EvaluationError, ProblemError, ShapeError, StartPointError
-from .merit import project  # (np.clip's values on validated bounds, at 40% of its cost)
+from .box import project  # (np.clip's values on validated bounds, at 40% of its cost)
 
 _SIZE_WORDS = ("shape", "dimension", "size", "broadcast", "index", "mismatch", "aligned")
 """Words of a user's exception at the start point that suggest a wrong-length x0."""

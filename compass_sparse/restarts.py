@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .merit import project
+from .box import project
 
 __all__ = ["RestartSchedule", "FROM_START", "FROM_RANDOM", "FROM_NEAR_BEST"]
 

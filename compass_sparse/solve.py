@@ -21,7 +21,8 @@ import scipy.sparse as sp
 from .acceptance import Acceptance, judge
 from .crash import crash
 from .exceptions import CompassError
-from .merit import dot_norm, fb_phi, fb_psi, float_vector, normal_map_at, residual_report
+from .box import dot_norm, float_vector
+from .merit import fb_phi, fb_psi, normal_map_at, residual_report
 from .nms import NMSSolver, Point
 from .options import Options
 from .exceptions import ShapeError

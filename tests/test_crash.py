@@ -215,10 +215,10 @@ def test_dense_solve_of_the_crash_gives_the_bits_of_scipy_lu_factor_and_lu_solve
 
 
 def test_crash_norm_is_numpys_two_norm_bit_for_bit():
-    """The crash's ||v||_2 (the square root of v.v, merit.dot_norm, which the homotopy's
+    """The crash's ||v||_2 (the square root of v.v, box.dot_norm, which the homotopy's
     corrector uses too) gives np.linalg.norm's bits, from underflowing to overflowing
     magnitudes."""
-    from compass_sparse.merit import dot_norm as _norm
+    from compass_sparse.box import dot_norm as _norm
 
     rng = np.random.default_rng(0)
     for n in (0, 1, 2, 5, 17, 1000):
@@ -424,7 +424,7 @@ def _crash_both_ways(p, opt, monkeypatch):
     with monkeypatch.context() as m:
         calls = []
         m.setattr(C, "dense_crash_step", lambda *a: calls.append(1) or 1 / 0)
-        m.setattr(C, "_solver_vectors", lambda *a: False)  # the general route
+        m.setattr(C, "solver_vectors", lambda *a: False)  # the general route
         p.evaluator.forget()
         slow = crash(p.evaluator, p.x0, p.lb, p.ub, opt)
         assert not calls

@@ -8,6 +8,7 @@ import scipy.sparse as sp
 from hypothesis import given, settings, strategies as st
 
 import compass_sparse.generators as gen
+from compass_sparse.box import max_abs, max_abs_diff, project
 from compass_sparse.merit import (
     fb_directional,
     fb_gradient,
@@ -15,12 +16,9 @@ from compass_sparse.merit import (
     fb_phi,
     fb_psi,
     fischer,
-    max_abs,
-    max_abs_diff,
     min_map,
     natural_residual,
     normal_map,
-    project,
     residual_report,
 )
 

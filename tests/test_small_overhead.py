@@ -835,10 +835,10 @@ def test_crash_limits_blas_threads_only_from_the_size_where_blas_could_use_threa
 
 
 def test_project_gives_np_clip_bits_signed_zeros_and_infinite_bounds_included():
-    """The start point's projection (merit.project: np.minimum of np.maximum, which MCP
+    """The start point's projection (box.project: np.minimum of np.maximum, which MCP
     uses instead of np.clip) gives np.clip's values bit for bit on validated bounds,
     signed zeros and infinite bounds included (20000 random boxes)."""
-    from compass_sparse.merit import project
+    from compass_sparse.box import project
 
     rng = np.random.default_rng(17)
     vals = np.array([0.0, -0.0, 1.0, -1.0, 2.5, -3e300, 5e-324, np.inf, -np.inf])

@@ -1,0 +1,91 @@
+"""The box [l, u] and the vectors of a solve: projection, norms, float-vector tests.
+
+pi(x) = min(max(x, l), u) is the projection on the box (thesis §3.1: the normal map
+F_B(x) = F(pi(x)) + x - pi(x) is built on it).  The norms here are the ones every pass
+reads several times per iteration -- ||x||_inf and ||x - y||_inf in one compiled pass,
+||v||_2 as the square root of v . v (what np.linalg.norm computes for a real vector, without
+its dispatch) -- and the tests of whether a vector is the solver's own float64 vector,
+which the compiled kernels take as they are.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ._merit_kernels import max_abs_kernel
+
+__all__ = ["F64", "broadcast_box", "dot_norm", "float_vector", "max_abs", "max_abs_diff",
+           "norm2", "project", "solver_vectors"]
+
+
+F64 = np.dtype(np.float64)
+"""The float64 dtype object (tested by identity: ``==`` converts np.float64 first)."""
+
+
+def float_vector(x) -> bool:
+    """x is a float64 vector, the compiled kernels' argument (every point of a solve).
+    (Identity tests: a tenth of a microsecond where ``dtype ==`` and the flags cost a
+    microsecond, asked several times at every evaluated point.)"""
+    return x.__class__ is np.ndarray and x.ndim == 1 and x.dtype is F64
+
+
+def solver_vectors(z, f, lb, ub) -> bool:
+    """z, F, l, u are float64 vectors of one length: the solver's own vectors at every
+    evaluated point, handed straight to the compiled kernels (a microsecond of tests
+    instead of the conversions of the general case)."""
+    return (float_vector(z) and float_vector(f) and float_vector(lb) and float_vector(ub)
+            and z.shape == f.shape == lb.shape == ub.shape)
+
+
+def broadcast_box(lb, ub, z):
+    """Broadcast scalar (or array) bounds to the shape of z (no validation: that is
+    :func:`compass_sparse.problem.as_bounds`, for user input)."""
+    if (isinstance(lb, np.ndarray) and isinstance(ub, np.ndarray) and lb.shape == z.shape
+            and ub.shape == z.shape and lb.dtype == float and ub.dtype == float):
+        return lb, ub  # the solver's own bound arrays: nothing to broadcast
+    return (np.broadcast_to(np.asarray(lb, dtype=float), z.shape),
+            np.broadcast_to(np.asarray(ub, dtype=float), z.shape))
+
+
+def project(x, lb, ub):
+    """pi(x): the projection of x on the box [lb, ub]."""
+    return np.minimum(np.maximum(x, lb), ub)
+
+
+def max_abs(x) -> float:
+    """||x||_inf of a vector (0 when empty; NaN when x holds a NaN), in one compiled pass
+    for a float vector: np.max(np.abs(x)) costs ~5 us of dispatch on a short one, and the
+    solver asks it several times per major iteration."""
+    if float_vector(x):
+        return float(max_abs_kernel(x, x, False))
+    x = np.asarray(x, dtype=float)
+    return float(np.max(np.abs(x))) if x.size else 0.0
+
+
+def max_abs_diff(x, y) -> float:
+    """||x - y||_inf of two vectors of one length (as :func:`max_abs`)."""
+    if float_vector(x) and float_vector(y) and x.shape == y.shape:
+        return float(max_abs_kernel(x, y, True))
+    return max_abs(np.asarray(x, dtype=float) - np.asarray(y, dtype=float))
+
+
+def dot_norm(v) -> float:
+    """||v||_2 of a float vector as the square root of v . v, which is what np.linalg.norm
+    computes for a real vector (the same bits), without its dispatch (~4 us; the crash and
+    the homotopy's corrector ask several per step).  (:func:`norm2` scales against
+    overflow instead.)"""
+    return math.sqrt(float(v.dot(v)))
+
+
+def norm2(v, inf_norm=None) -> float:
+    """||v||_2 without underflow or overflow of the squares (``inf_norm``: ||v||_inf when
+    known)."""
+    if inf_norm is not None:
+        m = float(inf_norm)
+    else:
+        m = float(np.abs(v).max()) if v.size else 0.0
+    if m == 0.0 or not math.isfinite(m):
+        return m
+    s = v / m
+    return m * math.sqrt(float(np.dot(s, s)))  # (the correctly rounded root, as np.sqrt)
