@@ -19,11 +19,11 @@ import numpy as np
 
 import math
 
-from ._eval_kernels import free_block
+from .linalg._csc_kernels import free_block
 from ._jit import njit
-from ._matching import _augmenting_matching
-from ._merit_kernels import (crash_active_set, csc_diagonal, csc_to_dense, fb_phi_kernel,
-                             max_abs_kernel, normal_map_kernel)
+from .linalg.matching import augmenting_matching
+from ._merit_kernels import crash_active_set, fb_phi_kernel, max_abs_kernel, normal_map_kernel
+from .linalg._csc_kernels import csc_diagonal, csc_to_dense
 
 __all__ = ["dense_crash_step", "dense_perturbed_solve", "dense_solve_or_none",
            "initial_shift", "structurally_singular"]
@@ -46,7 +46,7 @@ def structurally_singular(indptr, indices, data, n):
                 idx[k] = indices[e]
                 k += 1
     ptr[n] = k
-    row_of, _ = _augmenting_matching(n, n, ptr, idx[:k])
+    row_of, _ = augmenting_matching(n, n, ptr, idx[:k])
     for j in range(n):
         if row_of[j] < 0:
             return True

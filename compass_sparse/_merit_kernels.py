@@ -1,6 +1,7 @@
-"""Compiled Fischer–Burmeister vector and J^T u for :mod:`compass_sparse.merit`, and the
-small CSC helpers of a small problem's per-iteration work (M z, row and column maxima,
-the dense copy of M for the compiled path engine).
+"""Compiled Fischer–Burmeister vector, its generalized Jacobian's diagonals, gradient and
+directional derivative for :mod:`compass_sparse.merit`, the norms of :mod:`compass_sparse.box`,
+the normal map, the residual report and the acceptance test's kernels (the CSC helpers
+they call are :mod:`compass_sparse.linalg._csc_kernels`).
 
 Same formulas as merit.fischer / merit.fb_phi, one element at a time: the arguments of
 phi(a, b) = sqrt(a^2 + b^2) - a - b are scaled by the power of two of max(|a|, |b|) (exact)
@@ -14,6 +15,7 @@ import numpy as np
 
 from ._eval_kernels import top_abs_distinct
 from ._jit import njit
+from .linalg._csc_kernels import csc_abs_maxima, csc_matvec
 
 
 @njit(cache=True, inline="always")
@@ -84,16 +86,6 @@ def all_finite_kernel(x):
     return True
 
 
-@njit(cache=True)
-def csc_rmatvec(indptr, indices, data, u, out):
-    """out = A^T u for A in CSC form (column j of A is row j of A^T)."""
-    for j in range(out.shape[0]):
-        s = 0.0
-        for k in range(indptr[j], indptr[j + 1]):
-            s += data[k] * u[indices[k]]
-        out[j] = s
-
-
 @njit(cache=True, inline="always")
 def _fischer_grad(a, b):
     """(d phi / da, d phi / db), the direction (1, 1)/sqrt(2) at (0, 0) (merit._fischer_grad)."""
@@ -157,18 +149,6 @@ def fb_directional_kernel(z, f, lb, ub, phi, indptr, indices, data, zc, g, d):
 
 
 @njit(cache=True)
-def csc_diagonal(indptr, indices, data, diag):
-    """diag[j] = A_jj of a CSC matrix A (duplicates summed, 0 where not stored), as
-    scipy's A.diagonal() without its dispatch (~15 us on a small matrix)."""
-    for j in range(diag.shape[0]):
-        d = 0.0
-        for k in range(indptr[j], indptr[j + 1]):
-            if indices[k] == j:
-                d += data[k]
-        diag[j] = d
-
-
-@njit(cache=True)
 def crash_active_set(z, f, lb, ub, diag, free, d):
     """The crash's active set and Newton target (crash.py): with g_i = |J_ii| (1 where it
     is 0 or NaN), index i is active at its lower bound when z_i - f_i / g_i <= l_i, else at
@@ -189,72 +169,6 @@ def crash_active_set(z, f, lb, ub, diag, free, d):
         else:
             free[i] = True
             d[i] = 0.0
-
-
-@njit(cache=True)
-def csc_abs_maxima(indptr, indices, data, rows, cols, diag):
-    """Of a canonical CSC matrix A: rows[i] = max_j |A_ij|, cols[j] = max_i |A_ij| and
-    diag[j] = A_jj (0 where not stored), in one pass over the stored entries (a NaN entry
-    makes its row and column maxima NaN, as np.maximum does).  The caller zeroes rows."""
-    for j in range(cols.shape[0]):
-        c = 0.0
-        d = 0.0
-        for k in range(indptr[j], indptr[j + 1]):
-            i = indices[k]
-            a = abs(data[k])
-            if a > c or a != a:
-                c = a
-            if a > rows[i] or a != a:
-                rows[i] = a
-            if i == j:
-                d = data[k]
-        cols[j] = c
-        diag[j] = d
-
-
-@njit(cache=True)
-def csc_scaled_abs_maxima(indptr, indices, data, row, col, rows, cols):
-    """Row and column max-norms of diag(row) A diag(col) for a canonical CSC A, entry
-    (|a_ij| row_i) col_j as scaling._maxnorms' array formula (NaN propagates as in
-    np.maximum); the caller zeroes rows and cols."""
-    for j in range(cols.shape[0]):
-        c = 0.0
-        for k in range(indptr[j], indptr[j + 1]):
-            i = indices[k]
-            a = abs(data[k]) * row[i] * col[j]
-            if a > c or a != a:
-                c = a
-            if a > rows[i] or a != a:
-                rows[i] = a
-        cols[j] = c
-
-
-@njit(cache=True)
-def csc_is_canonical(indptr, indices, nrows, nnz):
-    """Whether CSC index arrays are valid and canonical: indptr runs from 0 to nnz without
-    decreasing, and every column's row indices lie in [0, nrows) strictly increasing
-    (sorted, no duplicates)."""
-    if indptr[0] != 0 or indptr[indptr.shape[0] - 1] != nnz or indices.shape[0] < nnz:
-        return False
-    for j in range(indptr.shape[0] - 1):
-        a, b = indptr[j], indptr[j + 1]
-        if b < a:
-            return False
-        prev = -1
-        for k in range(a, b):
-            i = indices[k]
-            if i <= prev or i >= nrows:
-                return False
-            prev = i
-    return True
-
-
-@njit(cache=True)
-def csc_scale(indptr, indices, data, row, col, out):
-    """out[k] = (a_k row_i) col_j for every stored entry k = (i, j) of a CSC matrix."""
-    for j in range(indptr.shape[0] - 1):
-        for k in range(indptr[j], indptr[j + 1]):
-            out[k] = data[k] * row[indices[k]] * col[j]
 
 
 @njit(cache=True, inline="always")
@@ -368,20 +282,6 @@ def residual_report_kernel(z, f, lb, ub, phi, mm, idx):
 
 
 @njit(cache=True)
-def positive_spread(v):
-    """max / min of the positive entries of v (1 when there are none)."""
-    lo = np.inf
-    hi = 0.0
-    for x in v:
-        if x > 0.0:
-            if x < lo:
-                lo = x
-            if x > hi:
-                hi = x
-    return hi / lo if hi > 0.0 else 1.0
-
-
-@njit(cache=True)
 def min_map_within(z, f, lb, ub, tol):
     """Whether |z_i - pi(z_i - F_i)| <= tol for every i, with the min-map formed as
     merit.min_map forms it, min(max(F, z - u), z - l), and a NaN anywhere in it (z - u
@@ -398,36 +298,6 @@ def min_map_within(z, f, lb, ub, tol):
         if not abs(m) <= tol:
             return False
     return True
-
-
-@njit(cache=True)
-def csc_max_norm_spread(indptr, indices, data, n):
-    """max(positive_spread(rows), positive_spread(cols)) of the row and column max-norms
-    of a canonical square CSC matrix of order n (scaling.spread in one call: the scaling
-    trigger asks for it in every solve)."""
-    rows = np.zeros(n)
-    cols = np.zeros(n)
-    csc_abs_maxima(indptr, indices, data, rows, cols, np.empty(n))
-    return max(positive_spread(rows), positive_spread(cols))
-
-
-@njit(cache=True)
-def csc_matvec(indptr, indices, data, x, out):
-    """out = A x for A in CSC form, column by column (scipy's csc_matvec order)."""
-    out[:] = 0.0
-    for j in range(x.shape[0]):
-        xj = x[j]
-        for k in range(indptr[j], indptr[j + 1]):
-            out[indices[k]] += data[k] * xj
-
-
-@njit(cache=True)
-def csc_to_dense(indptr, indices, data, out):
-    """out[:, :] = A for A in CSC form (duplicate entries summed), in place."""
-    out[:, :] = 0.0
-    for j in range(out.shape[1]):
-        for k in range(indptr[j], indptr[j + 1]):
-            out[indices[k], j] += data[k]
 
 
 @njit(cache=True)

@@ -14,7 +14,7 @@ where several slots name the same index, the assignment order of the array versi
 import numpy as np
 
 from ._jit import njit
-from ._merit_kernels import csc_matvec
+from .linalg._csc_kernels import csc_matvec
 from ._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
 
 

@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ._csc import without_duplicates
+from .linalg.csc import without_duplicates
 from ._merit_kernels import (flat_step_kernel, min_map_within,
                              scale_test_kernel)
 from .box import dot_norm, max_abs

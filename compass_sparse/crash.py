@@ -37,13 +37,15 @@ import scipy.sparse as sp
 from . import _crash_kernels as ck
 from ._crash_kernels import (NO_BASIS_CHANGE, dense_crash_step, dense_perturbed_solve,
                              initial_shift)
-from ._merit_kernels import crash_active_set, csc_diagonal, csc_to_dense
-from ._blas import BLAS_LIMIT_MIN_N, single_threaded_blas
+from ._merit_kernels import crash_active_set
+from .linalg._csc_kernels import csc_diagonal, csc_to_dense
+from .linalg.blas import BLAS_LIMIT_MIN_N, single_threaded_blas
 from ._jit import NO_INDICES, NO_VALUES
-from ._csc import float_csc
+from .linalg.csc import float_csc
 from .basis.backends import DENSE_SOLVE_MAX_N, SingularFactorError, solve_sparse
-from .direct_step import (DIRECT_MAX_N, KLU_FILL_LIMIT, REUSE_BEATS_REFACTOR_NNZ,
-                          DirectFactors, automatic_lu, klu_available, reduced_system)
+from .direct_step import DIRECT_MAX_N, REUSE_BEATS_REFACTOR_NNZ
+from .linalg.direct import KLU_FILL_LIMIT, DirectFactors, automatic_lu, klu_available
+from .linalg.csc import reduced_system
 from .evaluation import all_finite
 from .exceptions import FactorBudgetError
 from .box import dot_norm, max_abs, project, solver_vectors
@@ -233,7 +235,7 @@ def crash(evalr, z0, lb, ub, options, *, f0=None, J0=None, tol=None, deadline=No
               stats=stats)
     if BLAS_LIMIT_MIN_N <= np.size(z0) <= DENSE_SOLVE_MAX_N:
         # Its reduced systems are factored densely, each in a single-threaded BLAS block;
-        # one block around the whole crash makes those free (see compass_sparse._blas).
+        # one block around the whole crash makes those free (see compass_sparse.linalg.blas).
         # (Below BLAS_LIMIT_MIN_N OpenBLAS keeps such small kernels on one thread itself.)
         with single_threaded_blas():
             return _crash(evalr, z0, lb, ub, options, **kw)

@@ -35,7 +35,7 @@ import scipy.sparse as sp
 
 from . import _dense_path_kernels as K
 from . import _path_kernels as PK
-from ._merit_kernels import csc_to_dense
+from .linalg._csc_kernels import csc_to_dense
 from .basis.types import BasisStats
 from .path import LinearCode
 

@@ -43,9 +43,10 @@ from typing import Callable
 import numpy as np
 import scipy.sparse as sp
 
-from ._csc import is_csc, trusted_csc
-from ._eval_kernels import csc_copy_on_pattern, csc_same_pattern
-from ._merit_kernels import all_finite_kernel, csc_is_canonical, memo_key_kernel
+from .linalg.csc import is_csc, trusted_csc
+from .linalg._csc_kernels import csc_copy_on_pattern, csc_same_pattern
+from ._merit_kernels import all_finite_kernel, memo_key_kernel
+from .linalg._csc_kernels import csc_is_canonical
 from .exceptions import (CompassError, EvaluationError, JacobianPatternError, ProblemError,
                          ShapeError)
 from .box import F64, float_vector
@@ -429,7 +430,7 @@ class Evaluator:
 
     def _fd_jacobian(self, x, f):
         """Forward differences on the pattern, one F call per colour of columns."""
-        from ._coloring import color_columns
+        from .linalg.coloring import color_columns
 
         self.counters.njev += 1
         P = self._pattern

@@ -93,13 +93,13 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from . import _homotopy_kernels as hk
-from ._blas import BLAS_LIMIT_MIN_N, single_threaded_blas
-from ._csc import csc_times, float_csc
+from .linalg.blas import BLAS_LIMIT_MIN_N, single_threaded_blas
+from .linalg.csc import csc_times, float_csc
 from ._homotopy_kernels import (bordered_pivots_ok, bordered_values, chord_step,
                                 homotopy_values, lu_solve, smoothed_projection,
                                 unit_tangent)
 from ._jit import NO_INDICES, NO_VALUES, cold_start
-from ._merit_kernels import csc_to_dense
+from .linalg._csc_kernels import csc_to_dense
 from .evaluation import all_finite
 from .box import dot_norm, float_vector, max_abs, project
 from .merit import fb_phi, fb_psi

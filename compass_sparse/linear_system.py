@@ -40,8 +40,8 @@ class FreeSystemOutcome:
 def solve_free_lcp(M: sp.csc_matrix, q: np.ndarray, tol: float) -> FreeSystemOutcome | None:
     n = q.size
     if n <= DENSE_MAX_N:
-        # single-threaded (see compass_sparse._blas): 25 s against 0.8 s at n = 1000
-        from ._blas import single_threaded_blas
+        # single-threaded (see compass_sparse.linalg.blas): 25 s against 0.8 s at n = 1000
+        from .linalg.blas import single_threaded_blas
 
         with single_threaded_blas():
             z = np.linalg.lstsq(M.toarray(), -q, rcond=None)[0]

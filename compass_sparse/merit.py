@@ -35,9 +35,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from ._merit_kernels import (csc_rmatvec, fb_diagonals_kernel, fb_directional_kernel,
-                             fb_gradient_kernel, fb_phi_kernel, normal_map_kernel,
-                             residual_report_kernel)
+from .linalg._csc_kernels import csc_rmatvec
+from ._merit_kernels import (fb_diagonals_kernel, fb_directional_kernel, fb_gradient_kernel,
+                             fb_phi_kernel, normal_map_kernel, residual_report_kernel)
 from .box import broadcast_box, float_vector, max_abs, norm2, project, solver_vectors
 
 __all__ = [

@@ -49,14 +49,15 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _nms_kernels as nk
-from ._csc import trusted_csc
+from .linalg.csc import trusted_csc
 from ._jit import NO_INDICES, NO_VALUES, cold_start
-from ._merit_kernels import csc_matvec, newton_linearization
+from .linalg._csc_kernels import csc_matvec
+from ._merit_kernels import newton_linearization
 from .acceptance import Acceptance
 from .crash import crash
 from .direct_step import (DIRECT_MIN_N, FEASIBILITY_TOLERANCE, RESIDUAL_TOLERANCE,
-                          REUSE_BEATS_REFACTOR_NNZ, DirectFactors, direct_step_applies,
-                          failed_direct_start)
+                          REUSE_BEATS_REFACTOR_NNZ, direct_step_applies, failed_direct_start)
+from .linalg.direct import DirectFactors
 from .evaluation import all_finite
 from .exceptions import FactorBudgetError
 from .fallback import gradient_steps, lm_step

@@ -78,13 +78,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _path_kernels as _PK
-from ._csc import csc_times, trusted_csc
+from .linalg.csc import csc_times, trusted_csc
 from ._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
 from ._slot_kernels import lemke_start, slot_basis, slot_point, slot_table, start_basis
 from .basis import KIND_DENSE, KIND_M, KIND_UNIT, FactorReuseFailed, UpdateStatus
-from .direct_step import (FEASIBILITY_TOLERANCE, RESIDUAL_TOLERANCE, DirectFactors,
-                          dense_direct_path, dense_newton_direct, direct_step,
-                          failed_direct_start)
+from .direct_step import (FEASIBILITY_TOLERANCE, RESIDUAL_TOLERANCE, dense_direct_path,
+                          dense_newton_direct, direct_step, failed_direct_start)
+from .linalg.direct import DirectFactors
 from .exceptions import ShapeError, SingularBasisError
 from .box import F64, max_abs
 

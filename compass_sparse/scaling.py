@@ -33,9 +33,9 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ._csc import trusted_csc, without_duplicates
+from .linalg.csc import trusted_csc, without_duplicates
 from ._jit import njit
-from ._merit_kernels import csc_max_norm_spread, csc_scaled_abs_maxima
+from .linalg._csc_kernels import csc_max_norm_spread, csc_scaled_abs_maxima
 from .evaluation import Evaluator
 from .problem import MCP
 
@@ -74,7 +74,7 @@ def scale_entries(J, row, col) -> sp.csc_matrix:
     """diag(row) J diag(col) as a new CSC matrix, entry by entry in one compiled pass
     ((a_ij row_i) col_j, the value diag(row) @ J @ diag(col) computes; the stored entries,
     explicit zeros included, are kept)."""
-    from ._merit_kernels import csc_scale
+    from .linalg._csc_kernels import csc_scale
 
     J = J if sp.issparse(J) and J.format == "csc" else sp.csc_matrix(J)
     data = np.empty(J.data.shape)
@@ -94,7 +94,7 @@ def _maxnorms(A: sp.csc_matrix, row=None, col=None):
 
 
 def _spread(v) -> float:
-    from ._merit_kernels import positive_spread
+    from .linalg._csc_kernels import positive_spread
 
     return float(positive_spread(v))
 

@@ -30,8 +30,9 @@ from .path import LinearCode, WarmBasis, default_basis, solve_linear_mcp
 from .problem import MCP
 from .result import Result
 from .status import Iteration, PassStats, PointStatus, Status
-from ._blas import BLAS_LIMIT_MIN_N, single_threaded_blas
-from ._eval_kernels import any_equal, csc_scaled_all_finite
+from .linalg.blas import BLAS_LIMIT_MIN_N, single_threaded_blas
+from ._eval_kernels import any_equal
+from .linalg._csc_kernels import csc_scaled_all_finite
 from .scaling import SPREAD_TRIGGER, equilibrate, scale_problem, spread
 
 logger = logging.getLogger("compass_sparse")
@@ -74,7 +75,7 @@ def _manager_factory(opt: Options, deadline=None):
 
 def _blas_threads(n: int):
     """Single-threaded BLAS for small problems (their dense kernels are tiny; see
-    :mod:`compass_sparse._blas`)."""
+    :mod:`compass_sparse.linalg.blas`)."""
     import contextlib
 
     if n > DENSE_BASIS_MAX_N or n < BLAS_LIMIT_MIN_N:

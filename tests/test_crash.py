@@ -279,9 +279,9 @@ def test_compiled_perturbed_attempts_give_the_python_routes_steps_bit_for_bit():
     getrf + getrs called per attempt, on regular blocks of orders 1 ... 200, exactly
     singular ones (a zero column: shifted), and blocks whose shifted steps run away until
     eps is large (the step limit)."""
-    from compass_sparse._blas import single_threaded_blas
+    from compass_sparse.linalg.blas import single_threaded_blas
     from compass_sparse._crash_kernels import dense_perturbed_solve
-    from compass_sparse._merit_kernels import csc_to_dense
+    from compass_sparse.linalg._csc_kernels import csc_to_dense
 
     rng = np.random.default_rng(11)
     cases = []
@@ -321,7 +321,7 @@ def test_structural_singularity_reads_nonzero_entries_only():
     unmatched -- compared with the matching of scipy's copy without stored zeros (the
     test it replaced) on random patterns with stored zeros."""
     from compass_sparse._crash_kernels import structurally_singular
-    from compass_sparse._matching import column_matching
+    from compass_sparse.linalg.matching import column_matching
 
     rng = np.random.default_rng(5)
     seen = set()
@@ -348,7 +348,7 @@ def test_crash_factors_small_sparse_blocks_by_klu_and_large_ones_by_superlu(monk
     or the environment's choice keeps SuperLU (and its factors, for reuse)."""
     import compass_sparse.crash as crash_module
     from compass_sparse.crash import _klu_suits, _solve_reduced
-    from compass_sparse.direct_step import klu_available
+    from compass_sparse.linalg.direct import klu_available
 
     monkeypatch.delenv("COMPASS_SPARSE_LU", raising=False)
     rng = np.random.default_rng(3)

@@ -11,11 +11,13 @@ import pytest
 import scipy.sparse as sp
 
 import compass_sparse.direct_step as ds
+import compass_sparse.linalg.direct as ld
 import compass_sparse.generators as gen
 from compass_sparse import Options, solve_mcp
 from compass_sparse._path_kernels import VAR_V, VAR_W, VAR_Z
 from compass_sparse.basis import BasisManager
 from compass_sparse.dense_path import DensePathEngine
+from compass_sparse.linalg.csc import trusted_csc
 from compass_sparse.path import LinearCode, PivotalPath
 
 
@@ -59,7 +61,7 @@ def _agreement(cases, scales, seed, manager, factors, atol):
 def test_direct_step_agrees_with_the_path(manager, seed):
     """Sparse direct step (n = 120): both branches, on both bases."""
     kinds = _agreement([(120, "banded", "box"), (120, "grid", "mixed")], (1e-4, 1e-2, 1.0),
-                       seed, manager, ds.DirectFactors, 1e-9)
+                       seed, manager, ld.DirectFactors, 1e-9)
     assert kinds == {"direct", "path"}  # both branches were exercised
 
 
@@ -108,7 +110,7 @@ def test_residual_tolerance_from_both_sides(monkeypatch, rel, accepted):
     """An end point is returned only when it satisfies M z + q - w + v = 0 to
     RESIDUAL_TOLERANCE relative to 1 + max|M z| + max|q|: an inaccurate solve (simulated by
     perturbing the factor's solution) beyond it is declined."""
-    real = ds._superlu_colamd
+    real = ld.superlu_colamd
 
     class Inaccurate:
         def __init__(self, lu):
@@ -118,7 +120,7 @@ def test_residual_tolerance_from_both_sides(monkeypatch, rel, accepted):
             x = self.lu.solve(b)
             return x * (1.0 + rel)
 
-    monkeypatch.setattr(ds, "_superlu_colamd", lambda K: Inaccurate(real(K)))
+    monkeypatch.setattr(ld, "superlu_colamd", lambda K: Inaccurate(real(K)))
     rng = np.random.default_rng(0)
     n = 60
     M = sp.random(n, n, density=0.05, random_state=1, format="csc") + 4.0 * sp.identity(n)
@@ -126,7 +128,7 @@ def test_residual_tolerance_from_both_sides(monkeypatch, rel, accepted):
     q = rng.uniform(-1.0, 1.0, n)
     lb, ub = np.full(n, -np.inf), np.full(n, np.inf)
     end, _ = ds.direct_step(M, q, lb, ub, np.zeros(n), np.full(n, VAR_Z, np.int8),
-                            ds.DirectFactors(klu=False))  # (the SuperLU route: simulated)
+                            ld.DirectFactors(klu=False))  # (the SuperLU route: simulated)
     assert (end is not None) is accepted
     if end is not None:
         z = end[0]
@@ -214,7 +216,7 @@ def test_klu_and_superlu_agree(n, density):
     K, b = _random_block(n, density, seed=n)
     ref = np.linalg.solve(K.toarray(), b)
     for klu in (True, False):
-        x = ds.DirectFactors(klu=klu).solve(K, b)
+        x = ld.DirectFactors(klu=klu).solve(K, b)
         assert np.max(np.abs(x - ref)) <= 1e-10 * (1.0 + np.max(np.abs(ref)))
 
 
@@ -223,20 +225,20 @@ def test_klu_first_then_superlu_for_good_once_a_block_fills():
     entries; a block that fills more returns the rest of the solve to SuperLU for good
     (its answer is still the KLU one: the factorization is done).  Without KLU
     (``klu=False``) SuperLU factors every block."""
-    f = ds.DirectFactors()
+    f = ld.DirectFactors()
     low, b = _random_block(300, 0.003, seed=1)   # little fill
     f.solve(low, b)
-    assert f.method[0] == "klu" and f.lu_nnz <= ds.KLU_FILL_LIMIT * low.nnz and f.klu
+    assert f.method[0] == "klu" and f.lu_nnz <= ld.KLU_FILL_LIMIT * low.nnz and f.klu
     f.solve(low, b)
     assert f.method[0] == "klu" and f.klu
     high, b2 = _random_block(300, 0.05, seed=2)  # fills most of L and U
     x = f.solve(high, b2)
-    assert f.method[0] == "klu" and f.lu_nnz > ds.KLU_FILL_LIMIT * high.nnz and not f.klu
+    assert f.method[0] == "klu" and f.lu_nnz > ld.KLU_FILL_LIMIT * high.nnz and not f.klu
     np.testing.assert_allclose(high @ x, b2, atol=1e-9)
     x = f.solve(low, b)
     assert f.method == ("superlu", "colamd") and not f.klu  # for good
     np.testing.assert_allclose(low @ x, b, atol=1e-9)
-    g = ds.DirectFactors(klu=False)
+    g = ld.DirectFactors(klu=False)
     g.solve(low, b)
     assert g.method == ("superlu", "colamd") and not g.klu
 
@@ -244,7 +246,7 @@ def test_klu_first_then_superlu_for_good_once_a_block_fills():
 @pytest.mark.parametrize("klu", [True, False])
 def test_singular_block_gives_no_solution(klu):
     K = sp.csc_matrix(np.array([[1.0, 2.0, 0.0], [2.0, 4.0, 0.0], [0.0, 0.0, 1.0]]))
-    assert ds.DirectFactors(klu=klu).solve(K, np.ones(3)) is None
+    assert ld.DirectFactors(klu=klu).solve(K, np.ones(3)) is None
 
 
 def test_non_finite_data_give_no_end_point():
@@ -268,8 +270,8 @@ def test_klu_keeps_its_symbolic_analysis_for_a_block_of_the_same_pattern(monkeyp
     calls = []
     real = klu.symbolic
     monkeypatch.setattr(klu, "symbolic", lambda A: calls.append(1) or real(A))
-    monkeypatch.setattr(ds, "_KLU_CACHE", [])  # no analysis kept from another test
-    f = ds.DirectFactors(klu=True)
+    monkeypatch.setattr(ld, "_KLU_CACHE", [])  # no analysis kept from another test
+    f = ld.DirectFactors(klu=True)
     K, b = _random_block(200, 0.01, seed=4)
     f.solve(K, b)
     K2 = K.copy()
@@ -287,7 +289,7 @@ def test_klu_reuse_needs_row_sorted_columns():
     """New values are copied into the kept matrix only in kvxopt's order (rows sorted in
     each column): a block with the same index arrays but unsorted rows is analysed afresh
     and still solved right."""
-    f = ds.DirectFactors(klu=True)
+    f = ld.DirectFactors(klu=True)
     K = sp.csc_matrix(np.array([[4.0, 1.0, 0.0], [1.0, 3.0, 0.0], [0.0, 1.0, 2.0]]))
     b = np.array([1.0, 2.0, 3.0])
     f.solve(K, b)
@@ -307,40 +309,40 @@ def test_klu_analysis_is_cached_across_solves_with_the_same_bits(monkeypatch):
     and finds patterns by their index arrays only."""
     from kvxopt import klu
 
-    monkeypatch.setattr(ds, "_KLU_CACHE", [])
+    monkeypatch.setattr(ld, "_KLU_CACHE", [])
     K, b = _random_block(200, 0.01, seed=7)
-    fresh = ds.DirectFactors(klu=True).solve(K, b)
+    fresh = ld.DirectFactors(klu=True).solve(K, b)
     calls = []
     real = klu.symbolic
     monkeypatch.setattr(klu, "symbolic", lambda A: calls.append(1) or real(A))
-    template = np.array(ds._KLU_CACHE[-1][2].V).ravel().copy()
+    template = np.array(ld._KLU_CACHE[-1][2].V).ravel().copy()
     K2 = K.copy()
     K2.data = K2.data * np.linspace(0.5, 2.0, K2.nnz)
-    x2 = ds.DirectFactors(klu=True).solve(K2, b)
-    x = ds.DirectFactors(klu=True).solve(K, b)
+    x2 = ld.DirectFactors(klu=True).solve(K2, b)
+    x = ld.DirectFactors(klu=True).solve(K, b)
     assert calls == [] and np.array_equal(x, fresh)
-    assert np.array_equal(np.array(ds._KLU_CACHE[-1][2].V).ravel(), template)
-    monkeypatch.setattr(ds, "_KLU_CACHE", [])
-    assert np.array_equal(ds.DirectFactors(klu=True).solve(K2, b), x2)  # fresh analysis
+    assert np.array_equal(np.array(ld._KLU_CACHE[-1][2].V).ravel(), template)
+    monkeypatch.setattr(ld, "_KLU_CACHE", [])
+    assert np.array_equal(ld.DirectFactors(klu=True).solve(K2, b), x2)  # fresh analysis
     assert len(calls) == 1
-    for seed in range(ds.KLU_CACHE_SIZE + 3):
+    for seed in range(ld.KLU_CACHE_SIZE + 3):
         Ks, bs = _random_block(50, 0.05, seed=100 + seed)
-        ds.DirectFactors(klu=True).solve(Ks, bs)
-    assert len(ds._KLU_CACHE) == ds.KLU_CACHE_SIZE
+        ld.DirectFactors(klu=True).solve(Ks, bs)
+    assert len(ld._KLU_CACHE) == ld.KLU_CACHE_SIZE
 
 
 def test_klu_analysis_of_a_block_above_the_cache_limit_is_not_kept(monkeypatch):
     """The process-wide cache keeps no analysis of a block larger than KLU_CACHE_MAX_NNZ
     (memory held for the life of the process); such a block still solves."""
-    monkeypatch.setattr(ds, "_KLU_CACHE", [])
+    monkeypatch.setattr(ld, "_KLU_CACHE", [])
     K, b = _random_block(200, 0.01, seed=7)
-    monkeypatch.setattr(ds, "KLU_CACHE_MAX_NNZ", K.nnz - 1)
-    x = ds.DirectFactors(klu=True).solve(K, b)
-    assert ds._KLU_CACHE == []
+    monkeypatch.setattr(ld, "KLU_CACHE_MAX_NNZ", K.nnz - 1)
+    x = ld.DirectFactors(klu=True).solve(K, b)
+    assert ld._KLU_CACHE == []
     np.testing.assert_allclose(K @ x, b, rtol=1e-10, atol=1e-10)
-    monkeypatch.setattr(ds, "KLU_CACHE_MAX_NNZ", K.nnz)
-    ds.DirectFactors(klu=True).solve(K, b)
-    assert len(ds._KLU_CACHE) == 1
+    monkeypatch.setattr(ld, "KLU_CACHE_MAX_NNZ", K.nnz)
+    ld.DirectFactors(klu=True).solve(K, b)
+    assert len(ld._KLU_CACHE) == 1
 
 
 def test_superlu_direct_call_is_splu():
@@ -348,12 +350,12 @@ def test_superlu_direct_call_is_splu():
     block splu would have to sort or sum goes through splu itself."""
     from scipy.sparse.linalg import splu
 
-    assert ds._superlu_gstrf() is not None  # this scipy: the direct call is taken
+    assert ld._superlu_gstrf() is not None  # this scipy: the direct call is taken
     for n, density in [(60, 0.05), (300, 0.01)]:
         K, b = _random_block(n, density, seed=n + 1)
-        K = ds.trusted_csc(K.data.copy(), K.indices.astype(np.int32),
+        K = trusted_csc(K.data.copy(), K.indices.astype(np.int32),
                            K.indptr.astype(np.int32), K.shape)
-        a, r = ds._superlu_colamd(K), splu(K, permc_spec="COLAMD")
+        a, r = ld.superlu_colamd(K), splu(K, permc_spec="COLAMD")
         for attr in ("perm_r", "perm_c"):
             assert np.array_equal(getattr(a, attr), getattr(r, attr))
         for attr in ("L", "U"):
@@ -364,7 +366,7 @@ def test_superlu_direct_call_is_splu():
     U = sp.csc_matrix((np.array([1.0, 5.0, 1.0, 3.0, 1.0, 2.0]),
                        np.array([1, 0, 0, 1, 2, 2], dtype=np.int32),
                        np.array([0, 2, 4, 6], dtype=np.int32)), shape=(3, 3))
-    x = ds._superlu_colamd(U.copy()).solve(np.ones(3))
+    x = ld.superlu_colamd(U.copy()).solve(np.ones(3))
     assert np.array_equal(x, splu(U.copy(), permc_spec="COLAMD").solve(np.ones(3)))
 
 
@@ -406,7 +408,7 @@ def test_dense_direct_step_agrees_with_the_path_on_small_problems(seed):
     (one compiled pass) agrees with the path in both branches."""
     kinds = _agreement([(2, "banded", "box"), (7, "grid", "mixed"), (30, "banded", "mixed")],
                        (1e-6, 1e-2, 1.0), seed, DensePathEngine,
-                       lambda: ds.DirectFactors(dense=True), 1e-10)
+                       lambda: ld.DirectFactors(dense=True), 1e-10)
     assert kinds == {"direct", "path"}
 
 
@@ -415,7 +417,7 @@ def test_dense_direct_step_tolerances_and_singular_block():
     compiled engine's rank tolerance (each from both sides); an exactly singular M_FF is
     left to the path."""
     tol = ds.FEASIBILITY_TOLERANCE
-    dense = ds.DirectFactors(dense=True)
+    dense = ld.DirectFactors(dense=True)
     end, nnz = ds.direct_step(*_one_dim(-0.5 * tol), factors=dense)
     assert end is not None and end[0][0] == 0.0 and nnz == 4
     end, _ = ds.direct_step(*_one_dim(-2.0 * tol), factors=dense)
@@ -477,7 +479,7 @@ def test_klu_lu_size_read_from_the_factorization_is_the_factors_size(monkeypatch
     values change the pivoting; after a mismatch the factors are counted again."""
     from kvxopt import klu, matrix
 
-    monkeypatch.setattr(ds, "_KLU_CACHE", [])
+    monkeypatch.setattr(ld, "_KLU_CACHE", [])
     real = klu.get_numeric
     copies = []
     monkeypatch.setattr(klu, "get_numeric", lambda *a: copies.append(1) or real(*a))
@@ -487,22 +489,22 @@ def test_klu_lu_size_read_from_the_factorization_is_the_factors_size(monkeypatch
         for trial in range(3):
             Kt = K.copy()
             Kt.data = Kt.data * rng.uniform(0.01, 100.0, Kt.nnz)  # other pivots
-            f = ds.DirectFactors(klu=True)
+            f = ld.DirectFactors(klu=True)
             f.solve(Kt, b)
-            A, Fs, info = ds._klu_analysis(Kt)
+            A, Fs, info = ld._klu_analysis(Kt)
             A.V = matrix(Kt.data)
             parts = real(A, Fs, klu.numeric(A, Fs))
             assert f.lu_nnz == len(parts[0]) + len(parts[1]) + len(parts[5])
     assert len(copies) == 6  # one copy per pattern, at its first factorization
-    monkeypatch.setattr(ds, "_KLU_COUNTS", [])  # (the switch turned off below is this one)
-    real_counts = ds._klu_counts
-    monkeypatch.setattr(ds, "_klu_counts", lambda Fn: real_counts(Fn) and (0, 0))  # another layout
-    monkeypatch.setattr(ds, "_KLU_CACHE", [])
-    f = ds.DirectFactors(klu=True)
+    monkeypatch.setattr(ld, "_KLU_COUNTS", [])  # (the switch turned off below is this one)
+    real_counts = ld._klu_counts
+    monkeypatch.setattr(ld, "_klu_counts", lambda Fn: real_counts(Fn) and (0, 0))  # another layout
+    monkeypatch.setattr(ld, "_KLU_CACHE", [])
+    f = ld.DirectFactors(klu=True)
     K, b = _random_block(120, 0.03, seed=200)
     f.solve(K, b)
     f.solve(K, b)
-    assert len(copies) == 8 and f.lu_nnz > 0 and ds._KLU_COUNTS == [None]
+    assert len(copies) == 8 and f.lu_nnz > 0 and ld._KLU_COUNTS == [None]
 
 
 # ------------------------------------------- the path's start and direct step in one call
@@ -550,7 +552,7 @@ def test_one_call_path_start_and_dense_direct_step_give_the_paths_results_bit_fo
                         mgr = DensePathEngine(M)
                         res = solve_linear_mcp(M, q, lb, ub, mgr, Options(), x, warm=w0,
                                                r=_covering(M, q, lb, ub, x),
-                                               direct=ds.DirectFactors(dense=True))
+                                               direct=ld.DirectFactors(dense=True))
                         results.append((res, mgr.stats.factorizations))
                 (a, fa), (b, fb) = results
                 assert a.code is b.code and a.t == b.t
@@ -600,7 +602,7 @@ def test_failed_one_call_step_hands_the_path_the_start_it_would_compute(seed):
         x[rng.random(n) < 0.4] = 0.0  # components at the lower bound, no slack value
         r = _covering(M, q, lb, ub, x)
         warm = None if trial % 3 else WarmBasis(default_basis(np.clip(x, lb, ub), lb, ub))
-        out = dense_direct_path(M, q, lb, ub, x, r, warm, ds.DirectFactors(dense=True))
+        out = dense_direct_path(M, q, lb, ub, x, r, warm, ld.DirectFactors(dense=True))
         if out is None or out[0] != "path":
             continue
         z, w, v, basic, slack = out[1]

@@ -203,7 +203,7 @@ def test_canonical_csc_fast_path_matches_scipys_canonical_form(case):
     """A canonical float CSC Jacobian is copied without scipy's constructor; every other
     form goes through scipy: both give the same sorted, duplicate-free matrix (explicit
     zeros kept) that owns its arrays."""
-    from compass_sparse._merit_kernels import csc_is_canonical
+    from compass_sparse.linalg._csc_kernels import csc_is_canonical
     from compass_sparse.evaluation import canonical_csc
 
     n = 5

@@ -12,7 +12,7 @@ import scipy.sparse as sp
 from compass_sparse import MCP, solve_mcp
 from compass_sparse.evaluation import _Memo
 from compass_sparse.merit import fb_phi, residual_report
-from compass_sparse._csc import without_duplicates
+from compass_sparse.linalg.csc import without_duplicates
 from compass_sparse.scaling import _maxnorms, _spread, spread
 
 

@@ -739,7 +739,7 @@ def test_homotopy_pass_limits_blas_threads_only_from_blas_limit_min_n(monkeypatc
     thread count is not touched."""
     import contextlib
 
-    from compass_sparse._blas import BLAS_LIMIT_MIN_N
+    from compass_sparse.linalg.blas import BLAS_LIMIT_MIN_N
 
     entered = []
 

@@ -1,4 +1,4 @@
-"""Maximum bipartite matching (compass_sparse._matching): validity, maximality, and the
+"""Maximum bipartite matching (compass_sparse.linalg.matching): validity, maximality, and the
 layered reduced Jacobian on which scipy's Hopcroft-Karp did not return."""
 from pathlib import Path
 
@@ -7,7 +7,7 @@ import pytest
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, maximum_bipartite_matching
 
-from compass_sparse._matching import column_matching, matching
+from compass_sparse.linalg.matching import column_matching, matching
 
 DATA = Path(__file__).parent / "data"
 

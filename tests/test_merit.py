@@ -367,7 +367,7 @@ def test_max_abs_agrees_with_numpy_nan_and_empty_included(x):
 def test_csc_diagonal_kernel_agrees_with_scipy_duplicates_and_missing_entries():
     """The crash's compiled diagonal: scipy's A.diagonal() on canonical matrices, on
     duplicated entries (summed) and on missing diagonal entries (0)."""
-    from compass_sparse._merit_kernels import csc_diagonal
+    from compass_sparse.linalg._csc_kernels import csc_diagonal
 
     rng = np.random.default_rng(3)
     A = sp.random(30, 30, density=0.2, random_state=4, format="csc")

@@ -79,7 +79,7 @@ def test_compiled_scaling_passes_match_the_array_formulas(n, density):
     """The compiled max-norms of R A C and the entrywise R J C agree bit for bit with the
     array formulas they replace ((|a| r) c and (a r) c; a NaN entry poisons its row and
     column maxima as np.maximum does)."""
-    from compass_sparse._merit_kernels import csc_scale, csc_scaled_abs_maxima
+    from compass_sparse.linalg._csc_kernels import csc_scale, csc_scaled_abs_maxima
 
     rng = np.random.default_rng(n)
     A = sp.csc_matrix(sp.random(n, n, density=density, format="csc", random_state=n)
@@ -159,7 +159,7 @@ def test_compiled_ruiz_sweeps_match_the_array_formulas(seed):
     factors of the array formulas they replace (max-norms of R A C, then
     row /= sqrt(where(r > 0, r, 1)), the same for the columns), zero and NaN entries
     included."""
-    from compass_sparse._csc import without_duplicates
+    from compass_sparse.linalg.csc import without_duplicates
     from compass_sparse.scaling import SWEEPS, _maxnorms, _ruiz_sweeps
 
     rng = np.random.default_rng(seed)

@@ -18,7 +18,7 @@ import scipy.sparse as sp
 from compass_sparse.generators import thesis_family
 
 from compass_sparse import _jit, merit, solve_mcp
-from compass_sparse._merit_kernels import csc_rmatvec
+from compass_sparse.linalg._csc_kernels import csc_rmatvec
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -255,7 +255,7 @@ def test_python_callers_of_a_built_kernel_call_its_dispatcher():
 def test_nested_single_threaded_blas_blocks_set_threads_once_and_restore_after():
     """A single-threaded BLAS block inside another sets nothing and restores nothing; the
     outer block restores each library's own count when it closes."""
-    from compass_sparse import _blas
+    from compass_sparse.linalg import blas as _blas
 
     with _blas.single_threaded_blas():
         pass
@@ -298,7 +298,7 @@ def test_nested_single_threaded_blas_blocks_set_threads_once_and_restore_after()
 
 
 def test_blas_limit_reuses_one_controller():
-    from compass_sparse import _blas
+    from compass_sparse.linalg import blas as _blas
     from compass_sparse import solve as S
 
     with S._blas_threads(50):
@@ -312,7 +312,7 @@ def test_blas_limit_reuses_one_controller():
 def test_blas_limit_is_one_thread_inside_and_restored_after():
     from threadpoolctl import threadpool_info
 
-    from compass_sparse import _blas
+    from compass_sparse.linalg import blas as _blas
 
     def blas_threads():
         return [d["num_threads"] for d in threadpool_info() if d["user_api"] == "blas"]
@@ -373,7 +373,7 @@ def _valid_csc_arrays(rng, n, density, sort=True):
 
 @pytest.mark.parametrize("sort", [True, False])
 def test_trusted_csc_equals_the_checked_constructor(sort):
-    from compass_sparse._csc import trusted_csc
+    from compass_sparse.linalg.csc import trusted_csc
 
     rng = np.random.default_rng(3)
     for n in (1, 2, 7, 30):
@@ -392,7 +392,7 @@ def test_trusted_csc_equals_the_checked_constructor(sort):
 
 
 def test_trusted_csc_with_int64_indices_falls_back_to_the_checked_constructor():
-    from compass_sparse._csc import trusted_csc
+    from compass_sparse.linalg.csc import trusted_csc
 
     T = trusted_csc(np.ones(2), np.array([0, 1]), np.array([0, 1, 2]), (2, 2))
     np.testing.assert_array_equal(T.toarray(), np.eye(2))
@@ -507,7 +507,7 @@ def test_options_replace_shares_equal_copies_and_still_validates():
 def test_csc_abs_maxima_matches_array_formulas(n, density):
     """Row and column max-norms and the diagonal of a canonical CSC in one compiled pass
     agree with numpy's (a NaN entry poisons its row and column, as np.maximum does)."""
-    from compass_sparse._merit_kernels import csc_abs_maxima
+    from compass_sparse.linalg._csc_kernels import csc_abs_maxima
 
     A = sp.random(n, n, density=density, format="csc", random_state=n) - 0.5 * sp.random(
         n, n, density=density, format="csc", random_state=n + 1)
@@ -609,7 +609,7 @@ def test_one_pass_linearization_gives_the_array_formulas_bits(kind):
     iteration in one compiled pass give the array formulas' bits (M's entries and pattern,
     q with M z summed column by column, r), on J's own pattern and with the diagonal
     added; a vector that is not the solver's float vector takes the array route."""
-    from compass_sparse._merit_kernels import csc_matvec
+    from compass_sparse.linalg._csc_kernels import csc_matvec
     from compass_sparse.evaluation import canonical_csc
     from compass_sparse.nms import Linearizer
 
@@ -704,7 +704,7 @@ def test_spread_of_positive_entries():
 def test_csc_matvec_is_scipy_product_bitwise(n, density):
     """The linearization's M z in compiled code, bit for bit scipy's CSC product (same
     order of the sums), entries over 40 orders of magnitude."""
-    from compass_sparse._merit_kernels import csc_matvec
+    from compass_sparse.linalg._csc_kernels import csc_matvec
 
     rng = np.random.default_rng(n)
     A = sp.random(n, n, density=density, format="csc", random_state=n)
@@ -789,7 +789,7 @@ def test_csc_same_pattern_compares_pointers_and_the_stored_indices():
     """The pattern test of the evaluator, the preprocessor and the KLU cache: equal when
     the pointers and the first nnz row indices agree (room beyond nnz is ignored), and
     against numpy's comparison of the arrays on random patterns, equal and not."""
-    from compass_sparse._eval_kernels import csc_same_pattern
+    from compass_sparse.linalg._csc_kernels import csc_same_pattern
 
     rng = np.random.default_rng(9)
     seen = set()
@@ -854,8 +854,8 @@ def test_evaluators_jacobians_are_marked_canonical_only_when_they_are():
     """A J the evaluator returns (dense, on the stored pattern, a canonical CSC copy)
     carries the canonical mark, which lets without_duplicates return it unscanned; every
     marked matrix passes the scan; an unmarked matrix with duplicates is still summed."""
-    from compass_sparse._csc import _CANONICAL, trusted_csc, without_duplicates
-    from compass_sparse._merit_kernels import csc_is_canonical
+    from compass_sparse.linalg.csc import _CANONICAL, trusted_csc, without_duplicates
+    from compass_sparse.linalg._csc_kernels import csc_is_canonical
     from compass_sparse.evaluation import Evaluator
 
     rng = np.random.default_rng(3)

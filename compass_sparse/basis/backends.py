@@ -48,6 +48,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..exceptions import FactorBudgetError
+from ..linalg.direct import LU_ENVIRONMENT
 from .ordering import Ordering, OrderingCache
 
 log = logging.getLogger(__name__)
@@ -427,17 +428,13 @@ def factor_backward_error(K, fac) -> float:
     return res / den if den > 0 else res
 
 
-_ENV = "COMPASS_SPARSE_LU"
-"""Environment override of the automatic choices, "backend" or "backend:ordering" (e.g.
-"superlu:metis", "umfpack"): lets the whole test suite run under every combination."""
-
 
 def resolve(backend="auto", ordering="auto"):
     """The (backend, ordering) pair an ``auto`` choice stands for: the environment
     variable ``COMPASS_SPARSE_LU`` first (applies only to the ``auto`` fields), then the
     defaults.  ``ordering`` "auto" under SuperLU is chosen per block by the ordering
     cache (see :mod:`compass_sparse.basis.ordering`)."""
-    env = os.environ.get(_ENV, "").strip()
+    env = os.environ.get(LU_ENVIRONMENT, "").strip()
     if env:
         b, _, o = env.partition(":")
         if backend == "auto" and b and not (b == "umfpack" and ordering != "auto"):
@@ -479,7 +476,7 @@ def _dense_solve(A, b):
     """x with A x = b by LAPACK's LU (getrf + getrs, through the crash's compiled solve:
     one dense solve in the package); raises :class:`SingularFactorError` on an exactly
     zero pivot."""
-    from .._blas import single_threaded_blas
+    from ..linalg.blas import single_threaded_blas
     from .._crash_kernels import dense_solve_or_none
 
     # Fortran order, as LAPACK factors it
@@ -546,7 +543,7 @@ def make_backend(name="auto", ordering="auto", diag_pivot_thresh=None, budget=No
                               "needs backend='superlu'")
         return UmfpackBackend(budget)
     if name != "superlu":
-        raise OptionError(f"unknown LU backend {name!r} (from {_ENV}?)")
+        raise OptionError(f"unknown LU backend {name!r} (from {LU_ENVIRONMENT}?)")
     if ordering == "metis" and not metis_available():
         raise OptionError("ordering='metis' needs the package pymetis")
     if not forced and ordering == "auto":

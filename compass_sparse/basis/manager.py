@@ -66,7 +66,7 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from .._blas import single_threaded_blas
+from ..linalg.blas import single_threaded_blas
 from ..exceptions import CompassError, ProblemError, ShapeError, SingularBasisError
 from . import _kernels as kern
 from .backends import BYTES_PER_ENTRY, FactorBudget, make_backend

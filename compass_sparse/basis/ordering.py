@@ -60,7 +60,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._jit import njit
-from .._matching import column_matching
+from ..linalg.matching import column_matching
 
 log = logging.getLogger(__name__)
 

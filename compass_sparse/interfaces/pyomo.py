@@ -458,7 +458,7 @@ class PyomoMCP:
         return self._sig(row)
 
     def _match_equations(self, eqs, eq_sigs, pairs, claimed):
-        from .._matching import matching
+        from ..linalg.matching import matching
 
         free, free_index = [], {}
         seen_vars = set()

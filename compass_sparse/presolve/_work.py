@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._eval_kernels import csc_same_pattern
+from ..linalg._csc_kernels import csc_same_pattern
 from . import _kernels
 from ._kernels import recount as _recount
 from .postsolve import FixVariables, PostsolveStack, Record

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from ._merit_kernels import csc_is_canonical, csc_matvec
+from ._csc_kernels import csc_is_canonical, csc_matvec, free_block
 
 _KNOWN = {"_shape", "maxprint", "indices", "indptr", "data"}
 _STATE = []  # [usable: bool, maxprint] after the probe
@@ -100,3 +100,17 @@ def csc_times(A, x):
         csc_matvec(A.indptr, A.indices, A.data, x, out)
         return out
     return A @ x
+
+
+def reduced_system(M, free, z, q):
+    """(M_FF as CSC, -(q + M_FN z_N)_F) for the indices F where ``free`` is True (M: CSC,
+    sorted indices give sorted indices), in one compiled pass without scipy's slicing."""
+    if not (sp.issparse(M) and M.format == "csc"):
+        M = sp.csc_matrix(M)
+    z = np.asarray(z, dtype=float)
+    q = np.asarray(q, dtype=float)
+    # positions, arrays and the pass in one compiled call
+    Kp, Ki, Kx, rhs, k = free_block(M.indptr, M.indices, M.data,
+                                    np.asarray(free, dtype=np.bool_), z, q)
+    nf = rhs.shape[0]
+    return trusted_csc(Kx[:k], Ki[:k], Kp, (nf, nf)), rhs

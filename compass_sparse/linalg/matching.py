@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from ._jit import njit
+from .._jit import njit
 
 __all__ = ["column_matching", "matching"]
 
@@ -35,7 +35,7 @@ _I = np.int64
 
 
 @njit(cache=True)
-def _augmenting_matching(m, n, indptr, indices):
+def augmenting_matching(m, n, indptr, indices):
     """(row matched to each column or -1, column matched to each row or -1)."""
     row_of = np.full(n, -1, np.int64)
     col_of = np.full(m, -1, np.int64)
@@ -106,7 +106,7 @@ def matching(A):
     m, n = A.shape
     if m == 0 or n == 0:
         return np.full(n, -1, _I), np.full(m, -1, _I)
-    return _augmenting_matching(m, n, A.indptr.astype(_I), A.indices.astype(_I))
+    return augmenting_matching(m, n, A.indptr.astype(_I), A.indices.astype(_I))
 
 
 def column_matching(A):

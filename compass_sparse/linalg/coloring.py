@@ -6,7 +6,7 @@ colouring in natural order uses at most (max entries per row - 1) * (max entries
 column) + 1 colours; for stencil-like patterns it is close to the maximum row count.
 """
 import numpy as np
-from ._jit import njit
+from .._jit import njit
 
 
 @njit(cache=True)
