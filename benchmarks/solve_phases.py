@@ -49,7 +49,8 @@ def main(argv=None):
     a = ap.parse_args(argv)
 
     from compass_sparse import _homotopy_kernels as hk
-    from compass_sparse import evaluation, homotopy, nms, solve_mcp
+    from compass_sparse.problem import evaluator as evaluation
+    from compass_sparse import homotopy, nms, solve_mcp
     from compass_sparse._jit import end_cold_start
 
     # compiled kernels from the first call: the warm-up solves of a small problem would

@@ -20,7 +20,7 @@ import logging as _logging
 from .exceptions import (BoundsError, CompassError, EvaluationError, JacobianPatternError,
                          OptionError, ProblemError, ShapeError, StartPointError)
 from .options import Options
-from .problem import MCP
+from .problem.mcp import MCP
 from .result import Result
 from .status import IntermediateResult, Iteration, PassStats, PointStatus, Status
 from .solve import MCPSolver, solve_lcp, solve_mcp

@@ -13,7 +13,6 @@ import math
 
 import numpy as np
 
-from ._eval_kernels import top_abs_distinct
 from ._jit import njit
 from .linalg._csc_kernels import csc_abs_maxima, csc_matvec
 
@@ -46,21 +45,6 @@ def fb_phi_kernel(z, f, lb, ub, phi):
             phi[i] = _fischer(z[i] - lb[i], _fischer(ub[i] - z[i], -f[i]))
         else:
             phi[i] = -f[i]
-
-
-@njit(cache=True)
-def memo_key_kernel(x, out):
-    """out = x with -0.0 made 0.0 (the bytes of equal points are then equal); returns
-    whether x holds a NaN (evaluation._Memo.probe)."""
-    nan = False
-    for i in range(x.shape[0]):
-        v = x[i]
-        if v == 0.0:
-            v = 0.0
-        elif v != v:
-            nan = True
-        out[i] = v
-    return nan
 
 
 @njit(cache=True)
@@ -322,3 +306,43 @@ def newton_linearization(jdata, pos_j, scatter, pos_d, eps, indptr, indices, z, 
     for i in range(q.shape[0]):
         q[i] = f[i] - q[i]
         r[i] = f[i] + x[i] - z[i]
+
+
+@njit(cache=True)
+def top_abs_distinct(v, idx):
+    """The indices of the k = len(idx) largest |v_i|, largest first, into idx, when that
+    answer is unique: the k largest values distinct and the k-th larger than the next
+    (ties are ordered by the caller's own sort instead, which this pass need not
+    imitate).  Returns False (idx undefined) on a tie, a NaN, or k > len(v)."""
+    k = idx.shape[0]
+    n = v.shape[0]
+    if k == 0 or k > n:
+        return False
+    vals = np.empty(k + 1)
+    ids = np.empty(k + 1, dtype=np.int64)
+    cnt = 0
+    for i in range(n):
+        a = abs(v[i])
+        if a != a:  # NaN
+            return False
+        if cnt == k + 1 and not a > vals[k]:
+            continue
+        # insertion into the descending list (the last entry drops when it is full)
+        p = cnt if cnt < k + 1 else k
+        while p > 0 and vals[p - 1] < a:
+            if p < k + 1:
+                vals[p] = vals[p - 1]
+                ids[p] = ids[p - 1]
+            p -= 1
+        vals[p] = a
+        ids[p] = i
+        if cnt < k + 1:
+            cnt += 1
+    for j in range(1, k):
+        if not vals[j - 1] > vals[j]:
+            return False
+    if cnt > k and not vals[k - 1] > vals[k]:
+        return False
+    for j in range(k):
+        idx[j] = ids[j]
+    return True

@@ -202,7 +202,7 @@ def _as_builder(model):
 
 
 def _build(builder, params):
-    from .problem import MCP
+    from .problem.mcp import MCP
 
     out = builder(**params)
     if not isinstance(out, MCP):

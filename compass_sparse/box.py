@@ -13,9 +13,9 @@ import math
 
 import numpy as np
 
-from ._merit_kernels import max_abs_kernel
+from ._merit_kernels import all_finite_kernel, max_abs_kernel
 
-__all__ = ["F64", "broadcast_box", "dot_norm", "float_vector", "max_abs", "max_abs_diff",
+__all__ = ["F64", "all_finite", "broadcast_box", "dot_norm", "float_vector", "max_abs", "max_abs_diff",
            "norm2", "project", "solver_vectors"]
 
 
@@ -89,3 +89,11 @@ def norm2(v, inf_norm=None) -> float:
         return m
     s = v / m
     return m * math.sqrt(float(np.dot(s, s)))  # (the correctly rounded root, as np.sqrt)
+
+
+def all_finite(x) -> bool:
+    """Whether every entry of the array x is finite; a float vector (every point of a
+    solve) in one compiled pass, a quarter of np.isfinite(x).all() on a short vector."""
+    if float_vector(x):
+        return bool(all_finite_kernel(x))
+    return bool(np.isfinite(x).all())

@@ -84,7 +84,7 @@ def _demo(args) -> int:
                              [6 * x1 + x2, x1 + 4 * x2, 2, 3],
                              [2 * x1, 6 * x2, 2, 3]], dtype=float)
 
-        from .problem import MCP
+        from .problem.mcp import MCP
 
         prob = MCP(F, J, 0.0, np.inf, np.zeros(4))
         build = time.perf_counter() - t0

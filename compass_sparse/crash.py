@@ -46,7 +46,7 @@ from .basis.backends import DENSE_SOLVE_MAX_N, SingularFactorError, solve_sparse
 from .direct_step import DIRECT_MAX_N, REUSE_BEATS_REFACTOR_NNZ
 from .linalg.direct import KLU_FILL_LIMIT, DirectFactors, automatic_lu, klu_available
 from .linalg.csc import reduced_system
-from .evaluation import all_finite
+from .box import all_finite
 from .exceptions import FactorBudgetError
 from .box import dot_norm, max_abs, project, solver_vectors
 from .merit import fb_phi, normal_map_at

@@ -45,7 +45,7 @@ from ._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
 from ._slot_kernels import components, start_basis
 from .basis.types import BasisOptions
 from .box import float_vector, max_abs
-from .evaluation import all_finite
+from .box import all_finite
 from .linalg.csc import reduced_system
 from .linalg.direct import DirectFactors, automatic_lu
 

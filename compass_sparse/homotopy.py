@@ -100,7 +100,7 @@ from ._homotopy_kernels import (bordered_pivots_ok, bordered_values, chord_step,
                                 unit_tangent)
 from ._jit import NO_INDICES, NO_VALUES, cold_start
 from .linalg._csc_kernels import csc_to_dense
-from .evaluation import all_finite
+from .box import all_finite
 from .box import dot_norm, float_vector, max_abs, project
 from .merit import fb_phi, fb_psi
 from .options import HOMOTOPY_DENSE_DENSITY, HOMOTOPY_DENSE_MAX_N

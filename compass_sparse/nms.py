@@ -58,7 +58,7 @@ from .crash import crash
 from .direct_step import (DIRECT_MIN_N, FEASIBILITY_TOLERANCE, RESIDUAL_TOLERANCE,
                           REUSE_BEATS_REFACTOR_NNZ, direct_step_applies, failed_direct_start)
 from .linalg.direct import DirectFactors
-from .evaluation import all_finite
+from .box import all_finite
 from .exceptions import FactorBudgetError
 from .fallback import gradient_steps, lm_step
 from .box import max_abs_diff, project, solver_vectors
@@ -420,8 +420,10 @@ class NMSSolver:
             # M = J + eps I has the same pattern in every solve of this problem: its index
             # arrays are made once per Jacobian pattern; made when first needed (a solve
             # that the crash ends never needs them: 6% of a solve of cournot2).
-            self.linearizer = self.ev.for_pattern(
-                "linearizer", lambda: _linearizer_for(J, self.ev.pattern_ref))
+            cache = self.ev.pattern_cache
+            if cache.linearizer is None:
+                cache.linearizer = _linearizer_for(J, cache.pattern)
+            self.linearizer = cache.linearizer
         if self.linearizer is None or self.linearizer.nnz_J != J.nnz:
             self.linearizer = Linearizer(J)  # J off the pattern, or an undeclared one grew
         return J

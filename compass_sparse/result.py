@@ -61,7 +61,7 @@ class Result:
     def check(self, F, lb=None, ub=None, names=None) -> ResidualReport:
         """Recompute the residuals of ``x`` from F (a callable or an MCP) — independent of
         the solver's bookkeeping."""
-        from .problem import MCP
+        from .problem.mcp import MCP
 
         if isinstance(F, MCP):
             f = F.F_uncounted(self.x)
@@ -69,7 +69,7 @@ class Result:
             ub = F.ub if ub is None else ub
             names = names or F.row_label
         else:
-            from .problem import as_real
+            from .problem.mcp import as_real
 
             f = as_real(F(np.array(self.x, copy=True)), "F(x)")
             if f.size != self.x.size:

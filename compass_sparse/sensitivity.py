@@ -154,7 +154,7 @@ def _solve_inactive(J, idx, rhs):
 
 
 def _problem_parts(problem, x):
-    from .problem import MCP
+    from .problem.mcp import MCP
 
     if not isinstance(problem, MCP):
         raise TypeError("sensitivity needs the MCP the point solves (compass_sparse.MCP)")

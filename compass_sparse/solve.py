@@ -27,11 +27,11 @@ from .nms import NMSSolver, Point
 from .options import Options
 from .exceptions import ShapeError
 from .path import LinearCode, WarmBasis, default_basis, solve_linear_mcp
-from .problem import MCP
+from .problem.mcp import MCP
 from .result import Result
 from .status import Iteration, PassStats, PointStatus, Status
 from .linalg.blas import BLAS_LIMIT_MIN_N, single_threaded_blas
-from ._eval_kernels import any_equal
+from .problem._kernels import any_equal
 from .linalg._csc_kernels import csc_scaled_all_finite
 from .scaling import SPREAD_TRIGGER, equilibrate, scale_problem, spread
 
@@ -259,7 +259,10 @@ def _presolve_pass(problem, opt, f0, J0):
 
     # A fact of the pattern and of the constant entries declared on it: counted once per
     # pattern (a loop of solves of one problem counted it in every solve).
-    linear_rows = problem.evaluator.for_pattern("linear_rows", count_linear_rows)
+    cache = problem.evaluator.pattern_cache
+    if cache.linear_rows is None:
+        cache.linear_rows = count_linear_rows()
+    linear_rows = cache.linear_rows
     if linear_rows == 0 and not has_fixed:
         st.reason = "no linear rows (all entries declared constant) and no fixed variables"
         return None, st
@@ -706,7 +709,7 @@ def _lcp_data(M, q):
     """Validated copies of the LCP data (the user's M is never modified): q real of shape
     (n,) (a column (n, 1) is accepted), M real n x n, both finite, named in errors."""
     from .exceptions import ProblemError, ShapeError
-    from .problem import as_real
+    from .problem.mcp import as_real
 
     q = as_real(q, "q")
     if q.ndim > 1 and q.size == max(q.shape):

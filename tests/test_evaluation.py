@@ -6,7 +6,7 @@ import pytest
 import scipy.sparse as sp
 
 import compass_sparse as cs
-from compass_sparse.evaluation import Evaluator
+from compass_sparse.problem.evaluator import Evaluator
 from compass_sparse.exceptions import JacobianPatternError, ShapeError
 
 
@@ -175,9 +175,9 @@ def test_memo_compares_points_as_equal_values_signed_zeros_alike_nan_never():
     """The evaluation memo's byte keys answer exactly as an elementwise == would: -0.0
     hits the value stored at 0.0, a point with a NaN is never a hit, a different point or
     shape misses, and the pinned point survives later evaluations."""
-    from compass_sparse.evaluation import _Memo
+    from compass_sparse.problem.memo import Memo
 
-    m = _Memo()
+    m = Memo()
     assert m.get(np.zeros(2)) is None
     m.put(np.array([0.0, 1.0]), "a")
     assert m.get(np.array([-0.0, 1.0])) == "a"
@@ -204,7 +204,7 @@ def test_canonical_csc_fast_path_matches_scipys_canonical_form(case):
     form goes through scipy: both give the same sorted, duplicate-free matrix (explicit
     zeros kept) that owns its arrays."""
     from compass_sparse.linalg._csc_kernels import csc_is_canonical
-    from compass_sparse.evaluation import canonical_csc
+    from compass_sparse.linalg.csc import canonical_csc
 
     n = 5
     indptr = np.array([0, 2, 3, 3, 5, 6], dtype=np.int32)
@@ -238,7 +238,7 @@ def test_user_jacobian_on_the_pattern_fast_path_is_the_general_route(case):
     pass; any other form takes canonical_csc and _fix_pattern.  Either way the evaluator
     hands out the general route's matrix (same index arrays and values, bit for bit),
     which owns its arrays (neither the user's nor the pattern's)."""
-    from compass_sparse.evaluation import canonical_csc
+    from compass_sparse.linalg.csc import canonical_csc
 
     n = 5
     indptr = np.array([0, 2, 3, 3, 5, 6], dtype=np.int32)
@@ -302,7 +302,7 @@ def test_dense_jacobian_on_the_full_pattern_is_a_copy_equal_to_the_general_route
     (the small problems' route): the general route's matrix, bit for bit, in either memory
     order of the user's array, and a copy -- the user writing into their array later does
     not change the evaluator's J."""
-    from compass_sparse.evaluation import _dense_csc
+    from compass_sparse.linalg.csc import dense_csc
 
     n = 4
     rng = np.random.default_rng(3)
@@ -312,7 +312,7 @@ def test_dense_jacobian_on_the_full_pattern_is_a_copy_equal_to_the_general_route
     first = ev.J(np.zeros(n))  # stores the full pattern
     assert first.nnz == n * n
     got = ev._user_J_on_pattern(A)
-    ref = ev._fix_pattern(_dense_csc(A, n))
+    ref = ev._fix_pattern(dense_csc(A, n))
     for a in ("indptr", "indices", "data"):
         assert np.array_equal(getattr(got, a), getattr(ref, a)), a
         assert getattr(got, a).dtype == getattr(ref, a).dtype

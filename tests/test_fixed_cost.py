@@ -10,7 +10,7 @@ import pytest
 import scipy.sparse as sp
 
 from compass_sparse import MCP, solve_mcp
-from compass_sparse.evaluation import _Memo
+from compass_sparse.problem.memo import Memo
 from compass_sparse.merit import fb_phi, residual_report
 from compass_sparse.linalg.csc import without_duplicates
 from compass_sparse.scaling import _maxnorms, _spread, spread
@@ -28,9 +28,10 @@ def test_linearizer_made_once_per_pattern_and_shared_by_the_solves_of_a_problem(
     opt = {"crash_method": "none"}
     prob = _cournot()
     first = solve_mcp(prob.with_start(np.zeros(2)), options=opt)
-    lin = prob.evaluator._derived["linearizer"][1]
+    lin = prob.evaluator.pattern_cache.linearizer
+    assert lin is not None
     again = solve_mcp(prob.with_start(np.zeros(2)), options=opt)
-    assert prob.evaluator._derived["linearizer"][1] is lin
+    assert prob.evaluator.pattern_cache.linearizer is lin
     # another problem object, nothing shared: the same answer and counts
     fresh = solve_mcp(_cournot().with_start(np.zeros(2)), options=opt)
     for r in (first, again):
@@ -52,13 +53,13 @@ def test_pattern_store_rebuilds_when_an_undeclared_pattern_grows():
     prob = MCP(F, J, -np.inf, np.inf, np.zeros(2))
     ev = prob.evaluator
     ev.fj(np.zeros(2))
-    built = []
-    assert ev.for_pattern("probe", lambda: built.append(1) or "a") == "a"
-    assert ev.for_pattern("probe", lambda: built.append(1) or "b") == "a"
+    first = ev.pattern_cache
+    first.linear_rows = 7
+    assert ev.pattern_cache is first and ev.pattern_cache.linear_rows == 7
     ev.fj(np.ones(2))  # J now has the (0, 1) entry: the pattern grows
     assert ev.pattern_growths == 1
-    assert ev.for_pattern("probe", lambda: built.append(1) or "c") == "c"
-    assert len(built) == 2
+    assert ev.pattern_cache is not first and ev.pattern_cache.linear_rows is None
+    assert ev.pattern_cache.pattern is ev.pattern_ref
     res = solve_mcp(prob.with_start(np.zeros(2)))
     assert res.success
     np.testing.assert_allclose(res.x, [-1.0, 2.0], atol=1e-8)
@@ -95,10 +96,10 @@ def test_tiny_problem_with_a_declared_linear_row_still_presolved_in_every_solve(
     (np.array([-0.0, 0.0]), False),
 ])
 def test_memo_key_is_none_exactly_for_points_with_a_nan(x, none):
-    k = _Memo._key(x)
+    k = Memo._key(x)
     assert (k is None) == none
     if not none:  # equal points (-0.0 == 0.0) share the key
-        assert k == _Memo._key(np.where(x == 0, 0.0, x))
+        assert k == Memo._key(np.where(x == 0, 0.0, x))
 
 
 def test_memo_key_made_once_still_finds_the_pinned_start_point():
@@ -317,10 +318,11 @@ def test_nan_and_finite_tests_by_one_dot_product_equal_numpy(seed):
     every point, in one compiled pass for float vectors) give numpy's answers across
     magnitudes, with NaN, +-inf, subnormals, empty vectors, and on the numpy path for
     2-D and strided arrays."""
-    from compass_sparse.evaluation import _Memo, all_finite
+    from compass_sparse.problem.memo import Memo
+    from compass_sparse.box import all_finite
 
     def has_nan(x):
-        return _Memo.probe(x)[2]
+        return Memo.probe(x)[2]
 
     rng = np.random.default_rng(seed)
     for n in (0, 1, 4, 50):

@@ -385,7 +385,7 @@ def test_residual_report_worst_rows_compiled_pass_is_numpys(seed):
     """The k worst rows found in one compiled pass are numpy's partition and sort when
     the k largest |Phi_i| are distinct; a tie (or a NaN, or k > n) is left to numpy, whose
     tie order the pass does not imitate: the report is the same either way."""
-    from compass_sparse._eval_kernels import top_abs_distinct
+    from compass_sparse._merit_kernels import top_abs_distinct
     from compass_sparse.merit import residual_report
 
     rng = np.random.default_rng(seed)

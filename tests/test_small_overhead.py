@@ -327,7 +327,7 @@ def test_blas_limit_is_one_thread_inside_and_restored_after():
 
 
 def test_dense_jacobian_gets_canonical_full_pattern_each_call():
-    from compass_sparse.evaluation import canonical_csc as _canonical_csc
+    from compass_sparse.linalg.csc import canonical_csc as _canonical_csc
 
     A = np.arange(9.0).reshape(3, 3)
     C1 = _canonical_csc(A, 3)
@@ -343,7 +343,8 @@ def test_dense_jacobian_on_its_full_pattern_matches_the_general_route():
     into the pattern's column order: the same matrix as canonical_csc + _fix_pattern, its
     zeros kept, owning its arrays (the pattern's stay untouched); an integer array or a
     Fortran-ordered one give that route's matrix too."""
-    from compass_sparse.evaluation import Evaluator, canonical_csc
+    from compass_sparse.problem.evaluator import Evaluator
+    from compass_sparse.linalg.csc import canonical_csc
 
     n = 4
     A = np.arange(16.0).reshape(n, n)
@@ -399,7 +400,7 @@ def test_trusted_csc_with_int64_indices_falls_back_to_the_checked_constructor():
 
 
 def test_dense_jacobian_in_fortran_order_is_copied_not_viewed():
-    from compass_sparse.evaluation import canonical_csc
+    from compass_sparse.linalg.csc import canonical_csc
 
     A = np.asfortranarray(np.arange(9.0).reshape(3, 3))
     C = canonical_csc(A, 3)
@@ -573,7 +574,7 @@ def test_normal_map_kernel_matches_array_formula_bitwise_across_magnitudes(seed)
 def test_linearizer_on_patterns_that_hold_the_diagonal(kind):
     """A full pattern and a pattern that stores the whole diagonal give M = J + eps I on
     J's own pattern (stored zeros kept); one without it gets the diagonal added."""
-    from compass_sparse.evaluation import canonical_csc
+    from compass_sparse.linalg.csc import canonical_csc
     from compass_sparse.nms import Linearizer
 
     rng = np.random.default_rng(8)
@@ -610,7 +611,7 @@ def test_one_pass_linearization_gives_the_array_formulas_bits(kind):
     q with M z summed column by column, r), on J's own pattern and with the diagonal
     added; a vector that is not the solver's float vector takes the array route."""
     from compass_sparse.linalg._csc_kernels import csc_matvec
-    from compass_sparse.evaluation import canonical_csc
+    from compass_sparse.linalg.csc import canonical_csc
     from compass_sparse.nms import Linearizer
 
     rng = np.random.default_rng(21)
@@ -856,7 +857,7 @@ def test_evaluators_jacobians_are_marked_canonical_only_when_they_are():
     marked matrix passes the scan; an unmarked matrix with duplicates is still summed."""
     from compass_sparse.linalg.csc import _CANONICAL, trusted_csc, without_duplicates
     from compass_sparse.linalg._csc_kernels import csc_is_canonical
-    from compass_sparse.evaluation import Evaluator
+    from compass_sparse.problem.evaluator import Evaluator
 
     rng = np.random.default_rng(3)
     A = sp.random(6, 6, density=0.5, format="csc", random_state=4) + sp.eye(6, format="csc")

@@ -279,8 +279,9 @@ def _scaled_acceptance(J_user, f_user=None, raise_J=False):
     """An Acceptance of a 3-variable problem scaled by powers of two, with the scaled
     evaluator's guarded jac (the old route) and the user's J read directly."""
     from compass_sparse.acceptance import Acceptance
-    from compass_sparse.evaluation import Evaluator
-    from compass_sparse.scaling import Scaling, ScaledEvaluator
+    from compass_sparse.problem.evaluator import Evaluator
+    from compass_sparse.scaling import Scaling
+    from compass_sparse.problem.evaluator import ScaledEvaluator
     from compass_sparse.solve import _UserJacobian
 
     n = 3

@@ -16,9 +16,12 @@ the checked constructor is used instead (probed once, at first use).
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import scipy.sparse as sp
 
+from ..exceptions import EvaluationError, ShapeError
 from ._csc_kernels import csc_is_canonical, csc_matvec, free_block
 
 _KNOWN = {"_shape", "maxprint", "indices", "indptr", "data"}
@@ -114,3 +117,59 @@ def reduced_system(M, free, z, q):
                                     np.asarray(free, dtype=np.bool_), z, q)
     nf = rhs.shape[0]
     return trusted_csc(Kx[:k], Ki[:k], Kp, (nf, nf)), rhs
+
+
+I32 = np.dtype(np.int32)
+"""The int32 dtype object of the index arrays (tested by identity, as box.F64)."""
+
+
+@functools.lru_cache(maxsize=16)
+def full_pattern(n: int):
+    """(indptr, indices) of the full n x n CSC pattern (never handed out: copied)."""
+    return (np.arange(0, n * n + 1, n, dtype=np.int32),
+            np.tile(np.arange(n, dtype=np.int32), n))
+
+
+def pattern_keys(A: sp.csc_matrix) -> np.ndarray:
+    """Sorted keys col * n + row of the stored entries of a canonical CSC matrix."""
+    n = A.shape[0]
+    return np.repeat(np.arange(A.shape[1], dtype=np.int64), np.diff(A.indptr)) * n + A.indices
+
+
+def dense_csc(A, n: int) -> sp.csc_matrix:
+    """A real dense n x n array as a CSC matrix holding every entry (zeros included)."""
+    if A.shape != (n, n):
+        raise ShapeError(f"the Jacobian has shape {A.shape}, expected ({n}, {n})")
+    # The full pattern, built once per n (a small problem with a dense Jacobian evaluates
+    # it every major iteration); copies of the index arrays, since scipy may sort or
+    # prune them in place.
+    indptr, indices = full_pattern(n)
+    return trusted_csc(A.T.flatten(), indices.copy(), indptr.copy(), (n, n), canonical=True)
+
+
+def canonical_csc(J, n: int) -> sp.csc_matrix:
+    """J as a canonical (sorted, duplicate-free) float CSC copy; a dense array keeps its
+    full pattern (its zeros stay stored)."""
+    sparse = sp.issparse(J)
+    if not sparse:
+        J = np.asarray(J)
+    if (J.data if sparse else J).dtype.kind == "c":
+        raise EvaluationError("the Jacobian has complex entries; J must be real")
+    if sparse:
+        if J.shape != (n, n):
+            raise ShapeError(f"the Jacobian has shape {J.shape}, expected ({n}, {n})")
+        if (J.format == "csc" and J.data.dtype == np.float64
+                and J.indices.dtype == np.int32 and J.indptr.dtype == np.int32):
+            nnz = J.indptr[-1]
+            if csc_is_canonical(J.indptr, J.indices, n, nnz):
+                # already canonical (the common case): copies of its arrays, without
+                # scipy's constructor checks and sorting (~50 us per evaluation)
+                return trusted_csc(J.data[:nnz].copy(), J.indices[:nnz].copy(),
+                                   J.indptr.copy(), (n, n), canonical=True)
+        C = sp.csc_matrix(J, dtype=float, copy=True)
+    else:
+        return dense_csc(J.astype(float, copy=False), n)
+    if not C.has_canonical_format:
+        C.sum_duplicates()  # sorts indices too
+    C.sort_indices()
+    return C

@@ -83,7 +83,10 @@ def _index(problem, J0):
     P = ev.pattern_ref if ev is not None else None
     if P is None or not csc_same_pattern(J0.indptr, J0.indices, P.indptr, P.indices):
         return _index_arrays(J0)
-    return ev.for_pattern("presolve_index", lambda: _index_arrays(P))
+    cache = ev.pattern_cache
+    if cache.presolve_index is None:
+        cache.presolve_index = _index_arrays(P)
+    return cache.presolve_index
 
 
 class Workspace:

@@ -20,7 +20,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..evaluation import all_finite
+from ..box import all_finite
 from ..merit import natural_residual
 from . import (column_singletons, duplicate_rows, empty_columns, empty_rows, fixed, forcing,
                range_fixing, singleton_rows)
@@ -291,7 +291,7 @@ def _structural_report(problem) -> StructuralReport:
     variables: it is reused only by a problem with the same name lists (copies of one
     problem share them; two problems on one evaluator may not)."""
     keep = np.packbits(problem.lb < problem.ub).tobytes()
-    store = problem.evaluator.for_pattern("structural_reports", dict)
+    store = problem.evaluator.pattern_cache.structural_reports
     hit = store.get(keep)
     if hit is not None and hit[0] is problem.var_names and hit[1] is problem.eqn_names:
         return hit[2]

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from ..problem import MCP
+from ..problem.mcp import MCP
 
 __all__ = ["build_reduced"]
 

@@ -37,10 +37,11 @@ from typing import Callable, Sequence
 import numpy as np
 import scipy.sparse as sp
 
-from ._eval_kernels import clean_bounds
-from .evaluation import EvalCounters, Evaluator, all_finite
-from .exceptions import BoundsError, EvaluationError, ProblemError, ShapeError, StartPointError
-from .box import project  # (np.clip's values on validated bounds, at 40% of its cost)
+from ..box import all_finite, project  # (project: np.clip's values, at 40% of its cost)
+from ..exceptions import BoundsError, EvaluationError, ProblemError, ShapeError, StartPointError
+from ._kernels import clean_bounds
+from .evaluator import Evaluator
+from .memo import EvalCounters
 
 _SIZE_WORDS = ("shape", "dimension", "size", "broadcast", "index", "mismatch", "aligned")
 """Words of a user's exception at the start point that suggest a wrong-length x0."""
