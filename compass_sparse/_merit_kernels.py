@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from ._jit import njit
-from .linalg._csc_kernels import csc_abs_maxima, csc_matvec
+from .linalg._csc_kernels import csc_abs_maxima
 
 
 @njit(cache=True, inline="always")
@@ -282,30 +282,6 @@ def min_map_within(z, f, lb, ub, tol):
         if not abs(m) <= tol:
             return False
     return True
-
-
-@njit(cache=True)
-def newton_linearization(jdata, pos_j, scatter, pos_d, eps, indptr, indices, z, f, x,
-                         mdata, q, r):
-    """The linear MCP of a major iteration in one pass (nms.Linearizer.linearize):
-    mdata = the entries of M = J + eps I on M's pattern (``scatter``: J's entry k at
-    position pos_j[k], the others 0; else J's entries in M's order), q = f - M z (M z
-    summed column by column, as :func:`csc_matvec`) and r = f + x - z: the bits of the
-    array formulas."""
-    if scatter:
-        mdata[:] = 0.0
-        for k in range(jdata.shape[0]):
-            mdata[pos_j[k]] = jdata[k]
-    else:
-        for k in range(jdata.shape[0]):
-            mdata[k] = jdata[k]
-    if eps != 0.0:
-        for k in range(pos_d.shape[0]):
-            mdata[pos_d[k]] += eps
-    csc_matvec(indptr, indices, mdata, z, q)
-    for i in range(q.shape[0]):
-        q[i] = f[i] - q[i]
-        r[i] = f[i] + x[i] - z[i]
 
 
 @njit(cache=True)

@@ -46,7 +46,7 @@ from ._crash_kernels import _np_max, _np_min
 from ._jit import njit
 from ._merit_kernels import (fb_directional_kernel, fb_phi_kernel, max_abs_kernel,
                              min_map_within, normal_map_kernel)
-from .direct_step import dense_newton_direct
+from .path.direct_step import dense_newton_direct
 
 # requests (returns)
 NEED_NEWTON, NEED_F_CAND, NEED_F_TRIAL, JUDGE, NEED_FALLBACK, TIME_UP, STALLED, NEED_PATH = \

@@ -37,7 +37,7 @@ from ._merit_kernels import (flat_step_kernel, min_map_within,
                              scale_test_kernel)
 from .box import dot_norm, max_abs
 from .merit import fb_jacobian_diagonals, fb_phi, min_map
-from .path import _floats
+from .box import float_vectors
 from .scaling import scale_entries
 
 __all__ = ["FLAT_STEP_RTOL", "Verdict", "judge", "residuals_small", "Acceptance"]
@@ -72,7 +72,7 @@ def residuals_small(z, f, lb, ub, tol, phi=None) -> bool:
         # The answer is the conjunction of the two tests; without Phi at hand the
         # natural residual, one compiled pass without an array, is asked first, and
         # away from a solution (most points asked) it alone says no.
-        if _floats(np.size(z), z, f, lb, ub):
+        if float_vectors(np.size(z), z, f, lb, ub):
             if not min_map_within(z, f, lb, ub, float(tol)):
                 return False
             phi = fb_phi(z, f, lb, ub)
@@ -80,7 +80,7 @@ def residuals_small(z, f, lb, ub, tol, phi=None) -> bool:
         phi = fb_phi(z, f, lb, ub)
     if dot_norm(phi) > tol:  # (np.dot's product, a correctly rounded root)
         return False
-    if _floats(np.size(z), z, f, lb, ub):  # the solver's points: one compiled pass
+    if float_vectors(np.size(z), z, f, lb, ub):  # the solver's points: one compiled pass
         return bool(min_map_within(z, f, lb, ub, float(tol)))
     mm = min_map(z, f, lb, ub)
     return bool((np.abs(mm) <= tol).all())
@@ -109,7 +109,7 @@ def _scale_test(z, f, lb, ub, phi, J) -> Verdict:
     is max(|db_i| max_j |J_ij|, |da_i + db_i J_ii|), read off the stored entries of the
     canonical CSC in one compiled pass (no sparse matrix built per solve)."""
     J = without_duplicates(J)  # (the evaluator's J already is: then J itself)
-    if _floats(np.size(z), z, f, lb, ub, phi) and J.data.dtype == np.float64:
+    if float_vectors(np.size(z), z, f, lb, ub, phi) and J.data.dtype == np.float64:
         # the solver's points: diagonals and test in one compiled call
         row, d, ratio = scale_test_kernel(z, f, lb, ub, phi, J.indptr, J.indices, J.data)
     else:

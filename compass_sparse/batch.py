@@ -366,7 +366,7 @@ def _solve_segment(blob: bytes, task: dict) -> list[dict]:
 
 def _solve_one(builder, idx, params, parent, state, task) -> dict:
     from .merit import fb_phi
-    from .path import WarmBasis
+    from .path.outcome import WarmBasis
     from .sensitivity import tangent_predictor
     from .solve import solve_mcp
 

@@ -15,8 +15,8 @@ import numpy as np
 
 from ._merit_kernels import all_finite_kernel, max_abs_kernel
 
-__all__ = ["F64", "all_finite", "broadcast_box", "dot_norm", "float_vector", "max_abs", "max_abs_diff",
-           "norm2", "project", "solver_vectors"]
+__all__ = ["F64", "all_finite", "broadcast_box", "dot_norm", "float_vector", "float_vectors",
+           "max_abs", "max_abs_diff", "norm2", "project", "solver_vectors"]
 
 
 F64 = np.dtype(np.float64)
@@ -97,3 +97,13 @@ def all_finite(x) -> bool:
     if float_vector(x):
         return bool(all_finite_kernel(x))
     return bool(np.isfinite(x).all())
+
+
+def float_vectors(n, *arrays) -> bool:
+    """All float64 vectors of length n (the compiled kernels' arguments)."""
+    shape = (n,)
+    for a in arrays:  # (a loop, not all(...): this runs several times per path)
+        # (the dtype by identity, as float_vector: ``==`` converts np.float64 first)
+        if not (isinstance(a, np.ndarray) and a.dtype is F64 and a.shape == shape):
+            return False
+    return True

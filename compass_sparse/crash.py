@@ -43,7 +43,7 @@ from .linalg.blas import BLAS_LIMIT_MIN_N, single_threaded_blas
 from ._jit import NO_INDICES, NO_VALUES
 from .linalg.csc import float_csc
 from .basis.backends import DENSE_SOLVE_MAX_N, SingularFactorError, solve_sparse
-from .direct_step import DIRECT_MAX_N, REUSE_BEATS_REFACTOR_NNZ
+from .path.direct_step import DIRECT_MAX_N, REUSE_BEATS_REFACTOR_NNZ
 from .linalg.direct import KLU_FILL_LIMIT, DirectFactors, automatic_lu, klu_available
 from .linalg.csc import reduced_system
 from .box import all_finite

@@ -104,7 +104,7 @@ from .box import all_finite
 from .box import dot_norm, float_vector, max_abs, project
 from .merit import fb_phi, fb_psi
 from .options import HOMOTOPY_DENSE_DENSITY, HOMOTOPY_DENSE_MAX_N
-from .path import _floats
+from .box import float_vectors
 from .restarts import random_point
 from .status import PassStats
 
@@ -226,7 +226,7 @@ class SmoothedNormalMap:
     def project(self, x, mu):
         """(p, dp/dx, dp/dmu) at x (one compiled pass for a float vector)."""
         n = self.lb.size
-        if _floats(n, x, self.lb, self.ub):
+        if float_vectors(n, x, self.lb, self.ub):
             p, dx, dmu = np.empty(n), np.empty(n), np.empty(n)
             smoothed_projection(x, float(mu), self.lb, self.ub, p, dx, dmu)
             return p, dx, dmu
@@ -400,7 +400,7 @@ class _Tracker:
         if want_jac:
             self._offer(p, f)
         lam = float(lam)
-        floats = _floats(self.n, f, x, p, a)
+        floats = float_vectors(self.n, f, x, p, a)
         n = self.n
         if want_jac:
             if J is None:
@@ -408,7 +408,7 @@ class _Tracker:
             J = float_csc(J)
             if self.dense is None:
                 self.dense = n <= DENSE_MAX_N or J.nnz >= DENSE_DENSITY * n * n
-            if self.dense and floats and _floats(n, dx, dmu):
+            if self.dense and floats and float_vectors(n, dx, dmu):
                 # the map's values, H_x and H_lam in one compiled call, the latter two as
                 # views of the bordered matrix that factor() completes with the tangent's
                 # row and factors in place (column-major for getrf)
@@ -669,7 +669,7 @@ class _Tracker:
         rhs = np.empty(yp.size)
         # a dense problem's iterations in compiled calls (the same formulas; the solves'
         # last bits may differ from the array route's, which remains for the others)
-        fast = Bf.dense and _floats(self.n, a, self.lb, self.ub) and float_vector(y) \
+        fast = Bf.dense and float_vectors(self.n, a, self.lb, self.ub) and float_vector(y) \
             and float_vector(v)
         p = None
         if fast:  # p = p_mu(x) of the first iterate; each chord step makes the next one's

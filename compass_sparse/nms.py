@@ -51,19 +51,19 @@ import scipy.sparse as sp
 from . import _nms_kernels as nk
 from .linalg.csc import trusted_csc
 from ._jit import NO_INDICES, NO_VALUES, cold_start
-from .linalg._csc_kernels import csc_matvec
-from ._merit_kernels import newton_linearization
 from .acceptance import Acceptance
 from .crash import crash
-from .direct_step import (DIRECT_MIN_N, FEASIBILITY_TOLERANCE, RESIDUAL_TOLERANCE,
-                          REUSE_BEATS_REFACTOR_NNZ, direct_step_applies, failed_direct_start)
+from .path.direct_step import (DIRECT_MIN_N, FEASIBILITY_TOLERANCE, RESIDUAL_TOLERANCE,
+                               REUSE_BEATS_REFACTOR_NNZ, direct_step_applies, failed_direct_start)
 from .linalg.direct import DirectFactors
 from .box import all_finite
 from .exceptions import FactorBudgetError
 from .fallback import gradient_steps, lm_step
 from .box import max_abs_diff, project, solver_vectors
 from .merit import fb_directional, fb_phi, fb_psi, normal_map_at
-from .path import LinearCode, WarmBasis, dense_newton_result, solve_linear_mcp
+from .path.outcome import LinearCode, WarmBasis
+from .path.linear_mcp import dense_newton_result, solve_linear_mcp
+from .path.linearize import Linearizer, linearizer_for
 from .progress import ProgressLine
 from .restarts import FROM_RANDOM, FROM_START, RestartSchedule, near_point, random_point
 from .status import Iteration, PassStats, Status
@@ -71,7 +71,7 @@ from .stationary import stationarity, worst_rows
 
 logger = logging.getLogger("compass_sparse")
 
-__all__ = ["NMSSolver", "Outcome", "Linearizer"]
+__all__ = ["NMSSolver", "Outcome"]
 
 LOCAL_FACTOR = 1e-3
 """Below this fraction of a run's starting residual the NMS accepts only steps that do not
@@ -137,87 +137,6 @@ class Outcome:
     #: the acceptance verdict of ``best`` on the user's problem when the solve stopped
     #: because best was judged a solution (None otherwise)
     verdict: object = None
-
-
-class Linearizer:
-    """M = J + eps I on the fixed pattern pattern(J) U diag, filled in place."""
-
-    def __init__(self, J: sp.csc_matrix):
-        n = J.shape[0]
-        self.n = n
-        self.nnz_J = J.nnz
-        key_D = np.arange(n, dtype=np.int64) * (n + 1)
-        if J.nnz == n * n:
-            # A full pattern (a dense Jacobian) holds the diagonal: M has J's pattern.
-            self._same_pattern(J, key_D)
-            return
-        # Structural union of pattern(J) and the diagonal, as sorted keys col * n + row
-        # (values of J could cancel against the identity and vanish); built with array
-        # operations, no sparse arithmetic: small problems build one per solve.
-        col = np.repeat(np.arange(n, dtype=np.int64), np.diff(J.indptr))
-        key_J = col * n + J.indices
-        pos_D = np.searchsorted(key_J, key_D)
-        if key_J.size and (pos_D < key_J.size).all() and (key_J[pos_D] == key_D).all():
-            self._same_pattern(J, key_D, pos_D)  # the diagonal is stored already
-            return
-        # (a sort and a mask: numpy 2's hashing np.union1d took 0.6 s at n = 3e4, this 30 ms)
-        keys = np.sort(np.concatenate((key_J, key_D)))
-        keys = keys[np.concatenate(([True], keys[1:] != keys[:-1]))]
-        indices = (keys % n).astype(np.int32)
-        indptr = np.searchsorted(keys, np.arange(n + 1, dtype=np.int64) * n).astype(np.int32)
-        self.M = trusted_csc(np.zeros(keys.size), indices, indptr, (n, n))
-        # position of each J entry and each diagonal entry inside M's pattern
-        self.pos_J = np.searchsorted(keys, key_J)
-        self.pos_D = np.searchsorted(keys, key_D)
-
-    def _same_pattern(self, J, key_D, pos_D=None):
-        """M on J's own (canonical) pattern; ``pos_D``: the diagonal's positions in it
-        (on a full pattern the diagonal of column j is entry j * (n + 1))."""
-        n = self.n
-        self.M = trusted_csc(np.zeros(J.nnz), J.indices.astype(np.int32),
-                             J.indptr.astype(np.int32), (n, n))
-        self.pos_J = None  # J's entries are M's, in the same order
-        self.pos_D = key_D if pos_D is None else pos_D
-
-    def linearize(self, J, eps: float, z, f, x):
-        """(M, q, r) of the major iteration at z (F = f) from x: M = J + eps I, q = f - M z
-        and r = f + x - z (the normal map of the linearization at x), in one compiled pass
-        for the solver's float vectors (five array steps cost a small problem ~10 us per
-        major iteration); the same bits either way."""
-        n = self.n
-        if (J.data.dtype == np.float64 and J.data.shape[0] == J.nnz
-                and solver_vectors(z, f, x, x) and z.shape[0] == n):
-            data = np.empty(self.M.data.shape[0])
-            q, r = np.empty(n), np.empty(n)
-            scatter = self.pos_J is not None
-            newton_linearization(J.data, self.pos_J if scatter else self.pos_D, scatter,
-                                 self.pos_D, float(eps), self.M.indptr, self.M.indices,
-                                 z, f, x, data, q, r)
-            return trusted_csc(data, self.M.indices, self.M.indptr, self.M.shape), q, r
-        z, f, x = (np.asarray(a, dtype=float) for a in (z, f, x))
-        M = self(J, eps)
-        Mz = np.empty(n)
-        csc_matvec(M.indptr, M.indices, M.data, z, Mz)  # M @ z without scipy's dispatch
-        return M, f - Mz, f + x - z
-
-    def __call__(self, J, eps: float) -> sp.csc_matrix:
-        if self.pos_J is None:
-            data = J.data.copy()
-        else:
-            data = np.zeros_like(self.M.data)
-            data[self.pos_J] = J.data  # canonical pattern: positions are distinct
-        if eps:
-            data[self.pos_D] += eps
-        return trusted_csc(data, self.M.indices, self.M.indptr, self.M.shape)
-
-
-def _linearizer_for(J, P):
-    """A Linearizer of J when J is stored on the pattern P (None otherwise: not kept)."""
-    if P is None or not (J.nnz == P.nnz and J.indptr.shape == P.indptr.shape
-                         and np.array_equal(J.indptr, P.indptr)
-                         and np.array_equal(J.indices, P.indices)):
-        return None
-    return Linearizer(J)
 
 
 @dataclass
@@ -422,7 +341,7 @@ class NMSSolver:
             # that the crash ends never needs them: 6% of a solve of cournot2).
             cache = self.ev.pattern_cache
             if cache.linearizer is None:
-                cache.linearizer = _linearizer_for(J, cache.pattern)
+                cache.linearizer = linearizer_for(J, cache.pattern)
             self.linearizer = cache.linearizer
         if self.linearizer is None or self.linearizer.nnz_J != J.nnz:
             self.linearizer = Linearizer(J)  # J off the pattern, or an undeclared one grew

@@ -26,7 +26,9 @@ from .merit import fb_phi, fb_psi, normal_map_at, residual_report
 from .nms import NMSSolver, Point
 from .options import Options
 from .exceptions import ShapeError
-from .path import LinearCode, WarmBasis, default_basis, solve_linear_mcp
+from .path.outcome import LinearCode, WarmBasis
+from .path.warm import default_basis
+from .path.linear_mcp import solve_linear_mcp
 from .problem.mcp import MCP
 from .result import Result
 from .status import Iteration, PassStats, PointStatus, Status
@@ -51,7 +53,7 @@ def _manager_factory(opt: Options, deadline=None):
     factorization that cannot finish in time is not started (TIME_LIMIT)."""
     def make(M):
         n = M.shape[0]
-        from . import dense_path
+        from .path import dense_engine as dense_path
 
         # Both bases preallocate room for their updates; past max(n, 50) updates applying
         # them costs more than a fresh factorization, so a larger limit is capped there.

@@ -184,7 +184,7 @@ def test_largest_factorization_update_limit_does_not_exhaust_memory(monkeypatch)
     assert r.residual.natural <= opt.convergence_tolerance
     # the sparse manager gets the same cap (asked of the factory, no 8 GB allocation here)
     monkeypatch.setattr(solve_module, "DENSE_BASIS_MAX_N", 0)
-    import compass_sparse.dense_path as dense_path
+    import compass_sparse.path.dense_engine as dense_path
 
     monkeypatch.setattr(dense_path, "DENSE_ENGINE_MAX_N", 0)
     bm = solve_module._manager_factory(Options(factorization_update_limit=10 ** 6))(

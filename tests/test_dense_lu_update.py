@@ -1,4 +1,4 @@
-"""The dense factors of the small-problem engine (compass_sparse._dense_path_kernels): LU
+"""The dense factors of the small-problem engine (compass_sparse.path._dense_lu): LU
 with partial pivoting and Forrest-Tomlin column replacements, against numpy.
 
 Tolerance checked everywhere: the backward error of a solve,
@@ -13,20 +13,21 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from compass_sparse import _dense_path_kernels as K
+from compass_sparse.path import _dense_lu as K
+from compass_sparse.path._kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z
 
 BACKWARD_TOL = 1e-12
 UPDATE_TOL, STAB_TOL, GROWTH = 1e-11, 1e-8, 100.0  # the engine's defaults
-_UNIT = (K.VAR_W, K.VAR_V, K.VAR_A)
+_UNIT = (VAR_W, VAR_V, VAR_A)
 
 
 def _column(kind, idx, M, r):
-    if kind == K.VAR_Z:
+    if kind == VAR_Z:
         return M[:, idx].copy()
-    if kind == K.VAR_T:
+    if kind == VAR_T:
         return r.copy()
     c = np.zeros(M.shape[0])
-    c[idx] = -1.0 if kind in (K.VAR_W, K.VAR_S) else 1.0
+    c[idx] = -1.0 if kind in (VAR_W, VAR_S) else 1.0
     return c
 
 
@@ -99,8 +100,8 @@ def backward_errors(f, rng):
 
 
 def _random_table(n, rng):
-    sk = rng.choice([K.VAR_Z, K.VAR_W, K.VAR_V], size=n).astype(np.int64)
-    sk[rng.integers(n)] = K.VAR_T
+    sk = rng.choice([VAR_Z, VAR_W, VAR_V], size=n).astype(np.int64)
+    sk[rng.integers(n)] = VAR_T
     return sk, np.arange(n, dtype=np.int64)
 
 
@@ -121,12 +122,12 @@ def _entering(f, rng):
     while True:
         u = rng.random()
         if u < 0.6:
-            kind, idx = K.VAR_Z, int(rng.integers(f.n))
+            kind, idx = VAR_Z, int(rng.integers(f.n))
         elif u < 0.95:
-            kind, idx = (K.VAR_W, K.VAR_V)[int(rng.integers(2))], int(rng.integers(f.n))
+            kind, idx = (VAR_W, VAR_V)[int(rng.integers(2))], int(rng.integers(f.n))
         else:
-            kind, idx = K.VAR_T, 0
-        clash = (f.sk == kind) & ((f.si == idx) | (kind == K.VAR_T))
+            kind, idx = VAR_T, 0
+        clash = (f.sk == kind) & ((f.si == idx) | (kind == VAR_T))
         if kind in _UNIT:  # one unit column per row
             clash |= np.isin(f.sk, _UNIT) & (f.si == idx)
         if not clash.any():
@@ -169,28 +170,28 @@ def test_near_singular_replacement_is_refused_and_the_new_basis_is_repaired(eps)
     n = 12
     rng = np.random.default_rng(5)
     M = rng.standard_normal((n, n))
-    sk, si = np.full(n, K.VAR_Z, np.int64), np.arange(n, dtype=np.int64)
-    sk[:4] = K.VAR_W
+    sk, si = np.full(n, VAR_Z, np.int64), np.arange(n, dtype=np.int64)
+    sk[:4] = VAR_W
     M[:, 2] = M[:, 7] + eps * rng.standard_normal(n)  # z_2 enters, parallel to z_7
     f = Factors(M, rng.standard_normal(n), sk, si, limit=50)
     for _ in range(5):  # carry a few updates first
         kind, idx = _entering(f, rng)
-        if kind == K.VAR_Z and idx == 2:
+        if kind == VAR_Z and idx == 2:
             continue
         d = f.d_of(kind, idx)
         f.replace(int(np.argmax(np.abs(d))), kind, idx)
-    assert f.k > 0 and 7 in f.si[f.sk == K.VAR_Z]  # updates carried, z_7 still basic
+    assert f.k > 0 and 7 in f.si[f.sk == VAR_Z]  # updates carried, z_7 still basic
     old = f.basis()
-    slot = int(np.flatnonzero(f.sk == K.VAR_Z)[0])
+    slot = int(np.flatnonzero(f.sk == VAR_Z)[0])
     if f.si[slot] == 7:
-        slot = int(np.flatnonzero(f.sk == K.VAR_Z)[1])
-    d = f.d_of(K.VAR_Z, 2)
+        slot = int(np.flatnonzero(f.sk == VAR_Z)[1])
+    d = f.d_of(VAR_Z, 2)
     k0 = f.k
     upd = K.replace_column(f.U, f.R, f.perm, f.k, slot, d, f.fw[1], f.fw[2], *f.tols)
     assert upd == K.UPD_REFUSED
     b = rng.standard_normal(n)
     assert f.k == k0 and np.abs(old @ f.ftran(b) - b).max() <= 1e-10
-    f.sk[slot], f.si[slot] = K.VAR_Z, 2
+    f.sk[slot], f.si[slot] = VAR_Z, 2
     assert f.refactor() >= 1  # z_2 and z_7 basic together: singular, the path repairs it
 
 
@@ -200,8 +201,8 @@ def test_update_pivot_tolerance_decides_at_its_threshold():
     n = 6
     rng = np.random.default_rng(7)
     M = rng.standard_normal((n, n))
-    sk, si = np.full(n, K.VAR_Z, np.int64), np.arange(n, dtype=np.int64)
-    sk[5], si[5] = K.VAR_W, 5
+    sk, si = np.full(n, VAR_Z, np.int64), np.arange(n, dtype=np.int64)
+    sk[5], si[5] = VAR_W, 5
     f0 = Factors(M, np.zeros(n), sk, si, limit=10)
     B = f0.basis()
     coef = rng.standard_normal(n)
@@ -210,13 +211,13 @@ def test_update_pivot_tolerance_decides_at_its_threshold():
     for tol, expect in ((1e-11, K.UPD_OK), (1e-8, K.UPD_REFUSED)):
         f = Factors(M, np.zeros(n), sk, si, limit=10, update_tol=tol)
         f.M[:, 5] = a  # z_5 (not basic) enters with column a
-        d = f.d_of(K.VAR_Z, 5)
+        d = f.d_of(VAR_Z, 5)
         assert np.allclose(d, coef, rtol=1e-6, atol=1e-15)
         upd = K.replace_column(f.U, f.R, f.perm, f.k, 2, d, f.fw[1], f.fw[2], *f.tols)
         assert upd == expect
         if upd == K.UPD_OK:
             f.k += 1
-            f.sk[2], f.si[2] = K.VAR_Z, 5
+            f.sk[2], f.si[2] = VAR_Z, 5
             assert max(backward_errors(f, rng)) <= BACKWARD_TOL
 
 
@@ -224,9 +225,9 @@ def _grown_factors(growth):
     """B = [[1, 1e6], [0, 1]] (U = B) and the column (1, 1) replacing slot 0: the row
     eta multiplier is 1e6."""
     M = np.array([[1.0, 1e6, 1.0], [0.0, 1.0, 1.0], [0.0, 0.0, 1.0]])
-    f = Factors(M, np.zeros(3), [K.VAR_Z, K.VAR_Z, K.VAR_W], [0, 1, 2], limit=5,
+    f = Factors(M, np.zeros(3), [VAR_Z, VAR_Z, VAR_W], [0, 1, 2], limit=5,
                 growth=growth)
-    return f, f.d_of(K.VAR_Z, 2)
+    return f, f.d_of(VAR_Z, 2)
 
 
 def test_growth_limit_declines_an_update_with_a_large_multiplier():
@@ -239,7 +240,7 @@ def test_growth_limit_declines_an_update_with_a_large_multiplier():
             assert np.array_equal(f.U, U0) and f.perm[K.P_SLOT, 3] == -1  # untouched
         else:
             f.k += 1
-            f.sk[0], f.si[0] = K.VAR_Z, 2
+            f.sk[0], f.si[0] = VAR_Z, 2
             b = np.array([1.0, 2.0, 3.0])
             assert np.allclose(f.basis() @ f.ftran(b), b, rtol=0, atol=1e-6)
 

@@ -1,4 +1,4 @@
-"""The small-problem engine (compass_sparse.dense_path): its repair against the thesis' rule, and
+"""The small-problem engine (compass_sparse.path.dense_engine): its repair against the thesis' rule, and
 its paths against the Python pivot loop on the dense reference basis (same algorithm:
 same codes, pivots and points) on random, degenerate and rank-deficient linear MCPs.
 
@@ -11,23 +11,26 @@ import numpy as np
 import pytest
 
 import compass_sparse.generators as gen
-from compass_sparse import MCP, Options, dense_path, solve_lcp, solve_mcp
-from compass_sparse import _dense_path_kernels as K
+from compass_sparse import MCP, Options, solve_lcp, solve_mcp
+from compass_sparse.path import dense_engine as dense_path
+from compass_sparse.path import _dense_lu as K
+from compass_sparse.path._kernels import VAR_A, VAR_S, VAR_T, VAR_W, VAR_Z
 from compass_sparse.basis.dense import DenseBasis
-from compass_sparse.dense_path import DensePathEngine
-from compass_sparse.path import LinearCode, PivotalPath
+from compass_sparse.path.dense_engine import DensePathEngine
+from compass_sparse.path.outcome import LinearCode
+from compass_sparse.path.pivotal import PivotalPath
 
 
 def _basis(sk, si, M, r):
     n = sk.size
     B = np.zeros((n, n))
     for k in range(n):
-        if sk[k] == K.VAR_Z:
+        if sk[k] == VAR_Z:
             B[:, k] = M[:, si[k]]
-        elif sk[k] == K.VAR_T:
+        elif sk[k] == VAR_T:
             B[:, k] = r
         else:
-            B[si[k], k] = -1.0 if sk[k] in (K.VAR_W, K.VAR_S) else 1.0
+            B[si[k], k] = -1.0 if sk[k] in (VAR_W, VAR_S) else 1.0
     return B
 
 
@@ -38,7 +41,7 @@ def test_factor_repairs_dependent_columns_with_artificials_on_their_rows():
     rng = np.random.default_rng(4)
     M = rng.standard_normal((n, n))
     M[:, 4] = M[:, 1]
-    sk = np.full(n, K.VAR_Z, np.int64)
+    sk = np.full(n, VAR_Z, np.int64)
     si = np.arange(n, dtype=np.int64)
     L, U = np.zeros((n, n), order="F"), np.zeros((n, n), order="F")
     prow, qslot = np.zeros(n, np.int64), np.zeros(n, np.int64)
@@ -46,7 +49,7 @@ def test_factor_repairs_dependent_columns_with_artificials_on_their_rows():
     nrep = K.factor(np.asfortranarray(M), np.zeros(n), sk, si, np.ones(n, np.int64), L, U,
                     prow, qslot, 1e-9, rs, rr, True, np.zeros((4, n), np.int64), np.zeros(n))
     assert nrep == 1 and rs[0] == 4 and rr[0] == 4
-    sk[4] = K.VAR_A
+    sk[4] = VAR_A
     B = _basis(sk, si, M, np.zeros(n))
     B[4, 4] = 1.0
     assert np.linalg.matrix_rank(B) == n
@@ -223,9 +226,9 @@ def test_artificial_zero_tolerance_decides_the_side_of_an_artificial_at_zero():
     """An artificial within ARTIFICIAL_ZERO of 0 is at 0 from above whatever the sign of
     its rounding: moving down it blocks at once; beyond the tolerance it is on the
     negative side and moving down takes it away from 0, so another slot blocks."""
-    from compass_sparse._path_kernels import ARTIFICIAL_ZERO, project_slots, ratio_test
+    from compass_sparse.path._kernels import ARTIFICIAL_ZERO, project_slots, ratio_test
 
-    sk = np.array([K.VAR_A, K.VAR_W], np.int64)
+    sk = np.array([VAR_A, VAR_W], np.int64)
     si = np.array([0, 1], np.int64)
     lb, ub = np.zeros(2), np.full(2, np.inf)
     rate = np.array([-1.0, -1.0])
@@ -244,9 +247,9 @@ def test_t_at_its_bound_wins_a_tie_and_is_free_below_on_a_path_from_the_current_
     """t reaching 1 or falling to its lower bound 0 wins a tie (the path ends either way);
     with no lower bound (a path from the current point before it has been above t = 0) t
     never blocks going down and another slot leaves."""
-    from compass_sparse._path_kernels import ratio_test
+    from compass_sparse.path._kernels import ratio_test
 
-    sk = np.array([K.VAR_T, K.VAR_W], np.int64)
+    sk = np.array([VAR_T, VAR_W], np.int64)
     si = np.array([0, 1], np.int64)
     lb, ub = np.zeros(2), np.full(2, np.inf)
     slot, theta, up = ratio_test(sk, si, np.zeros(2), np.array([-0.01, -2.0]), lb, ub,
@@ -304,7 +307,7 @@ def test_pivot_budget_below_zero_ends_paths_that_do_not_get_above_zero(monkeypat
     """t's bound is lifted on the path's second pivot (pivot count 1) and t gets above 0
     on its fourth: a budget of 1 or 2 pivots ends the path first ("t not above 0", the
     start point returned at t = 0), 3 lets it reach t = 1; both implementations alike."""
-    from compass_sparse import _path_kernels as PK
+    from compass_sparse.path import _kernels as PK
 
     monkeypatch.setattr(PK, "BELOW_ZERO_PIVOTS", budget)
     lcp, x = _degenerate_start_lcp()
@@ -325,7 +328,7 @@ def test_t_below_t_progress_is_not_progress_above_zero(monkeypatch, eps, t_progr
     third.  At most T_PROGRESS (1e-9) that is not progress: the bound is lifted and the path
     reaches t = 1; above it the path has been above 0 and ends there, as with the
     tolerance moved across eps/3 either way; both implementations alike."""
-    from compass_sparse import _path_kernels as PK
+    from compass_sparse.path import _kernels as PK
 
     if t_progress is not None:
         monkeypatch.setattr(PK, "T_PROGRESS", t_progress)

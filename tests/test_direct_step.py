@@ -10,15 +10,16 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-import compass_sparse.direct_step as ds
+import compass_sparse.path.direct_step as ds
 import compass_sparse.linalg.direct as ld
 import compass_sparse.generators as gen
 from compass_sparse import Options, solve_mcp
-from compass_sparse._path_kernels import VAR_V, VAR_W, VAR_Z
+from compass_sparse.path._kernels import VAR_V, VAR_W, VAR_Z
 from compass_sparse.basis import BasisManager
-from compass_sparse.dense_path import DensePathEngine
+from compass_sparse.path.dense_engine import DensePathEngine
 from compass_sparse.linalg.csc import trusted_csc
-from compass_sparse.path import LinearCode, PivotalPath
+from compass_sparse.path.outcome import LinearCode
+from compass_sparse.path.pivotal import PivotalPath
 
 
 def _agreement(cases, scales, seed, manager, factors, atol):
@@ -509,9 +510,9 @@ def test_klu_lu_size_read_from_the_factorization_is_the_factors_size(monkeypatch
 
 # ------------------------------------------- the path's start and direct step in one call
 def _without_fused_route(monkeypatch):
-    import compass_sparse.path as path_mod
+    import compass_sparse.path.linear_mcp as linear_mcp
 
-    monkeypatch.setattr(path_mod, "dense_direct_path", lambda *a, **k: None)
+    monkeypatch.setattr(linear_mcp, "dense_direct_path", lambda *a, **k: None)
 
 
 def _covering(M, q, lb, ub, x):
@@ -528,7 +529,7 @@ def test_one_call_path_start_and_dense_direct_step_give_the_paths_results_bit_fo
     PivotalPath.run gives -- the same point bits, basis, code, counts -- in the three
     outcomes (start solves, step solves, step fails and the path runs), with and
     without a warm basis."""
-    from compass_sparse.path import solve_linear_mcp
+    from compass_sparse.path.linear_mcp import solve_linear_mcp
 
     seen = set()
     rng = np.random.default_rng(seed)
@@ -586,9 +587,9 @@ def test_failed_one_call_step_hands_the_path_the_start_it_would_compute(seed):
     computed: the components of x, the start basis with the inward guess and, when the
     guess changed the basis, the basis before it -- what PivotalPath._run computes
     itself (path.components and path.start_basis_with_guess)."""
-    from compass_sparse.direct_step import dense_direct_path
-    from compass_sparse.path import (WarmBasis, components, default_basis,
-                                     start_basis_with_guess)
+    from compass_sparse.path.direct_step import dense_direct_path
+    from compass_sparse.path.outcome import WarmBasis
+    from compass_sparse.path.warm import components, default_basis, start_basis_with_guess
 
     rng = np.random.default_rng(seed)
     got = set()

@@ -8,7 +8,8 @@ import scipy.sparse as sp
 
 from compass_sparse import Options, Status, solve_mcp
 from compass_sparse.basis import BasisManager, BasisOptions
-from compass_sparse.path import LinearCode, PivotalPath
+from compass_sparse.path.outcome import LinearCode
+from compass_sparse.path.pivotal import PivotalPath
 
 
 def _interior_lcp(n, seed):

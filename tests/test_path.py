@@ -18,8 +18,10 @@ import compass_sparse.generators as gen
 from compass_sparse import Options, Status, solve_lcp
 from compass_sparse.basis.dense import DenseBasis
 from compass_sparse.basis import BasisManager
-from compass_sparse.dense_path import DensePathEngine
-from compass_sparse.path import LinearCode, PivotalPath, WarmBasis, components, default_basis
+from compass_sparse.path.dense_engine import DensePathEngine
+from compass_sparse.path.outcome import LinearCode, WarmBasis
+from compass_sparse.path.pivotal import PivotalPath
+from compass_sparse.path.warm import components, default_basis
 
 MANAGERS = {"sparse": BasisManager, "dense": DenseBasis, "compiled": DensePathEngine}
 HYP = settings(derandomize=True, max_examples=30, deadline=None,
@@ -452,8 +454,8 @@ def test_fixed_variables():
 def _random_slot_table(seed, n=40):
     """A slot table with every kind, repeated indices across and within kinds, NaN and
     signed-zero values, bounds of every kind (fixed ones included)."""
-    from compass_sparse._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z
-    from compass_sparse.path import PathState
+    from compass_sparse.path._kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z
+    from compass_sparse.path.pivotal import PathState
 
     rng = np.random.default_rng(seed)
     lb = np.where(rng.random(n) < 0.3, -np.inf, rng.standard_normal(n))
@@ -474,9 +476,10 @@ def test_compiled_slot_readout_matches_array_formulas(seed):
     """The compiled read-out of a slot table (the point (z, w, v) and the basis handed to
     the next path) equals the array formulas bit for bit, NaN and -0.0 included, with
     repeated indices assigned in the array version's order."""
-    from compass_sparse._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
-    from compass_sparse._slot_kernels import slot_basis
-    from compass_sparse.path import PivotalPath, default_basis
+    from compass_sparse.path._kernels import VAR_S, VAR_V, VAR_W, VAR_Z
+    from compass_sparse.path._slot_kernels import slot_basis
+    from compass_sparse.path.pivotal import PivotalPath
+    from compass_sparse.path.warm import default_basis
 
     lb, ub, st = _random_slot_table(seed)
     n = lb.size
@@ -501,8 +504,8 @@ def test_compiled_slot_readout_matches_array_formulas(seed):
 
 @pytest.mark.parametrize("seed", range(3))
 def test_compiled_slot_table_matches_array_formulas(seed):
-    from compass_sparse._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
-    from compass_sparse.path import PathState, PivotalPath
+    from compass_sparse.path._kernels import VAR_S, VAR_V, VAR_W, VAR_Z
+    from compass_sparse.path.pivotal import PathState, PivotalPath
 
     rng = np.random.default_rng(seed)
     n = 30
@@ -523,8 +526,9 @@ def test_compiled_slot_table_matches_array_formulas(seed):
 def test_compiled_default_basis_matches_array_formulas(seed):
     """The start basis of a path (cold and warm-started) from the compiled pass equals the
     array formulas, at points inside, on and beyond bounds, fixed and infinite ones."""
-    from compass_sparse._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
-    from compass_sparse.path import WarmBasis, default_basis
+    from compass_sparse.path._kernels import VAR_S, VAR_V, VAR_W, VAR_Z
+    from compass_sparse.path.outcome import WarmBasis
+    from compass_sparse.path.warm import default_basis
 
     lb, ub, st = _random_slot_table(seed)
     rng = np.random.default_rng(seed)
@@ -548,7 +552,7 @@ def test_path_starts_again_when_a_solve_repairs_the_basis(monkeypatch):
     SolveRepairedBasis; the path starts again on fresh factors and still solves, and a
     path whose solves keep repairing ends SINGULAR instead of raising."""
     from compass_sparse.basis import SolveRepairedBasis
-    from compass_sparse.path import PATH_ATTEMPTS
+    from compass_sparse.path.pivotal import PATH_ATTEMPTS
 
     g = gen.p_matrix_lcp(400, "grid", 9, "box")
     M, q, lb, ub = g.lcp
@@ -584,7 +588,7 @@ def test_compiled_lemke_start_gives_the_array_versions_bits():
     for bit and dtype for dtype, as the array version, over random boxes with free,
     lower-, upper-bounded, boxed and fixed variables, f of every size around 1 and a NaN
     in q."""
-    from compass_sparse.dense_path import DensePathEngine
+    from compass_sparse.path.dense_engine import DensePathEngine
 
     rng = np.random.default_rng(0)
     for trial in range(200):

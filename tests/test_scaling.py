@@ -137,8 +137,8 @@ def test_a_loop_of_scaled_solves_builds_the_newton_linearizer_once(monkeypatch):
     p = MCP(lambda z: S * (M @ z + q), lambda z: sp.csc_matrix(S[:, None] * M), 0.0, np.inf,
             np.zeros(n))
     built = []
-    real = nms._linearizer_for
-    monkeypatch.setattr(nms, "_linearizer_for", lambda J, P: built.append(1) or real(J, P))
+    real = nms.linearizer_for
+    monkeypatch.setattr(nms, "linearizer_for", lambda J, P: built.append(1) or real(J, P))
     # (no crash: it solves this model, and a solve that the crash ends needs no linearizer)
     opt = {"crash_method": "none"}
     first = solve_mcp(p, options=opt)

@@ -409,7 +409,7 @@ def test_dense_jacobian_in_fortran_order_is_copied_not_viewed():
 
 
 def test_linearizer_pattern_is_jacobian_pattern_union_diagonal():
-    from compass_sparse.nms import Linearizer
+    from compass_sparse.path.linearize import Linearizer
 
     rng = np.random.default_rng(5)
     for n in (1, 3, 12, 40):
@@ -575,7 +575,7 @@ def test_linearizer_on_patterns_that_hold_the_diagonal(kind):
     """A full pattern and a pattern that stores the whole diagonal give M = J + eps I on
     J's own pattern (stored zeros kept); one without it gets the diagonal added."""
     from compass_sparse.linalg.csc import canonical_csc
-    from compass_sparse.nms import Linearizer
+    from compass_sparse.path.linearize import Linearizer
 
     rng = np.random.default_rng(8)
     n = 9
@@ -612,7 +612,7 @@ def test_one_pass_linearization_gives_the_array_formulas_bits(kind):
     added; a vector that is not the solver's float vector takes the array route."""
     from compass_sparse.linalg._csc_kernels import csc_matvec
     from compass_sparse.linalg.csc import canonical_csc
-    from compass_sparse.nms import Linearizer
+    from compass_sparse.path.linearize import Linearizer
 
     rng = np.random.default_rng(21)
     n = 11
@@ -720,7 +720,7 @@ def test_dense_engine_refills_its_matrix_in_place_from_each_linearization():
     """The engine's dense copy of M is allocated once per order and refilled by every
     set_matrix: CSC (duplicates summed, unsorted indices), other sparse formats and dense
     input give M exactly; a new order gets a new array."""
-    from compass_sparse.dense_path import DensePathEngine
+    from compass_sparse.path.dense_engine import DensePathEngine
 
     rng = np.random.default_rng(4)
     A = sp.random(6, 6, density=0.5, format="csc", random_state=4)
@@ -881,11 +881,11 @@ def test_a_solve_the_crash_ends_builds_no_newton_linearizer(monkeypatch):
     """The Newton linearizer (the index arrays of J + eps I) is made at the first major
     iteration: a solve that the crash ends builds none (cournot2), one with major
     iterations builds it, with the same point as before this change (kojshin)."""
-    from compass_sparse import nms
+    from compass_sparse.path.linearize import Linearizer
 
     built = []
-    real = nms.Linearizer.__init__
-    monkeypatch.setattr(nms.Linearizer, "__init__",
+    real = Linearizer.__init__
+    monkeypatch.setattr(Linearizer, "__init__",
                         lambda self, J: built.append(1) or real(self, J))
     k = kp.cournot_duopoly()
     r = solve_mcp(k.F, k.J, k.lb, k.ub, k.x0)

@@ -70,259 +70,29 @@ path; the point with the largest t is returned.
 """
 from __future__ import annotations
 
-import enum
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 
-from . import _path_kernels as _PK
-from .linalg.csc import csc_times, trusted_csc
-from ._path_kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
-from ._slot_kernels import lemke_start, slot_basis, slot_point, slot_table, start_basis
-from .basis import KIND_DENSE, KIND_M, KIND_UNIT, FactorReuseFailed, UpdateStatus
-from .direct_step import (FEASIBILITY_TOLERANCE, RESIDUAL_TOLERANCE, dense_direct_path,
-                          dense_newton_direct, direct_step, failed_direct_start)
-from .linalg.direct import DirectFactors
-from .exceptions import ShapeError, SingularBasisError
-from .box import F64, max_abs
+from ..basis import KIND_DENSE, KIND_M, KIND_UNIT, FactorReuseFailed, UpdateStatus
+from ..box import float_vectors, max_abs
+from ..exceptions import SingularBasisError
+from ..linalg.csc import csc_times
+from ..linalg.direct import DirectFactors
+from . import _kernels as _PK
+from ._kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
+from ._slot_kernels import lemke_start, slot_basis, slot_point, slot_table
+from .direct_step import direct_step
+from .outcome import LinearCode, PathResult, WarmBasis
+from .warm import components, default_basis, start_basis_with_guess
 
 _VAR_NAMES = "zwvatS"
 
 PATH_ATTEMPTS = 3
 """Runs of one path when the basis manager reports that a singular basis changed its slot
 table (each run starts again from fresh factors); after the last, the path ends SINGULAR."""
-
-
-class LinearCode(enum.Enum):
-    """Outcome of one pivotal path: PATH's one-letter linear-solver codes."""
-
-    SOLVED = "S"
-    RAY = "R"
-    CYCLE = "C"
-    MINOR_LIMIT = "I"
-    SINGULAR = "N"
-    TOLERANCE = "T"
-    ERROR = "E"
-
-
-@dataclass
-class WarmBasis:
-    """Which variable of each index is basic at the end of a path: VAR_Z, VAR_W or VAR_V
-    (VAR_S for fixed variables).  Artificials are not kept."""
-
-    basic: np.ndarray
-
-
-@dataclass
-class PathResult:
-    code: LinearCode
-    z: np.ndarray
-    w: np.ndarray
-    v: np.ndarray
-    t: float
-    pivots: int = 0
-    factorizations: int = 0
-    updates: int = 0
-    artificials: int = 0
-    breakpoints: list = field(default_factory=list)  # (t, x) with t increasing
-    basis: WarmBasis | None = None
-    ray_start: bool = False
-    unbounded: bool = False  #: RAY because the entering variable grows without bound
-    ray: np.ndarray | None = None  #: unbounded: direction of z along the ray
-    ray_base: np.ndarray | None = None  #: unbounded: the z where the ray starts
-    time: float = 0.0
-    message: str = ""
-    direct_lu_nnz: int = 0  #: entries of the direct step's LU (0: not tried)
-
-    @property
-    def x(self) -> np.ndarray:
-        return self.z - self.w + self.v
-
-
-def _floats(n, *arrays) -> bool:
-    """All float64 vectors of length n (the compiled kernels' arguments)."""
-    shape = (n,)
-    for a in arrays:  # (a loop, not all(...): this runs several times per path)
-        # (the dtype by identity, as box.float_vector: ``==`` converts np.float64 first)
-        if not (isinstance(a, np.ndarray) and a.dtype is F64 and a.shape == shape):
-            return False
-    return True
-
-
-def components(x, lb, ub):
-    """(z, w, v) comprising x: z = pi(x), w = (z - x)+, v = (x - z)+ (thesis (3.2.2)-(3.2.5))."""
-    z = np.minimum(np.maximum(x, lb), ub)
-    return z, np.maximum(z - x, 0.0), np.maximum(x - z, 0.0)
-
-
-def default_basis(z, lb, ub, previous: WarmBasis | None = None) -> np.ndarray:
-    """The basic variable of each index at a point z.
-
-    Strictly inside its bounds z_i is basic; at a bound the slack is basic (the thesis
-    prefers slack columns: fewer chances of a singular basis) unless the previous basis had
-    z_i basic there (a degenerate but valid warm start that saves pivots)."""
-    if previous is not None and previous.basic.shape != z.shape:
-        raise ShapeError(f"warm basis of shape {previous.basic.shape} for a linear MCP "
-                         f"of {z.size} variables")
-    if _floats(z.size, z, lb, ub) and z.ndim == 1:
-        basic = np.empty(z.shape, dtype=np.int8)
-        prev = previous.basic if previous is not None else basic
-        start_basis(z, lb, ub, prev, previous is not None, basic)
-        return basic
-    basic = np.full(z.shape, VAR_Z, dtype=np.int8)
-    at_l = z <= lb
-    at_u = (z >= ub) & ~at_l
-    fixed = lb == ub
-    basic[at_l] = VAR_W
-    basic[at_u] = VAR_V
-    if previous is not None:
-        keep_z = (previous.basic == VAR_Z) & (at_l | at_u)
-        basic[keep_z] = VAR_Z
-    basic[fixed] = VAR_S
-    return basic
-
-
-def start_basis_with_guess(z, w, v, r, lb, ub, warm: WarmBasis | None = None):
-    """(basic, slack basis or None): the start basis of a path from the point with
-    components (z, w, v) and covering vector r -- :func:`default_basis`, and without a warm
-    basis the inward guess on it.  At a bound with no slack value (x_i = z_i) the variable
-    is degenerate: its z column may replace the slack when the residual pushes it inwards
-    (r_i < 0 at a lower bound, r_i > 0 at an upper one).  On NCP grids this cut the pivots
-    of a cold path 5-10x (43 -> 6 at n = 100, 468 -> 80 at n = 1000, PATH's counts); the
-    second value, the basis before the guess, is the path's fallback when the guess makes
-    the basis singular (None when the guess changed nothing)."""
-    basic = default_basis(z, lb, ub, warm)
-    if warm is not None:
-        return basic, None
-    inward = ((z <= lb) & (w == 0) & (r < 0)) | ((z >= ub) & (v == 0) & (r > 0))
-    inward &= lb < ub
-    if not inward.any():
-        return basic, None
-    slack_basis = basic.copy()
-    basic[inward] = VAR_Z
-    return basic, slack_basis
-
-
-def solve_linear_mcp(M, q, lb, ub, basis, options, x, *, warm: WarmBasis | None = None,
-                     r=None, ray_start: bool = False, retry_below: float = np.inf,
-                     keep_ray: bool = False, minor_limit=None, deadline=None,
-                     log=None, direct: DirectFactors | None = None,
-                     dense_start=None) -> PathResult:
-    """One linear MCP by the pivotal path from x (warm-started from ``warm``), retried
-    from the Lemke ray start when ``options.lemke_start`` is "automatic", the first path
-    failed and reached only t < ``retry_below``.  The retry's result is kept when it
-    solves, reaches a larger t, or (``keep_ray``) ends in a genuine ray, which is what
-    an infeasibility verdict needs; pivots and factorizations of both paths are counted.
-    ``direct``: first try the path's end point by one sparse solve with these factors
-    (:mod:`compass_sparse.direct_step`; the first path only, not the ray-start retry).
-    ``dense_start``: what :func:`~compass_sparse.direct_step.dense_direct_path` returns
-    for these arguments, when the caller has computed it (a failed step is not made
-    again).
-    """
-    kw = dict(minor_limit=minor_limit, deadline=deadline, log=log)
-    res = None
-    if (direct is not None and direct.dense and not ray_start and log is None
-            and r is not None):
-        # A small problem's start and dense direct step in one compiled call (the
-        # Python of a path's set-up cost more than the step); the path runs only when
-        # the step fails, then without trying it again.
-        res = _dense_direct_result(M, q, lb, ub, basis, options, x, r, warm, direct, kw,
-                                   dense_start)
-    if res is None:
-        res = PivotalPath(M, q, lb, ub, basis, options, direct=direct, **kw).run(
-            x, warm=warm, ray_start=ray_start, r=r)
-    if (res.code is LinearCode.SOLVED or ray_start or options.lemke_start != "automatic"
-            or res.t >= retry_below
-            or (deadline is not None and time.perf_counter() > deadline)):
-        return res  # (no retry after the time limit: its factorization alone may take long)
-    res2 = PivotalPath(M, q, lb, ub, basis, options, **kw).run(x, ray_start=True)
-    pivots = res.pivots + res2.pivots
-    factorizations = res.factorizations + res2.factorizations
-    if (res2.code is LinearCode.SOLVED or res2.t > res.t
-            or (keep_ray and res2.code is LinearCode.RAY and res2.unbounded)):
-        res = res2
-    res.pivots, res.factorizations = pivots, factorizations
-    return res
-
-
-def _dense_direct_result(M, q, lb, ub, manager, options, x, r, warm, direct, kw, out=None):
-    """What ``PivotalPath(..., direct=direct).run(x, warm=warm, r=r)`` returns, the same
-    values and counts, with its start and direct step computed by
-    :func:`~compass_sparse.direct_step.dense_direct_path` (``out``: its outcome, when
-    the caller has it); None when that call does not apply."""
-    t0 = time.perf_counter()
-    M = M if (sp.issparse(M) and M.format == "csc") else sp.csc_matrix(M)
-    if out is None:
-        out = dense_direct_path(M, np.asarray(q, dtype=float), lb, ub, x, r, warm, direct)
-    if out is None:
-        return None
-    kind, end, basic, nnz_lu = out
-    if kind != "path":
-        return _decided_result(kind, end, basic, nnz_lu, manager, direct, t0)
-    # the step failed: the path runs from the start the call computed
-    if nnz_lu:
-        manager.stats.record_direct_lu(nnz_lu, time.perf_counter() - t0, direct.method)
-    res = PivotalPath(M, q, lb, ub, manager, options, **kw).run(x, warm=warm, r=r, start=end)
-    # the failed step's factorization counts in the path's, as inside run()
-    res.factorizations += 1 if nnz_lu else 0
-    res.direct_lu_nnz = nnz_lu
-    res.time = time.perf_counter() - t0
-    return res
-
-
-def _decided_result(kind, end, basic, nnz_lu, manager, direct, t0):
-    """The PathResult of a path that its start ends (``kind`` "start": r = 0) or its dense
-    direct step ends ("direct": the step's LU, ``nnz_lu`` entries, is counted)."""
-    if kind == "start":
-        res = PathResult(LinearCode.SOLVED, *end, 1.0, basis=WarmBasis(basic),
-                         ray_start=False)
-    else:
-        if nnz_lu:
-            manager.stats.record_direct_lu(nnz_lu, time.perf_counter() - t0, direct.method)
-        res = PathResult(LinearCode.SOLVED, *end, 1.0, factorizations=1,
-                         basis=WarmBasis(basic), ray_start=False, direct_lu_nnz=nnz_lu)
-    res.time = time.perf_counter() - t0
-    return res
-
-
-def dense_newton_result(lin, J, eps, zk, fk, x, lb, ub, manager, warm, direct):
-    """(M, q, r, res, start): the linear MCP of a major iteration, ``lin.linearize(J, eps,
-    zk, fk, x)``, and what ``solve_linear_mcp(M, q, lb, ub, manager, ..., x, warm=warm,
-    r=r, direct=direct)`` returns when the path's start or its dense direct step decides
-    it, in one compiled call for a small dense problem
-    (:func:`~compass_sparse.direct_step.dense_newton_direct`): the same values, counts and
-    bits.  When the step fails, res is None and ``start`` is the outcome for that call's
-    ``dense_start`` (the path runs from the start computed here).  All None when the
-    arguments are not the compiled call's."""
-    n = zk.shape[0]
-    if not (direct.dense and J.data.dtype == np.float64 and J.data.shape[0] == J.nnz
-            and _floats(n, zk, fk, x, lb, ub) and n == lin.n
-            and (warm is None or warm.basic.shape == (n,))):
-        return None, None, None, None, None
-    t0 = time.perf_counter()
-    P = lin.M
-    mdata = np.empty(P.data.shape[0])
-    q, r = np.empty((2, n))
-    z, w, v, zt, wt, vt = np.empty((6, n))  # (rows of one allocation: C vectors)
-    basic, slack = np.empty((2, n), dtype=np.int8)
-    scatter = lin.pos_J is not None
-    use_previous = warm is not None
-    code, nf, accepted, guessed = dense_newton_direct(
-        J.data, lin.pos_J if scatter else lin.pos_D, scatter, lin.pos_D, float(eps),
-        P.indptr, P.indices, zk, fk, x, lb, ub, warm.basic if use_previous else basic,
-        use_previous, mdata, q, r, z, w, v, basic, slack, zt, wt, vt, FEASIBILITY_TOLERANCE,
-        direct.rank_tolerance, RESIDUAL_TOLERANCE)
-    M = trusted_csc(mdata, P.indices, P.indptr, P.shape)
-    if code == 0:
-        return M, q, r, _decided_result("start", (z, w, v), basic, 0, manager, direct,
-                                        t0), None
-    nnz_lu = direct.dense_done(nf)
-    if not accepted:
-        return M, q, r, None, failed_direct_start(z, w, v, basic, slack, guessed, nnz_lu)
-    return M, q, r, _decided_result("direct", (zt, wt, vt), basic, nnz_lu, manager, direct,
-                                    t0), None
 
 
 @dataclass
@@ -516,7 +286,7 @@ class PivotalPath:
     def _reset_slots(self, basic, z, w, v):
         """Slot table: slot i holds index i's basic variable at its value in (z, w, v)."""
         n = self.n
-        if _floats(n, z, w, v):
+        if float_vectors(n, z, w, v):
             self.st.sk = np.empty(n, dtype=np.int64)  # slot variable kind (VAR_*)
             self.st.si = np.empty(n, dtype=np.int64)  # slot variable index
             self.st.xb = np.empty(n)
@@ -540,7 +310,7 @@ class PivotalPath:
         its slack basic, the covering vector making them feasible at t = 0 (one compiled
         pass for float data; :meth:`_lemke_start_arrays` otherwise, and its reference)."""
         n, M = self.n, self.M
-        if M.data.dtype == np.float64 and _floats(n, self.q, self.lb, self.ub):
+        if M.data.dtype == np.float64 and float_vectors(n, self.q, self.lb, self.ub):
             z, w, v, r = np.empty(n), np.empty(n), np.empty(n), np.empty(n)
             basic = np.empty(n, dtype=np.int8)
             lemke_start(M.indptr, M.indices, M.data, self.q, self.lb, self.ub, z, w, v, r,
@@ -800,7 +570,7 @@ class PivotalPath:
                 self.st.breakpoints.append((self.st.t, x))
 
     def _current_point(self):
-        if _floats(self.n, self.st.zval, self.st.xb, self.lb, self.ub):
+        if float_vectors(self.n, self.st.zval, self.st.xb, self.lb, self.ub):
             z, w, v = np.empty(self.n), np.empty(self.n), np.empty(self.n)
             slot_point(self.st.sk, self.st.si, self.st.xb, self.st.zval, self.lb, self.ub,
                        z, w, v)
@@ -847,7 +617,7 @@ class PivotalPath:
         if not isinstance(w, np.ndarray):
             w = np.zeros(self.n)
             v = np.zeros(self.n)
-        if self.st.sk is not None and _floats(self.n, z, self.lb, self.ub):
+        if self.st.sk is not None and float_vectors(self.n, z, self.lb, self.ub):
             basic = np.empty(self.n, dtype=np.int8)  # (slot_basis sets every entry)
             slot_basis(z, self.lb, self.ub, self.st.sk, self.st.si, basic)
         elif self.st.sk is not None:

@@ -39,15 +39,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._jit import njit
-from ._merit_kernels import max_abs_kernel, newton_linearization
-from ._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
+from .._jit import njit
+from .._merit_kernels import max_abs_kernel
+from ._kernels import VAR_S, VAR_V, VAR_W, VAR_Z, newton_linearization
 from ._slot_kernels import components, start_basis
-from .basis.types import BasisOptions
-from .box import float_vector, max_abs
-from .box import all_finite
-from .linalg.csc import reduced_system
-from .linalg.direct import DirectFactors, automatic_lu
+from ..basis.types import BasisOptions
+from ..box import float_vector, max_abs
+from ..box import all_finite
+from ..linalg.csc import reduced_system
+from ..linalg.direct import DirectFactors, automatic_lu
 
 __all__ = ["DIRECT_MAX_DENSITY", "DIRECT_MAX_N", "DIRECT_MIN_N", "REUSE_BEATS_REFACTOR_NNZ",
            "dense_direct_path", "direct_step", "direct_step_applies", "failed_direct_start"]

@@ -33,11 +33,12 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from . import _dense_path_kernels as K
-from . import _path_kernels as PK
-from .linalg._csc_kernels import csc_to_dense
-from .basis.types import BasisStats
-from .path import LinearCode
+from . import _dense_kernels as K
+from . import _kernels as PK
+from ._dense_lu import allocate_factors
+from ..linalg._csc_kernels import csc_to_dense
+from ..basis.types import BasisStats
+from .outcome import LinearCode
 
 __all__ = ["DENSE_ENGINE_MAX_N", "DensePathEngine"]
 
@@ -85,7 +86,7 @@ class DensePathEngine:
         """The factors' and the path's work areas, once per engine: a solve whose paths
         all end by the direct step (direct_step.py) never needs them."""
         n = self.n
-        self.L, self.U, self.R, self.perm, self.fwork = K.allocate_factors(n, self.update_limit)
+        self.L, self.U, self.R, self.perm, self.fwork = allocate_factors(n, self.update_limit)
         self.work = np.zeros((8, n))
         self.n_breakpoints = max(1, min(200, 5_000_000 // max(n, 1)))
         self.bp_t = np.zeros(self.n_breakpoints)

@@ -13,9 +13,9 @@ where several slots name the same index, the assignment order of the array versi
 
 import numpy as np
 
-from ._jit import njit
-from .linalg._csc_kernels import csc_matvec
-from ._path_kernels import VAR_S, VAR_V, VAR_W, VAR_Z
+from .._jit import njit
+from ..linalg._csc_kernels import csc_matvec
+from ._kernels import VAR_S, VAR_V, VAR_W, VAR_Z
 
 
 @njit(cache=True, inline="always")

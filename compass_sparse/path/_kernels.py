@@ -1,7 +1,8 @@
 """Compiled inner loops of the pivotal path: the two-pass ratio test and the projection
 of basic values onto their bounds, with each slot's bounds derived from its variable kind
 (z: [l, u]; w, v: [0, inf); fixed-variable slack: free; t: [t_lower, 1]; artificial:
-towards 0 from the side it is on).
+towards 0 from the side it is on); and the linearization of a major iteration
+(:func:`newton_linearization`, :mod:`compass_sparse.path.linearize`).
 
 t's lower bound is the caller's (compass_sparse.path explains it): 0, or -inf while a path
 from the current point that has not been above t = 0 is allowed below it.
@@ -10,7 +11,9 @@ Ties: t leaving at either bound wins every tie (at 1 the linear problem is solve
 lower bound the path ends), then artificials, then the largest |rate|.
 """
 import numpy as np
-from ._jit import njit
+
+from .._jit import njit
+from ..linalg._csc_kernels import csc_matvec
 
 VAR_Z, VAR_W, VAR_V, VAR_A, VAR_T, VAR_S = 0, 1, 2, 3, 4, 5
 
@@ -106,3 +109,27 @@ def project_slots(sk, si, xb, lb, ub, t_lower):
             xb[k] = lo
         elif v > hi:
             xb[k] = hi
+
+
+@njit(cache=True)
+def newton_linearization(jdata, pos_j, scatter, pos_d, eps, indptr, indices, z, f, x,
+                         mdata, q, r):
+    """The linear MCP of a major iteration in one pass (nms.Linearizer.linearize):
+    mdata = the entries of M = J + eps I on M's pattern (``scatter``: J's entry k at
+    position pos_j[k], the others 0; else J's entries in M's order), q = f - M z (M z
+    summed column by column, as :func:`csc_matvec`) and r = f + x - z: the bits of the
+    array formulas."""
+    if scatter:
+        mdata[:] = 0.0
+        for k in range(jdata.shape[0]):
+            mdata[pos_j[k]] = jdata[k]
+    else:
+        for k in range(jdata.shape[0]):
+            mdata[k] = jdata[k]
+    if eps != 0.0:
+        for k in range(pos_d.shape[0]):
+            mdata[pos_d[k]] += eps
+    csc_matvec(indptr, indices, mdata, z, q)
+    for i in range(q.shape[0]):
+        q[i] = f[i] - q[i]
+        r[i] = f[i] + x[i] - z[i]
