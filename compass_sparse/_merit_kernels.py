@@ -132,29 +132,6 @@ def fb_directional_kernel(z, f, lb, ub, phi, indptr, indices, data, zc, g, d):
     return np.dot(g, d)
 
 
-@njit(cache=True)
-def crash_active_set(z, f, lb, ub, diag, free, d):
-    """The crash's active set and Newton target (crash.py): with g_i = |J_ii| (1 where it
-    is 0 or NaN), index i is active at its lower bound when z_i - f_i / g_i <= l_i, else at
-    its upper bound when that point is >= u_i (a NaN point is neither); ``free`` is the
-    complement, and d_i = z_i - (its bound) on the active indices, 0 elsewhere.  The array
-    formulas' values element by element, in one pass."""
-    for i in range(z.shape[0]):
-        g = abs(diag[i])
-        if not g > 0.0:
-            g = 1.0
-        xm = z[i] - f[i] / g
-        if xm <= lb[i]:
-            free[i] = False
-            d[i] = z[i] - lb[i]
-        elif xm >= ub[i]:
-            free[i] = False
-            d[i] = z[i] - ub[i]
-        else:
-            free[i] = True
-            d[i] = 0.0
-
-
 @njit(cache=True, inline="always")
 def _absorbed(zi, fi, li, ui):
     """(w, v) of merit.normal_map_at for one index: the part of F absorbed by the normal
@@ -322,3 +299,15 @@ def top_abs_distinct(v, idx):
     for j in range(k):
         idx[j] = ids[j]
     return True
+
+
+@njit(cache=True, inline="always")
+def np_max(a, b):
+    """np.maximum(a, b) of two floats, b not NaN: b on a tie, as numpy (0.0 and -0.0)."""
+    return a if (a > b or a != a) else b
+
+
+@njit(cache=True, inline="always")
+def np_min(a, b):
+    """np.minimum(a, b) of two floats, b not NaN: b on a tie, as numpy."""
+    return a if (a < b or a != a) else b

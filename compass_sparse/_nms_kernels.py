@@ -42,7 +42,7 @@ import math
 
 import numpy as np
 
-from ._crash_kernels import _np_max, _np_min
+from ._merit_kernels import np_max, np_min
 from ._jit import njit
 from ._merit_kernels import (fb_directional_kernel, fb_phi_kernel, max_abs_kernel,
                              min_map_within, normal_map_kernel)
@@ -278,7 +278,7 @@ def _trial(sf, si, W):
         else:
             t = a * W[W_KX, i] + alpha * W[W_NX, i]
             W[W_TX, i] = t
-        W[W_TZ, i] = _np_min(_np_max(t, lb[i]), ub[i])
+        W[W_TZ, i] = np_min(np_max(t, lb[i]), ub[i])
     si[I_PHASE] = _P_TRIAL_F
     return NEED_F_TRIAL
 

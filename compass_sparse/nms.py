@@ -52,7 +52,7 @@ from . import _nms_kernels as nk
 from .linalg.csc import trusted_csc
 from ._jit import NO_INDICES, NO_VALUES, cold_start
 from .acceptance import Acceptance
-from .crash import crash
+from .crash.driver import crash
 from .path.direct_step import (DIRECT_MIN_N, FEASIBILITY_TOLERANCE, RESIDUAL_TOLERANCE,
                                REUSE_BEATS_REFACTOR_NNZ, direct_step_applies, failed_direct_start)
 from .linalg.direct import DirectFactors

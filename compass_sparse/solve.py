@@ -19,7 +19,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .acceptance import Acceptance, judge
-from .crash import crash
+from .crash.driver import crash
 from .exceptions import CompassError
 from .box import dot_norm, float_vector
 from .merit import fb_phi, fb_psi, normal_map_at, residual_report

@@ -76,7 +76,7 @@ def test_crash_steps_and_factorizations_are_reported_when_the_crash_finds_the_so
 
 
 def _dynamic_cge_crash(monkeypatch, **consts):
-    import compass_sparse.crash as crash_module
+    import compass_sparse.crash.reduced as reduced
     from compass_sparse.generators.cge import ramsey_cge
 
     monkeypatch.undo()                    # the module's own constants, then these
@@ -86,9 +86,9 @@ def _dynamic_cge_crash(monkeypatch, **consts):
     # this model's blocks (n = 1281, 6e3 entries) are small enough for KLU, which keeps
     # no factors (a KLU refactorization costs less than GMRES on old factors there: the
     # crash 9-13 ms against 21 ms); the reuse is that of the larger blocks, on SuperLU
-    monkeypatch.setattr(crash_module, "_klu_suits", lambda J, lu: False)
+    monkeypatch.setattr(reduced, "klu_suits", lambda J, lu: False)
     for k, v in consts.items():
-        monkeypatch.setattr(crash_module, k, v)
+        monkeypatch.setattr(reduced, k, v)
     p = ramsey_cge(periods=20, sectors=10, seed=0).with_shock(capital_tax=0.25).problem
     return crash(p.evaluator, p.x0, p.lb, p.ub, cs.Options())
 
@@ -130,7 +130,8 @@ def test_crash_step_on_a_singular_reduced_jacobian_does_not_run_away():
     sys.path.insert(0, str(Path(__file__).parent))
     import known_problems as kp
 
-    from compass_sparse.crash import CRASH_STEP_LIMIT, _solve_reduced
+    from compass_sparse.crash.outcome import CRASH_STEP_LIMIT
+    from compass_sparse.crash.reduced import solve_reduced as _solve_reduced
 
     p = kp.kojima_shindo()
     z = p.x0.astype(float)
@@ -155,7 +156,7 @@ def test_compiled_crash_active_set_matches_the_array_formulas():
     """The crash's active set and target in one compiled pass: the same sets and the same
     d as the array formulas it replaced, with zero and NaN diagonal entries, infinite
     bounds, points at their bounds and a NaN F."""
-    from compass_sparse._merit_kernels import crash_active_set
+    from compass_sparse.crash._kernels import crash_active_set
 
     rng = np.random.default_rng(7)
     n = 400
@@ -280,7 +281,7 @@ def test_compiled_perturbed_attempts_give_the_python_routes_steps_bit_for_bit():
     singular ones (a zero column: shifted), and blocks whose shifted steps run away until
     eps is large (the step limit)."""
     from compass_sparse.linalg.blas import single_threaded_blas
-    from compass_sparse._crash_kernels import dense_perturbed_solve
+    from compass_sparse.crash._kernels import dense_perturbed_solve
     from compass_sparse.linalg._csc_kernels import csc_to_dense
 
     rng = np.random.default_rng(11)
@@ -320,7 +321,7 @@ def test_structural_singularity_reads_nonzero_entries_only():
     maximum matching of its NONZERO entries (stored zeros dropped) leaves a column
     unmatched -- compared with the matching of scipy's copy without stored zeros (the
     test it replaced) on random patterns with stored zeros."""
-    from compass_sparse._crash_kernels import structurally_singular
+    from compass_sparse.crash._kernels import structurally_singular
     from compass_sparse.linalg.matching import column_matching
 
     rng = np.random.default_rng(5)
@@ -346,8 +347,9 @@ def test_crash_factors_small_sparse_blocks_by_klu_and_large_ones_by_superlu(monk
     basis reuses is factored by KLU, with the same steps (to working accuracy) and the
     same perturbations as SuperLU's route; a block with more entries, a chosen LU backend
     or the environment's choice keeps SuperLU (and its factors, for reuse)."""
-    import compass_sparse.crash as crash_module
-    from compass_sparse.crash import _klu_suits, _solve_reduced
+    import compass_sparse.crash.reduced as crash_module
+    from compass_sparse.crash.reduced import klu_suits as _klu_suits
+    from compass_sparse.crash.reduced import solve_reduced as _solve_reduced
     from compass_sparse.linalg.direct import klu_available
 
     monkeypatch.delenv("COMPASS_SPARSE_LU", raising=False)
@@ -370,7 +372,7 @@ def test_crash_factors_small_sparse_blocks_by_klu_and_large_ones_by_superlu(monk
     b = rng.normal(size=n)
     for M, eps0 in ((A, 1e-8), (B, 1e-3)):
         d, eps, nf, why, held = _solve_reduced(M, b, True, eps0)
-        monkeypatch.setattr(crash_module, "_klu_suits", lambda J, lu: False)
+        monkeypatch.setattr(crash_module, "klu_suits", lambda J, lu: False)
         d_s, eps_s, nf_s, why_s, held_s = _solve_reduced(M, b, True, eps0)
         monkeypatch.undo()
         monkeypatch.delenv("COMPASS_SPARSE_LU", raising=False)
@@ -413,7 +415,7 @@ def _crash_problems(trials):
 def _crash_both_ways(p, opt, monkeypatch):
     """The crash with its one-call dense step, and with the general route (the same
     kernels called one by one from Python)."""
-    import compass_sparse.crash as C
+    import compass_sparse.crash.projected_newton as C
 
     real = C.dense_crash_step
     used = []
@@ -479,12 +481,12 @@ def test_compiled_crash_gives_the_python_routes_points_bit_for_bit(monkeypatch):
     and on F and J that fail at some points, with every crash option that changes its
     path: the same points (z, F, x), iterations, norms, stop reasons, factorizations,
     log rows and lines, counts, evaluations and trial points offered, bit for bit."""
-    import compass_sparse.crash as C
+    import compass_sparse.crash._kernels as ck
     from compass_sparse.status import PassStats
 
     used = []
-    real = C.ck.crash_dense
-    monkeypatch.setattr(C.ck, "crash_dense", lambda *a: used.append(1) or real(*a))
+    real = ck.crash_dense
+    monkeypatch.setattr(ck, "crash_dense", lambda *a: used.append(1) or real(*a))
     options = (cs.Options(), cs.Options(crash_nbchange_limit=3, crash_perturb=False),
                cs.Options(crash_searchtype="line"), cs.Options(crash_iteration_limit=1),
                cs.Options(crash_stepsize_minimum=0.3), cs.Options(crash_iteration_limit=0))
@@ -495,12 +497,11 @@ def test_compiled_crash_gives_the_python_routes_points_bit_for_bit(monkeypatch):
             for J_start in (J0, None):
                 out = {}
                 for compiled in (False, True):
-                    monkeypatch.setattr(C, "COMPILED_CRASH", compiled)
                     p.evaluator.forget()
                     p.evaluator.counters.reset()
                     st, lines, offered = PassStats(), [], []
                     cr = crash(p.evaluator, p.x0, p.lb, p.ub, opt, f0=f0, J0=J_start,
-                               stats=st, log=lines.append,
+                               stats=st, log=lines.append, compiled=compiled,
                                on_point=lambda z, f: offered.append(z.tobytes() + f.tobytes()))
                     c = p.evaluator.counters
                     out[compiled] = (cr.z.tobytes(), cr.f.tobytes(), cr.x.tobytes(),
@@ -519,11 +520,8 @@ def test_compiled_crash_stops_at_the_time_limit_as_the_python_route():
     """A deadline already past: no step, the reason "time limit", the start handed on."""
     import time
 
-    import compass_sparse.crash as C
-
     p = _crash_problems(0)[0]
     f0, J0 = p.evaluator.fj(p.x0)
-    assert C.COMPILED_CRASH
     cr = crash(p.evaluator, p.x0, p.lb, p.ub, cs.Options(), f0=f0, J0=J0,
                deadline=time.perf_counter() - 1.0)
     assert (cr.iterations, cr.stop_reason) == (0, "time limit")

@@ -227,7 +227,9 @@ def test_time_limit_holds_through_the_crash_factorizations(clock, monkeypatch):
     # shifts) without looking at the clock: with each factorization costing 0.3 s, a 0.5 s
     # limit ran to 1.8 s.  Now the deadline is checked before every factorization, which is
     # atomic: the overshoot is at most one of them (plus one evaluation).
-    import compass_sparse.crash as crash_module
+    import compass_sparse.crash.driver as crash_driver
+    import compass_sparse.crash.projected_newton as crash_python
+    import compass_sparse.crash.reduced as crash_module
     from compass_sparse.basis.backends import SingularFactorError
 
     FACTOR = 0.3
@@ -243,8 +245,9 @@ def test_time_limit_holds_through_the_crash_factorizations(clock, monkeypatch):
     # attempt at a time; blocks up to DENSE_SOLVE_MAX_N (milliseconds for all attempts)
     # are solved in one compiled call, small sparse ones by KLU.  This small problem
     # stands for a large one.
-    monkeypatch.setattr(crash_module, "DENSE_SOLVE_MAX_N", 0)
-    monkeypatch.setattr(crash_module, "_klu_suits", lambda J, lu: False)
+    for module in (crash_driver, crash_python, crash_module):
+        monkeypatch.setattr(module, "DENSE_SOLVE_MAX_N", 0)
+    monkeypatch.setattr(crash_module, "klu_suits", lambda J, lu: False)
     F = _costly(lambda x: x - 1.0 + 0.01 * (_B @ x), clock)
     J = lambda x: sp.csc_matrix(np.eye(N) + 0.01 * _B)  # noqa: E731
     start = clock.now

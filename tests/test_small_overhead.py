@@ -820,8 +820,8 @@ def test_crash_limits_blas_threads_only_from_the_size_where_blas_could_use_threa
     kernels that small on one thread itself); from there on one block spans the crash."""
     import numpy as np
 
-    from compass_sparse import crash as C
     from compass_sparse import solve_mcp
+    from compass_sparse.crash import driver as C
 
     opened = []
     real = C.single_threaded_blas

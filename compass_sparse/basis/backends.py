@@ -473,11 +473,11 @@ with a suspect solve)."""
 
 
 def _dense_solve(A, b):
-    """x with A x = b by LAPACK's LU (getrf + getrs, through the crash's compiled solve:
-    one dense solve in the package); raises :class:`SingularFactorError` on an exactly
+    """x with A x = b by LAPACK's LU (getrf + getrs, in one compiled call: the
+    package's one dense solve); raises :class:`SingularFactorError` on an exactly
     zero pivot."""
     from ..linalg.blas import single_threaded_blas
-    from .._crash_kernels import dense_solve_or_none
+    from ..linalg._dense_kernels import dense_solve_or_none
 
     # Fortran order, as LAPACK factors it
     D = A.toarray(order="F") if sp.issparse(A) else np.array(A, dtype=np.float64, order="F")

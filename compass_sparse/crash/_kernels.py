@@ -1,4 +1,5 @@
-"""Compiled parts of the crash's reduced solve (see :func:`compass_sparse.crash._solve_reduced`).
+"""Compiled parts of the crash: its active set, its reduced solve (see
+:func:`compass_sparse.crash.reduced.solve_reduced`) and its compiled route (:func:`crash_dense`).
 
 A crash step on a small problem solves (J_II + eps I) d = rhs for a block of order <= 200
 in up to eight attempts of growing eps.  Each attempt in Python -- a copy, the diagonal
@@ -7,25 +8,23 @@ cost ~20 us, and the structural test that decides whether eps = 0 is tried at al
 scipy copy of the block without its stored zeros (~60 us): on kojshin's start, a third of a
 solve.  Here the attempts run in one compiled call.
 
-The factorization is numpy's ``linalg.solve`` as numba compiles it: LAPACK's gesv, which
-is getrf followed by getrs on scipy's library, so the bits of scipy's lu_factor + lu_solve
-(checked by the tests on orders 1 ... 200).  Its singular-matrix error is raised exactly
-when getrf reports a zero pivot (info > 0).  :func:`dense_solve_or_none` is also the dense
-solve of :func:`compass_sparse.basis.backends.solve_sparse`: one dense LU in the package.
+The factorization is :func:`compass_sparse.linalg._dense_kernels.dense_solve_or_none`,
+LAPACK's gesv as numba compiles it: the bits of scipy's lu_factor + lu_solve (checked by
+the tests on orders 1 ... 200), and the package's one dense LU.
 """
 from __future__ import annotations
 
-import numpy as np
-
 import math
 
-from .linalg._csc_kernels import free_block
-from ._jit import njit
-from .linalg.matching import augmenting_matching
-from ._merit_kernels import crash_active_set, fb_phi_kernel, max_abs_kernel, normal_map_kernel
-from .linalg._csc_kernels import csc_diagonal, csc_to_dense
+import numpy as np
 
-__all__ = ["dense_crash_step", "dense_perturbed_solve", "dense_solve_or_none",
+from .._jit import njit
+from .._merit_kernels import fb_phi_kernel, max_abs_kernel, normal_map_kernel, np_max, np_min
+from ..linalg._csc_kernels import csc_diagonal, csc_to_dense, free_block
+from ..linalg._dense_kernels import dense_solve_or_none
+from ..linalg.matching import augmenting_matching
+
+__all__ = ["crash_active_set", "crash_dense", "dense_crash_step", "dense_perturbed_solve",
            "initial_shift", "structurally_singular"]
 
 
@@ -72,15 +71,6 @@ def initial_shift(indptr, indices, data, n, perturb, eps0):
         if full:
             return 0.0
     return eps0 if structurally_singular(indptr, indices, data, n) else 0.0
-
-
-@njit(cache=True)
-def dense_solve_or_none(A, b):
-    """(x, True) with A x = b, or (b, False) when LAPACK finds A exactly singular."""
-    try:
-        return np.linalg.solve(A, b), True
-    except Exception:  # numba's LinAlgError: getrf's info > 0, a zero pivot
-        return b, False
 
 
 @njit(cache=True)
@@ -203,18 +193,6 @@ CI_SIZE = 18
 _C_START, _C_TOP, _C_J, _C_F = 0, 1, 2, 3  # phases: what the next call receives
 
 
-@njit(cache=True, inline="always")
-def _np_max(a, b):
-    """np.maximum(a, b) of two floats, b not NaN: b on a tie, as numpy (0.0 and -0.0)."""
-    return a if (a > b or a != a) else b
-
-
-@njit(cache=True, inline="always")
-def _np_min(a, b):
-    """np.minimum(a, b) of two floats, b not NaN: b on a tie, as numpy."""
-    return a if (a < b or a != a) else b
-
-
 @njit(cache=True)
 def _crash_done(sf, si, W, reason, back):
     """The end of the crash: the stop reason, the iteration count (one less when the
@@ -251,7 +229,7 @@ def _crash_trial(sf, si, W):
     lb, ub = W[CW_LB], W[CW_UB]
     for i in range(n):
         t = z[i] - alpha * d[i] if si[CI_LINE] == 0 else z[i] + alpha * seg[i]
-        zt[i] = _np_min(_np_max(t, lb[i]), ub[i])
+        zt[i] = np_min(np_max(t, lb[i]), ub[i])
     si[CI_PHASE] = _C_F
     return NEED_F
 
@@ -282,7 +260,7 @@ def _crash_direction(sf, si, W, prev_free, indptr, indices, data):
     for i in range(n):
         W[CW_D, i] = d[i]
         if si[CI_LINE] != 0:  # the segment to the projected Newton point
-            W[CW_SEG, i] = _np_min(_np_max(z[i] - d[i], lb[i]), ub[i]) - z[i]
+            W[CW_SEG, i] = np_min(np_max(z[i] - d[i], lb[i]), ub[i]) - z[i]
     sf[CF_ALPHA] = 1.0
     return _crash_trial(sf, si, W)
 
@@ -381,3 +359,26 @@ def crash_dense(sf, si, W, prev_free, ft, indptr, indices, data, arg):
             return _crash_top(sf, si, W, prev_free, indptr, indices, data, False)
     sf[CF_ALPHA] = alpha * 0.5
     return _crash_trial(sf, si, W)
+
+
+@njit(cache=True)
+def crash_active_set(z, f, lb, ub, diag, free, d):
+    """The crash's active set and Newton target (crash.py): with g_i = |J_ii| (1 where it
+    is 0 or NaN), index i is active at its lower bound when z_i - f_i / g_i <= l_i, else at
+    its upper bound when that point is >= u_i (a NaN point is neither); ``free`` is the
+    complement, and d_i = z_i - (its bound) on the active indices, 0 elsewhere.  The array
+    formulas' values element by element, in one pass."""
+    for i in range(z.shape[0]):
+        g = abs(diag[i])
+        if not g > 0.0:
+            g = 1.0
+        xm = z[i] - f[i] / g
+        if xm <= lb[i]:
+            free[i] = False
+            d[i] = z[i] - lb[i]
+        elif xm >= ub[i]:
+            free[i] = False
+            d[i] = z[i] - ub[i]
+        else:
+            free[i] = True
+            d[i] = 0.0
