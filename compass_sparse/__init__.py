@@ -23,7 +23,8 @@ from .options import Options
 from .problem.mcp import MCP
 from .result import Result
 from .status import IntermediateResult, Iteration, PassStats, PointStatus, Status
-from .solve import MCPSolver, solve_lcp, solve_mcp
+from .lcp import solve_lcp
+from .solve import MCPSolver, solve_mcp
 
 __version__ = "0.1.0"
 

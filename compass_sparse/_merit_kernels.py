@@ -162,7 +162,7 @@ def normal_map_kernel(z, f, lb, ub, x, nm):
 
 @njit(cache=True)
 def flat_step_kernel(z, phi, da, db, indptr, indices, data, row_max, col_max, diag):
-    """The scale test of :mod:`compass_sparse.acceptance` on a canonical CSC J: over the
+    """The scale test of :mod:`compass_sparse.nms.acceptance` on a canonical CSC J: over the
     rows with Phi_i != 0, the largest d_i / (1 + |z_i|) with d_i = |Phi_i| / ||H_i||_inf,
     H = diag(da) + diag(db) J (d_i = inf where H_i = 0).  Returns (row, d_row, ratio), row
     -1 when Phi = 0; the first row attains a tie.  ``row_max`` (zeroed), ``col_max`` and

@@ -107,3 +107,18 @@ def float_vectors(n, *arrays) -> bool:
         if not (isinstance(a, np.ndarray) and a.dtype is F64 and a.shape == shape):
             return False
     return True
+
+
+def random_point(rng, z0, lb, ub):
+    """A uniform point of the box; unbounded directions get a range that grows with the
+    start point's magnitude, 10 (1 + |z0_i|) on each side."""
+    spread = 10.0 * (1.0 + np.abs(z0))
+    lo = np.where(np.isfinite(lb), lb, z0 - spread)
+    hi = np.where(np.isfinite(ub), ub, z0 + spread)
+    return rng.uniform(lo, hi)
+
+
+def near_point(rng, z, lb, ub):
+    """z moved by up to 10% of the box width (of 1 + |z_i| where unbounded), projected."""
+    width = np.where(np.isfinite(ub - lb), ub - lb, 1.0 + np.abs(z))
+    return project(z + 0.1 * width * rng.uniform(-1, 1, z.size), lb, ub)

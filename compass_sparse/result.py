@@ -12,7 +12,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import sensitivity as _sensitivity
+from .exceptions import ShapeError
 from .merit import ResidualReport, natural_residual, residual_report
+from .problem.mcp import MCP, as_real
 from .status import PointStatus, Status
 
 __all__ = ["Result"]
@@ -53,6 +56,10 @@ class Result:
     #: sparse LU of the basis: backend, ordering, symbolic estimates (est_nnz_lu, est_flops,
     #: est_bytes: the largest met), max_nnz_lu, times, and the process's peak RSS in bytes
     lu: dict = field(default_factory=dict)
+    #: which implementation of each pass ran (:mod:`compass_sparse.routes`): "kernels"
+    #: (compiled or interpreted), "path" (dense engine, dense basis or sparse basis),
+    #: "nms", "crash", "homotopy" (compiled or python), chosen once for the solve
+    routes: dict = field(default_factory=dict)
 
     @property
     def worst_rows(self):
@@ -61,20 +68,14 @@ class Result:
     def check(self, F, lb=None, ub=None, names=None) -> ResidualReport:
         """Recompute the residuals of ``x`` from F (a callable or an MCP) — independent of
         the solver's bookkeeping."""
-        from .problem.mcp import MCP
-
         if isinstance(F, MCP):
             f = F.F_uncounted(self.x)
             lb = F.lb if lb is None else lb
             ub = F.ub if ub is None else ub
             names = names or F.row_label
         else:
-            from .problem.mcp import as_real
-
             f = as_real(F(np.array(self.x, copy=True)), "F(x)")
             if f.size != self.x.size:
-                from .exceptions import ShapeError
-
                 raise ShapeError(f"F(x) returned {f.size} values at the result's point, "
                                  f"which has {self.x.size} variables")
             f = f.reshape(self.x.shape)
@@ -89,9 +90,7 @@ class Result:
     def sensitivity(self, problem, dF_dp, **kwargs):
         """dx/dp at this solution of ``problem`` (an MCP) for the parameter derivative
         ``dF_dp`` (n,) or (n, k): see :func:`compass_sparse.sensitivity.sensitivity`."""
-        from .sensitivity import sensitivity
-
-        return sensitivity(problem, self.x, dF_dp, **kwargs)
+        return _sensitivity.sensitivity(problem, self.x, dF_dp, **kwargs)
 
     def summary(self) -> str:
         lines = [

@@ -24,7 +24,7 @@ more than ``SPREAD_TRIGGER``.
 
 The solve's tolerance still refers to the user's problem: a point of the scaled problem
 is accepted only when z = C y meets the acceptance test on F itself
-(see :class:`compass_sparse.acceptance.Acceptance`), and the Result is reported on F.
+(see :class:`compass_sparse.nms.acceptance.Acceptance`), and the Result is reported on F.
 """
 from __future__ import annotations
 

@@ -21,13 +21,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Status", "PointStatus", "PassStats", "IntermediateResult", "Iteration"]
+__all__ = ["IntermediateResult", "Iteration", "PassStats", "PointStatus", "Status", "WorkCounts"]
 
 
 class Status(enum.IntEnum):
     """Why the solve stopped.  Append-only: codes never change meaning."""
 
-    SOLVED = 1  #: both residuals <= convergence_tolerance (see compass_sparse.acceptance)
+    SOLVED = 1  #: both residuals <= convergence_tolerance (see compass_sparse.nms.acceptance)
     NO_PROGRESS = 2  #: restarts exhausted without reaching the tolerance
     MAJOR_ITERATION_LIMIT = 3  #: major_iteration_limit reached (0: start point evaluated)
     MINOR_ITERATION_LIMIT = 4  #: cumulative pivot limit reached
@@ -130,3 +130,18 @@ class PassStats:
     njev: int = 0
     pivots: int = 0
     factorizations: int = 0
+
+
+@dataclass
+class WorkCounts:
+    """The work a solve did, under the names :class:`~compass_sparse.result.Result` reports
+    them (one name per count, from the pass that counts to the Result)."""
+
+    nit: int = 0  #: major iterations
+    minor_iterations: int = 0  #: pivots over all paths
+    crash_iterations: int = 0
+    restarts: int = 0
+    gradient_steps: int = 0
+    lm_steps: int = 0
+    factorizations: int = 0
+    basis_updates: int = 0

@@ -134,18 +134,19 @@ def test_engine_path_stops_at_the_time_limit_between_pivot_chunks(monkeypatch):
 
 def test_solves_agree_with_and_without_the_engine(monkeypatch):
     """solve_lcp and solve_mcp give the same statuses and points with the compiled engine
-    and with the Python loop on the dense reference basis."""
+    and with the Python loop on the dense reference basis (option path_basis)."""
     cases = [gen.p_matrix_lcp(40, "banded", 3, "mixed"), gen.obstacle_problem(7, 2),
              gen.duplicated_columns_lcp(30, 1, bounds="box")]
     points = {}
-    for thr in (dense_path.DENSE_ENGINE_MAX_N, 0):
-        monkeypatch.setattr(dense_path, "DENSE_ENGINE_MAX_N", thr)
-        points[thr] = []
+    for basis in ("auto", "dense"):
+        opt = {"path_basis": basis}
+        points[basis] = []
         for g in cases:
             M, q, lb, ub = g.lcp
-            r = solve_lcp(M, q, lb, ub)
+            r = solve_lcp(M, q, lb, ub, options=opt)
+            assert r.routes["path"] == ("dense engine" if basis == "auto" else "dense basis")
             assert r.success, r.message
-            points[thr].append(r.x)
+            points[basis].append(r.x)
             Md = M.toarray()
 
             def F(z, Md=Md, q=q):
@@ -154,10 +155,10 @@ def test_solves_agree_with_and_without_the_engine(monkeypatch):
             def J(z, Md=Md):
                 return Md + np.diag(0.3 * z**2 * (z > 0))
 
-            rm = solve_mcp(MCP(F, J, lb, ub, np.clip(np.zeros(q.size), lb, ub)))
+            rm = solve_mcp(MCP(F, J, lb, ub, np.clip(np.zeros(q.size), lb, ub)), options=opt)
             assert rm.success, rm.message
-            points[thr].append(rm.x)
-    for a, b in zip(points[0], points[dense_path.DENSE_ENGINE_MAX_N]):
+            points[basis].append(rm.x)
+    for a, b in zip(points["dense"], points["auto"]):
         assert np.max(np.abs(a - b)) <= 1e-6 * (1 + np.abs(b).max())
 
 

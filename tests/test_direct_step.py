@@ -187,7 +187,7 @@ def test_newton_steps_without_pivots_take_no_dense_factorization(monkeypatch):
     assert engines and all(e._dense is None and e.L is None for e in engines)
     assert r.passes["path"].factorizations == r.passes["path"].iterations
     assert r.lu["backend"] == "klu"  # the Ramsey model's blocks barely fill
-    monkeypatch.setattr("compass_sparse.nms.direct_step_applies", lambda M, o: False)
+    monkeypatch.setattr("compass_sparse.nms.newton.direct_step_applies", lambda M, o: False)
     ref = solve_mcp(p)
     assert ref.status is r.status and ref.nit == r.nit
     np.testing.assert_allclose(r.x, ref.x, rtol=1e-9, atol=1e-9)

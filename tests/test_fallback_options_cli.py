@@ -4,7 +4,7 @@ import pytest
 import scipy.sparse as sp
 
 import compass_sparse as cs
-from compass_sparse.fallback import cholmod_available, gradient_steps, lm_step, spd_solve
+from compass_sparse.nms.fallback import cholmod_available, gradient_steps, lm_step, spd_solve
 from compass_sparse.merit import fb_phi, fb_psi
 from compass_sparse.generators import structured_quadratic
 
@@ -115,7 +115,7 @@ def test_fallback_search_stops_when_the_trial_point_rounds_to_the_start():
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_dense_lm_step_agrees_with_the_sparse_route(monkeypatch, seed):
-    import compass_sparse.fallback as fb
+    import compass_sparse.nms.fallback as fb
 
     g = structured_quadratic(60, seed=seed)
     p = g.problem

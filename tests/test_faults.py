@@ -194,7 +194,7 @@ def test_time_limit_holds_when_solve_lcp_hands_over_to_the_general_method(clock)
     n = 3
     Mn = -sp.identity(n, format="csc")
     qn = -np.ones(n)
-    import compass_sparse.solve as solve_module
+    import compass_sparse.lcp as solve_module
 
     real = solve_module.MCP
 
@@ -261,8 +261,8 @@ def test_time_limit_holds_through_the_crash_factorizations(clock, monkeypatch):
 def test_time_limit_holds_through_the_levenberg_marquardt_factorizations(clock, monkeypatch):
     # The LM step tried up to four Cholesky factorizations (growing mu) without looking
     # at the clock; each is atomic (12 s of H^T H on the dynamic CGE model at n = 3e4).
-    import compass_sparse.fallback as fallback_module
-    from compass_sparse.fallback import lm_step
+    import compass_sparse.nms.fallback as fallback_module
+    from compass_sparse.nms.fallback import lm_step
     from compass_sparse.options import Options
 
     FACTOR = 0.3

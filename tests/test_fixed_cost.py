@@ -166,17 +166,17 @@ def _badly_scaled():
 
 @pytest.mark.parametrize("make", [_cournot, _flat_start, _badly_scaled])
 def test_start_verdict_handed_to_the_solver_gives_the_solve_it_recomputes(make, monkeypatch):
-    from compass_sparse import nms
+    from compass_sparse.nms import solver
 
     def run():
         r = solve_mcp(make().with_start(make().x0))
         return r.status, r.x.tolist(), r.nit, r.minor_iterations, r.nfev, r.njev, r.message
 
     handed = run()
-    # the same solve with the verdict recomputed inside the solver (the attribute ignores
-    # what the caller sets)
-    monkeypatch.setattr(nms.NMSSolver, "start_verdict",
-                        property(lambda self: None, lambda self, v: None), raising=False)
+    # the same solve with the verdict recomputed inside the solver (none handed to it)
+    real = solver.NMSSolver.__init__
+    monkeypatch.setattr(solver.NMSSolver, "__init__",
+                        lambda self, *a, **k: real(self, *a, **{**k, "start_verdict": None}))
     assert run() == handed
 
 
@@ -255,7 +255,7 @@ def test_scale_test_in_one_kernel_equals_diagonals_then_flat_step(seed):
 
 
 def test_point_norm_by_math_sqrt_equals_the_numpy_square_root():
-    from compass_sparse.nms import Point
+    from compass_sparse.nms.state import Point
 
     rng = np.random.default_rng(0)
     psis = np.concatenate([rng.random(2000) * 10.0 ** rng.integers(-320, 308, 2000),
@@ -343,7 +343,7 @@ def test_acceptance_small_with_psi_gives_the_verdict_without_it(seed):
     (||Phi||_2 = sqrt(2 Psi) exactly); its answer is the full test's at points on both
     sides of the tolerance, and a scaled acceptance ignores Psi (it is of the scaled
     problem)."""
-    from compass_sparse.acceptance import Acceptance
+    from compass_sparse.nms.acceptance import Acceptance
     from compass_sparse.merit import fb_psi
 
     rng = np.random.default_rng(seed)

@@ -7,12 +7,25 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-import compass_sparse.homotopy as hom
+import compass_sparse.homotopy.bordered as bordered
+import compass_sparse.homotopy.paths as paths
+import compass_sparse.homotopy.smoothing as smoothing
+import compass_sparse.homotopy.tracker as hom
 from compass_sparse import MCP, Options, solve_mcp
 from compass_sparse.generators import thesis_family
 from compass_sparse.homotopy import HomotopyStatus, SmoothedNormalMap, track_paths
 from compass_sparse.merit import fb_gradient, fb_phi, natural_residual
 from compass_sparse.status import Status
+
+
+_TRACKER_INIT = hom.Tracker.__init__
+
+
+def _tracker_route(monkeypatch, compiled):
+    """Every tracker of the next solves on the compiled route or the Python one (the
+    solve's routes pick the compiled tracker for these dense problems)."""
+    monkeypatch.setattr(hom.Tracker, "__init__", lambda self, *a, **k: _TRACKER_INIT(
+        self, *a, **{**k, "compiled": compiled}))
 
 
 def _quadratic(D, A, b):
@@ -125,9 +138,9 @@ def test_homotopy_time_limit_status_keeps_the_best_point(monkeypatch):
     def check_time(self):
         calls["n"] += 1
         if calls["n"] > 5:
-            raise hom._Stop(HomotopyStatus.TIME_LIMIT, "time limit reached on the path")
+            raise hom.HomotopyStop(HomotopyStatus.TIME_LIMIT, "time limit reached on the path")
 
-    monkeypatch.setattr(hom._Tracker, "_check_time", check_time)
+    monkeypatch.setattr(hom.Tracker, "_check_time", check_time)
     g = thesis_family(60, 1, seed=3)
     start = solve_mcp(g.problem, options={"major_iteration_limit": 0})
     res = solve_mcp(g.problem, options={"homotopy": "only"})
@@ -264,7 +277,7 @@ def test_corrector_accepts_tiny_steps_from_a_base_point_on_the_curve_to_tracking
     # and ended paths of family 2 at n = 500 as "step too small").
     F, J, lb, ub, x0 = _stationary_problem()
     ev = MCP(F, J, lb, ub, x0).evaluator
-    tr = hom._Tracker(ev, lb, ub, Options(), deadline=None, on_point=None, tol=1e-12, log=None)
+    tr = hom.Tracker(ev, lb, ub, Options(), deadline=None, on_point=None, tol=1e-12, log=None)
     a = x0.copy()
     y = np.append(a, 0.3)
     for _ in range(30):  # Newton in x at fixed lam: onto the curve ...
@@ -330,7 +343,7 @@ def test_a_non_finite_correction_shortens_the_step_instead_of_failing_the_solve(
     calls = {"n": 0}
     # (the Python route's dense corrector: the compiled tracker calls chord_step inside
     # compiled code, test_compiled_tracker_carries_on_past_rejected_corrector_points)
-    monkeypatch.setattr(hom, "COMPILED_TRACKER", False)
+    _tracker_route(monkeypatch, False)
     if route == "compiled":
         chord = hom.chord_step
 
@@ -340,7 +353,7 @@ def test_a_non_finite_correction_shortens_the_step_instead_of_failing_the_solve(
 
         monkeypatch.setattr(hom, "chord_step", flaky)
     else:
-        solve = hom._Bordered.solve
+        solve = hom.Bordered.solve
 
         def flaky(self, b):
             if b[-1] == 1.0 and not np.any(b[:-1]):
@@ -350,8 +363,9 @@ def test_a_non_finite_correction_shortens_the_step_instead_of_failing_the_solve(
                 raise np.linalg.LinAlgError("non-finite solution of the bordered system")
             return solve(self, b)
 
-        monkeypatch.setattr(hom, "_floats", lambda *args: False)
-        monkeypatch.setattr(hom._Bordered, "solve", flaky)
+        monkeypatch.setattr(hom, "float_vectors", lambda *args: False)
+        monkeypatch.setattr(smoothing, "float_vectors", lambda *args: False)
+        monkeypatch.setattr(hom.Bordered, "solve", flaky)
     F, J, lb, ub, x0 = _stationary_problem()
     res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"})
     assert calls["n"] >= 3
@@ -405,13 +419,16 @@ def test_homotopy_start_option_picks_the_first_paths_start(where, monkeypatch):
     stalled, 'start' the start point; both solve the instance (thesis family 2, n = 10,
     seed 5: its best point is not the start point, and the path from it is shorter)."""
     seen = []
-    real = hom.homotopy_pass
+    import compass_sparse.nms.solver as nms_solver
 
-    def spy(solver, z_start, **kw):
-        seen.append((np.array(z_start, copy=True), solver.best.z.copy(), kw.get("center")))
-        return real(solver, z_start, **kw)
+    real = nms_solver.homotopy_pass
 
-    monkeypatch.setattr(hom, "homotopy_pass", spy)
+    def spy(evalr, lb, ub, z_start, opt, **kw):
+        best = kw["on_point"].__self__.point  # (the solver's BestPoint.consider)
+        seen.append((np.array(z_start, copy=True), best.z.copy(), kw.get("center")))
+        return real(evalr, lb, ub, z_start, opt, **kw)
+
+    monkeypatch.setattr(nms_solver, "homotopy_pass", spy)
     prob = thesis_family(10, 2, 5).problem
     res = solve_mcp(prob, options={"homotopy_start": where})
     assert res.success and natural_residual(res.x, prob.F(res.x), prob.lb, prob.ub) <= 1e-6
@@ -428,7 +445,7 @@ def test_later_homotopy_paths_start_at_random_points_around_the_center(monkeypat
     g = thesis_family(10, 2, 1)
     p = g.problem
     starts, centers = [], []
-    follow, draw = hom._Tracker.follow, hom.random_point
+    follow, draw = hom.Tracker.follow, paths.random_point
 
     def spy_follow(self, a, polish=None):
         starts.append(a.copy())
@@ -438,8 +455,8 @@ def test_later_homotopy_paths_start_at_random_points_around_the_center(monkeypat
         centers.append(np.array(z0, copy=True))
         return draw(rng, z0, lb, ub)
 
-    monkeypatch.setattr(hom._Tracker, "follow", spy_follow)
-    monkeypatch.setattr(hom, "random_point", spy_draw)
+    monkeypatch.setattr(hom.Tracker, "follow", spy_follow)
+    monkeypatch.setattr(paths, "random_point", spy_draw)
     z1 = np.clip(p.x0 + 0.5, p.lb, p.ub)
     out = track_paths(p.evaluator, p.lb, p.ub, z1, Options(homotopy_step_limit=1),
                       center=p.x0, rng=np.random.default_rng(0))
@@ -480,8 +497,9 @@ def test_compiled_homotopy_values_and_bordered_matrix_give_the_array_expressions
     def pieces(arrays):
         with monkeypatch.context() as m:
             if arrays:
-                m.setattr(hom, "_floats", lambda *args: False)
-            tr = hom._Tracker(p.evaluator, p.lb, p.ub, Options(), deadline=None,
+                m.setattr(hom, "float_vectors", lambda *args: False)
+                m.setattr(smoothing, "float_vectors", lambda *args: False)
+            tr = hom.Tracker(p.evaluator, p.lb, p.ub, Options(), deadline=None,
                               on_point=None, tol=1e-12, log=None)
             out = []
             for lam in (0.0, 0.3, 0.999, 1.0):
@@ -508,12 +526,12 @@ def test_compiled_lu_solve_agrees_with_lapack_getrs(m):
     rounding; a non-finite solution is reported."""
     import scipy.linalg as sla
 
-    from compass_sparse._homotopy_kernels import lu_solve
+    from compass_sparse.homotopy._kernels import lu_solve
 
     rng = np.random.default_rng(m)
     for _ in range(5):
         B = np.asfortranarray(rng.normal(size=(m, m)))
-        lu, piv, info = hom._getrf(B.copy(order="F"), overwrite_a=True)
+        lu, piv, info = bordered._getrf(B.copy(order="F"), overwrite_a=True)
         assert info == 0
         b = rng.normal(size=m)
         x = b.copy()
@@ -535,7 +553,7 @@ def test_compiled_tangent_and_chord_steps_agree_with_the_array_route(monkeypatch
     p = g.problem
     rng = np.random.default_rng(seed)
     a = np.clip(rng.normal(size=n), p.lb, p.ub)
-    tr = hom._Tracker(p.evaluator, p.lb, p.ub, Options(), deadline=None, on_point=None,
+    tr = hom.Tracker(p.evaluator, p.lb, p.ub, Options(), deadline=None, on_point=None,
                       tol=1e-12, log=None)
     compared = 0
     for lam in (0.05, 0.2, 0.4, 0.6):
@@ -558,7 +576,8 @@ def test_compiled_tangent_and_chord_steps_agree_with_the_array_route(monkeypatch
         yp = y + 1e-3 * tau
         fast = tr._correct(yp, a, Bf, v)
         with monkeypatch.context() as mp:
-            mp.setattr(hom, "_floats", lambda *args: False)
+            mp.setattr(hom, "float_vectors", lambda *args: False)
+            mp.setattr(smoothing, "float_vectors", lambda *args: False)
             slow = tr._correct(yp, a, Bf, v)
         assert fast[1] == slow[1]
         if fast[1]:
@@ -574,14 +593,13 @@ def test_chord_step_is_the_correction_then_the_next_smoothed_projection_bit_for_
     chord_correction followed by smoothed_projection at the corrected point, with the
     tracker's mu(lam) (0 past lam = 1), gives: the same y, d, p, dp/dx, dp/dmu and ||d||
     bits; a non-finite correction (-1.0) leaves p alone."""
-    from compass_sparse._homotopy_kernels import (chord_correction, chord_step,
-                                                  smoothed_projection)
+    from compass_sparse.homotopy._kernels import chord_correction, chord_step, smoothed_projection
 
     g = thesis_family(n, 2, seed=n)
     p = g.problem
     rng = np.random.default_rng(n)
     a = np.clip(rng.normal(size=n), p.lb, p.ub)
-    tr = hom._Tracker(p.evaluator, p.lb, p.ub, Options(), deadline=None, on_point=None,
+    tr = hom.Tracker(p.evaluator, p.lb, p.ub, Options(), deadline=None, on_point=None,
                       tol=1e-12, log=None)
     y = np.append(a + rng.normal(scale=0.1, size=n), lam)
     v = rng.normal(size=n + 1)
@@ -615,7 +633,8 @@ def test_compiled_dense_path_steps_reach_the_array_routes_solution(monkeypatch, 
     prob = thesis_family(10, family, seed).problem
     got = solve_mcp(prob, options={"homotopy": "only"})
     with monkeypatch.context() as mp:
-        mp.setattr(hom, "_floats", lambda *args: False)
+        mp.setattr(hom, "float_vectors", lambda *args: False)
+        mp.setattr(smoothing, "float_vectors", lambda *args: False)
         ref = solve_mcp(thesis_family(10, family, seed).problem, options={"homotopy": "only"})
     for r in (got, ref):
         assert r.success and natural_residual(r.x, prob.F(r.x), prob.lb, prob.ub) <= 1e-6
@@ -634,10 +653,10 @@ def test_end_game_dense_solve_agrees_with_scipy_and_is_not_finite_when_singular(
             A = rng.normal(size=(n, n)) + n * np.eye(n)
             b = rng.normal(size=n)
             want = sla.lu_solve(sla.lu_factor(A), b)
-            got = hom._solve_square(A.copy(), b, True)
+            got = hom.solve_square(A.copy(), b, True)
             assert np.allclose(got, want, rtol=1e-12, atol=1e-12)
     S = np.array([[1.0, 2.0], [2.0, 4.0]])
-    assert not np.isfinite(hom._solve_square(S, np.array([1.0, 0.0]), True)).all()
+    assert not np.isfinite(hom.solve_square(S, np.array([1.0, 0.0]), True)).all()
 
 
 def test_homotopy_random_generator_is_made_only_when_a_second_path_starts():
@@ -671,8 +690,8 @@ def test_corrector_points_are_within_the_tolerance_of_the_curve(monkeypatch, fam
     assert hom.CORRECTOR_ESTIMATE
     # the Python route's corrector, instrumented (the compiled tracker's points are its
     # bits: test_compiled_tracker_follows_the_python_routes_points_bit_for_bit)
-    monkeypatch.setattr(hom, "COMPILED_TRACKER", False)
-    orig = hom._Tracker._correct
+    _tracker_route(monkeypatch, False)
+    orig = hom.Tracker._correct
     seen = []
 
     def checked(self, yp, a, Bf, v):
@@ -688,7 +707,7 @@ def test_corrector_points_are_within_the_tolerance_of_the_curve(monkeypatch, fam
                 seen.append(np.linalg.norm(out[0] - ref[0]) / tol)
         return out, ok
 
-    monkeypatch.setattr(hom._Tracker, "_correct", checked)
+    monkeypatch.setattr(hom.Tracker, "_correct", checked)
     r = solve_mcp(thesis_family(n, family, seed).problem)
     assert r.success and r.passes["homotopy"].ran
     assert len(seen) >= 5
@@ -724,7 +743,7 @@ def test_tracker_smoothing_scale_is_numpys_median_of_the_finite_widths():
             lb = rng.standard_normal(n) * 10.0 ** rng.integers(-3, 4)
             ub = lb + rng.random(n) * 10.0 ** rng.integers(-3, 4)
             lb[rng.random(n) < 0.3] = -np.inf
-            tr = hom._Tracker(None, lb, ub, opt, deadline=None, on_point=None, tol=1e-6,
+            tr = hom.Tracker(None, lb, ub, opt, deadline=None, on_point=None, tol=1e-6,
                               log=None)
             w = (ub - lb)[np.isfinite(ub - lb)]
             want = opt.homotopy_smoothing * max(float(np.median(w)) if w.size else 1.0,
@@ -747,7 +766,7 @@ def test_homotopy_pass_limits_blas_threads_only_from_blas_limit_min_n(monkeypatc
         entered.append(1)
         return contextlib.nullcontext()
 
-    monkeypatch.setattr(hom, "single_threaded_blas", counting)
+    monkeypatch.setattr(paths, "single_threaded_blas", counting)
     r = solve_mcp(thesis_family(n, 2, 1).problem, options={"homotopy": "only"})
     assert r.passes["homotopy"].ran
     assert len(entered) == (1 if n >= BLAS_LIMIT_MIN_N else 0)
@@ -758,8 +777,8 @@ def test_accepted_point_reuses_the_correctors_projection_bit_for_bit(monkeypatch
     made (no second projection): p, dp/dx and dp/dmu are the bits a fresh projection at
     that point gives, on every accepted point of a homotopy-only solve."""
     g = thesis_family(10, 2, 1)
-    monkeypatch.setattr(hom, "COMPILED_TRACKER", False)  # (the Python route's residual)
-    inner = hom._Tracker.residual
+    _tracker_route(monkeypatch, False)  # (the Python route's residual)
+    inner = hom.Tracker.residual
     reused = []
 
     def checked(self, y, a, want_jac):
@@ -771,7 +790,7 @@ def test_accepted_point_reuses_the_correctors_projection_bit_for_bit(monkeypatch
             reused.append(True)
         return inner(self, y, a, want_jac)
 
-    monkeypatch.setattr(hom._Tracker, "residual", checked)
+    monkeypatch.setattr(hom.Tracker, "residual", checked)
     r = solve_mcp(g.problem, options={"homotopy": "only"})
     assert r.success
     assert len(reused) >= 5  # the dense route accepted several points with it
@@ -811,7 +830,7 @@ def test_compiled_tracker_follows_the_python_routes_points_bit_for_bit(monkeypat
     monkeypatch.setattr(hom.hk, "follow_dense", counted)
     out = {}
     for compiled in (False, True):
-        monkeypatch.setattr(hom, "COMPILED_TRACKER", compiled)
+        _tracker_route(monkeypatch, compiled)
         records = []
         for _, args, opts in _route_runs():
             caplog.clear()
@@ -832,9 +851,9 @@ def test_compiled_tracker_carries_on_past_rejected_corrector_points(monkeypatch)
     compiled tracker halves the step and goes on, as the Python route does, to the same
     points."""
     def run(compiled):
-        monkeypatch.setattr(hom, "COMPILED_TRACKER", compiled)
+        _tracker_route(monkeypatch, compiled)
         calls = {"n": 0}
-        once = hom._Tracker.__init__
+        once = hom.Tracker.__init__
 
         def init(self, evalr, *args, **kw):
             once(self, evalr, *args, **kw)
@@ -849,7 +868,7 @@ def test_compiled_tracker_carries_on_past_rejected_corrector_points(monkeypatch)
             self.ev = copy.copy(evalr)
             self.ev.f_once = flaky
 
-        monkeypatch.setattr(hom._Tracker, "__init__", init)
+        monkeypatch.setattr(hom.Tracker, "__init__", init)
         res = solve_mcp(thesis_family(10, 2, 1).problem, options={"homotopy": "only"})
         return res, calls["n"]
 

@@ -7,8 +7,8 @@ import scipy.sparse as sp
 
 import compass_sparse as cs
 from compass_sparse.generators import thesis_family
-from compass_sparse.nms import LOCAL_FACTOR, classify_step, reference_value
-from compass_sparse.restarts import FROM_NEAR_BEST, FROM_RANDOM, FROM_START, RestartSchedule
+from compass_sparse.nms.state import LOCAL_FACTOR, classify_step, reference_value
+from compass_sparse.nms.restarts import FROM_NEAR_BEST, FROM_RANDOM, FROM_START, RestartSchedule
 
 
 def test_reference_value_turns_monotone_near_a_solution():
@@ -199,9 +199,9 @@ def test_compiled_nms_gives_the_python_routes_points_bit_for_bit(monkeypatch):
     (monotone, memory, watchdogs, the arc search, m-step frequency, no LM fallback, no
     crash, restarts without the homotopy, paths from the Lemke start, the homotopy's
     polishing runs): the same results bit for bit -- status and
-    message, point and F, every count, the basis, the history and the passes."""
-    import compass_sparse._nms_kernels as nk
-    import compass_sparse.nms as N
+    message, point and F, every count, the basis, the history and the passes.  (The
+    Python loop: the option engine = "reference".)"""
+    import compass_sparse.nms._kernels as nk
 
     used, asked = [], []  # the answers given, the requests made
 
@@ -222,8 +222,8 @@ def test_compiled_nms_gives_the_python_routes_points_bit_for_bit(monkeypatch):
         for opt in options:
             out = {}
             for compiled in (False, True):
-                monkeypatch.setattr(N, "COMPILED_NMS", compiled)
-                out[compiled] = _solve_record(p, opt)
+                out[compiled] = _solve_record(
+                    p, {**opt, "engine": "auto" if compiled else "reference"})
             assert out[False] == out[True], opt
             steps |= {h[2] for h in out[True][16]}
     assert len(used) > 2000
@@ -241,7 +241,8 @@ def test_compiled_nms_stops_at_the_time_limit_as_the_python_route(monkeypatch):
     import time
     import types
 
-    import compass_sparse.nms as N
+    import compass_sparse.nms.best as B
+    import compass_sparse.nms.solver as N
 
     problems = _nms_problems(3)
     picked = [problems[k] for k in (0, 5, 6, 8)] + problems[-9:-6]
@@ -252,9 +253,11 @@ def test_compiled_nms_stops_at_the_time_limit_as_the_python_route(monkeypatch):
                 1e6 if p.evaluator.counters.nfev >= K else 0.0))
             out = {}
             for compiled in (False, True):
-                monkeypatch.setattr(N, "COMPILED_NMS", compiled)
                 monkeypatch.setattr(N, "time", fake)
-                out[compiled] = _solve_record(p, {"time_limit": 1e3, "homotopy": "off"})
+                monkeypatch.setattr(B, "time", fake)
+                out[compiled] = _solve_record(p, {"time_limit": 1e3, "homotopy": "off",
+                                                  "engine": "auto" if compiled else
+                                                  "reference"})
             assert out[False] == out[True], K
             stops += out[True][0] is cs.Status.TIME_LIMIT
     assert stops > 40
@@ -262,18 +265,20 @@ def test_compiled_nms_stops_at_the_time_limit_as_the_python_route(monkeypatch):
 
 def test_compiled_nms_keeps_the_python_loop_above_its_order_limit(monkeypatch):
     """Above COMPILED_NMS_MAX_N variables (the work area holds 28 vectors of length n)
-    the major iterations stay in the Python loop; below it they take the compiled calls;
-    the results are the same either way."""
-    import compass_sparse.nms as N
+    the routes keep the major iterations in the Python loop; below it they take the
+    compiled calls; the results are the same either way."""
+    from compass_sparse.nms import compiled as C
+    from compass_sparse.routes import COMPILED_NMS_MAX_N, choose_routes
 
+    assert choose_routes(COMPILED_NMS_MAX_N, cs.Options()).nms == "compiled"
+    assert choose_routes(COMPILED_NMS_MAX_N + 1, cs.Options()).nms == "python"
     calls = []
-    real = N.NMSSolver._run_compiled
-    monkeypatch.setattr(N.NMSSolver, "_run_compiled",
-                        lambda self, *a: calls.append(self.n) or real(self, *a))
+    real = C.CompiledRun.run
+    monkeypatch.setattr(C.CompiledRun, "run",
+                        lambda self: calls.append(self.solver.n) or real(self))
     p = thesis_family(20, 1, 3).problem
     below = _solve_record(p, {})
     assert calls and set(calls) == {20}
     calls.clear()
-    monkeypatch.setattr(N, "COMPILED_NMS_MAX_N", 19)
-    above = _solve_record(p, {})
+    above = _solve_record(p, {"engine": "reference"})
     assert calls == [] and above == below

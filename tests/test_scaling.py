@@ -129,7 +129,7 @@ def test_a_loop_of_scaled_solves_builds_the_newton_linearizer_once(monkeypatch):
     pattern-derived objects: R J C has J's pattern, so a loop of solves of one badly
     scaled model builds the linearizer's index arrays once (every solve did), with the
     same results."""
-    import compass_sparse.nms as nms
+    import compass_sparse.nms.newton as nms
 
     n = 20
     M, q = _monotone(n, 3)

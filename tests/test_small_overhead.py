@@ -125,37 +125,34 @@ def _run_fresh(code, **env):
 
 
 def test_first_small_solve_of_a_process_does_not_load_numba():
-    """A fresh process's first solve of a small problem runs the kernels interpreted:
-    numba (0.5-0.8 s with its first kernel) is not loaded, and the solve succeeds.  With
-    COMPASS_SPARSE_JIT=always the same solve loads it.  (The window is widened to 30 s:
-    the solve takes ~20 ms of the default 0.2 s here, but a test must not depend on the
-    machine's speed; bench_cold_start.py measures the default.)"""
+    """A fresh process's first solve of a small problem runs the kernels interpreted (its
+    route, recorded in Result.routes): numba (0.5-0.8 s with its first kernel) is not
+    loaded, and the solve succeeds.  With COMPASS_SPARSE_JIT=always the same solve
+    compiles and loads it."""
     code = ("import sys; sys.path.insert(0, 'tests'); import known_problems as kp; "
-            "import compass_sparse._jit as J; J.INTERPRET_WINDOW = 30.0; "
             "from compass_sparse import solve_mcp; from compass_sparse._jit import cold_start; "
             "q = kp.kojima_shindo(); r = solve_mcp(q.F, q.J, q.lb, q.ub, q.x0); "
             "print(r.status.name, r.residual.natural <= 1e-6, 'numba' in sys.modules, "
-            "cold_start()['interpreting'])")
-    assert _run_fresh(code).split() == ["SOLVED", "True", "False", "True"]
+            "cold_start()['interpreting'], r.routes['kernels'])")
+    assert _run_fresh(code).split() == ["SOLVED", "True", "False", "True", "interpreted"]
     assert _run_fresh(code, COMPASS_SPARSE_JIT="always").split() == [
-        "SOLVED", "True", "True", "False"]
+        "SOLVED", "True", "True", "False", "compiled"]
 
 
 def test_interpreted_kernels_solve_the_small_problems_as_the_compiled_ones():
-    """With the cold start's window unlimited, a fresh process solves the known problems
-    and thesis instances at n = 10 with interpreted kernels only; statuses, major
-    iterations, pivots, F and J evaluations are the compiled kernels' (this process), and
-    both points pass the tolerance."""
+    """With every small solve interpreted (COMPASS_SPARSE_JIT=interpret), a fresh process
+    solves the known problems and thesis instances at n = 10 with interpreted kernels
+    only; statuses, major iterations, pivots, F and J evaluations are the compiled
+    kernels' (this process), and both points pass the tolerance."""
     code = textwrap.dedent("""
         import sys, json
         sys.path.insert(0, "tests")
         import known_problems as kp
-        import compass_sparse._jit as J
         from compass_sparse import solve_mcp
         from compass_sparse.generators import thesis_family
-        J.INTERPRET_WINDOW = 1e9
-        out = {}
+        out, routes = {}, set()
         def row(r):
+            routes.add(r.routes["kernels"])
             return [r.status.name, r.nit, r.minor_iterations, r.nfev, r.njev,
                     r.residual.natural]
         for name, make in kp.ALL_SOLVABLE.items():
@@ -164,10 +161,10 @@ def test_interpreted_kernels_solve_the_small_problems_as_the_compiled_ones():
         for fam in (1, 2):
             for seed in (1, 2, 3):
                 out[f"f{fam}s{seed}"] = row(solve_mcp(thesis_family(10, fam, seed).problem))
-        print(json.dumps([out, "numba" in sys.modules]))
+        print(json.dumps([out, "numba" in sys.modules, sorted(routes)]))
         """)
-    interpreted, numba_loaded = json.loads(_run_fresh(code))
-    assert not numba_loaded
+    interpreted, numba_loaded, routes = json.loads(_run_fresh(code, COMPASS_SPARSE_JIT="interpret"))
+    assert not numba_loaded and routes == ["interpreted"]
     compiled = {}
     for name, make in kp.ALL_SOLVABLE.items():
         q = make()
@@ -177,6 +174,7 @@ def test_interpreted_kernels_solve_the_small_problems_as_the_compiled_ones():
             compiled[f"f{fam}s{seed}"] = solve_mcp(thesis_family(10, fam, seed).problem)
     assert set(compiled) == set(interpreted) and len(compiled) > 10
     for key, r in compiled.items():
+        assert r.routes["kernels"] == "compiled"
         status, nit, minor, nfev, njev, natural = interpreted[key]
         assert (status, nit, minor, nfev, njev) == (
             r.status.name, r.nit, r.minor_iterations, r.nfev, r.njev), key
@@ -184,31 +182,50 @@ def test_interpreted_kernels_solve_the_small_problems_as_the_compiled_ones():
             assert natural <= 1e-6 and r.residual.natural <= 1e-6, key
 
 
-def test_cold_start_ends_with_its_window_and_at_a_large_array():
-    """The interpreted cold start ends when its window has passed (the next kernel call
-    loads numba) or at the first kernel call with an array above INTERPRET_MAX_ENTRIES;
-    either way the kernels give the same values."""
+def test_cold_start_is_decided_once_per_solve_from_the_process_and_the_size():
+    """Whether a solve's kernels are interpreted is decided when it starts, never from the
+    clock: the first INTERPRET_SOLVES solves of small problems (n <= INTERPRET_MAX_N) are
+    interpreted, the next compiles (and loads numba), and so does every solve after a
+    compiled one; a solve of a larger problem compiles at once.  Outside a solve a kernel
+    with a large array compiles.  Every kernel of an interpreted solve is interpreted,
+    whatever its arrays' sizes."""
     code = textwrap.dedent("""
+        import sys
+        sys.path.insert(0, "tests")
+        import known_problems as kp
+        import compass_sparse._jit as J
+        from compass_sparse import solve_mcp
+        from compass_sparse.generators import thesis_family
+        q = kp.cournot_duopoly()
+        kinds = [solve_mcp(q.F, q.J, q.lb, q.ub, q.x0).routes["kernels"]
+                 for _ in range(J.INTERPRET_SOLVES + 1)]
+        print(kinds.count("interpreted"), kinds[-1], "numba" in sys.modules)
+        """)
+    from compass_sparse._jit import INTERPRET_MAX_N, INTERPRET_SOLVES
+
+    assert _run_fresh(code).split() == [str(INTERPRET_SOLVES), "compiled", "True"]
+    code = textwrap.dedent(f"""
+        import sys
+        sys.path.insert(0, "tests")
+        import known_problems as kp
+        from compass_sparse import solve_mcp
+        from compass_sparse.generators import thesis_family
+        big = solve_mcp(thesis_family({INTERPRET_MAX_N + 1}, 1, 1).problem)
+        q = kp.cournot_duopoly()
+        small = solve_mcp(q.F, q.J, q.lb, q.ub, q.x0)
+        print(big.routes["kernels"], small.routes["kernels"], "numba" in sys.modules)
+        """)
+    assert _run_fresh(code).split() == ["compiled", "compiled", "True"]
+    code = textwrap.dedent(f"""
         import sys, numpy as np
         import compass_sparse._jit as J
         from compass_sparse._merit_kernels import all_finite_kernel, max_abs_kernel
-        J.INTERPRET_WINDOW = {window}
-        x = np.array([1.0, -3.0])
-        a = max_abs_kernel(x, x, False)
-        first = ("numba" in sys.modules, J.cold_start()["interpreting"])
-        b = all_finite_kernel(np.ones({size}))
-        print(a, bool(b), *first, "numba" in sys.modules, J.cold_start()["interpreting"])
+        a = max_abs_kernel(np.array([1.0, -3.0]), np.array([1.0, -3.0]), False)
+        first = "numba" in sys.modules
+        b = all_finite_kernel(np.ones({2 * 4096}))
+        print(a, bool(b), first, "numba" in sys.modules)
         """)
-    # a window of 0 s: the first call opens it and is interpreted, the second compiles
-    assert _run_fresh(code.format(window=0.0, size=3)).split() == [
-        "3.0", "True", "False", "True", "True", "False"]
-    # the window open, but the second call's array is large: it compiles
-    big = 2 * _jit.INTERPRET_MAX_ENTRIES
-    assert _run_fresh(code.format(window=100.0, size=big)).split() == [
-        "3.0", "True", "False", "True", "True", "False"]
-    # the window open and small arrays: both interpreted
-    assert _run_fresh(code.format(window=100.0, size=3)).split() == [
-        "3.0", "True", "False", "True", "False", "True"]
+    assert _run_fresh(code).split() == ["3.0", "True", "False", "True"]
 
 
 def test_lazy_kernels_calling_each_other_compile_on_first_use(tmp_path, monkeypatch):
@@ -301,7 +318,7 @@ def test_blas_limit_reuses_one_controller():
     from compass_sparse.linalg import blas as _blas
     from compass_sparse import solve as S
 
-    with S._blas_threads(50):
+    with S.blas_threads(50):
         pass
     first = list(_blas._CONTROLLER)
     with _blas.single_threaded_blas():
@@ -452,7 +469,7 @@ def test_maxnorm_spread_sums_duplicate_entries_first():
 
 
 def test_flat_tail_verdict_same_for_duplicate_csr_and_canonical_csc_jacobian():
-    from compass_sparse.acceptance import judge
+    from compass_sparse.nms.acceptance import judge
 
     z = np.array([1.0, 2.0])
     f = np.array([1e-9, -1e-9])
@@ -532,7 +549,7 @@ def test_verdict_shared_by_the_solver_and_the_result_agrees_with_a_fresh_judgeme
     import known_problems as kp
 
     from compass_sparse import MCP, solve_mcp
-    from compass_sparse.acceptance import judge
+    from compass_sparse.nms.acceptance import judge
 
     makers = dict(kp.ALL_SOLVABLE)
     makers.update(sqrt_ncp=kp.sqrt_ncp, billups=kp.billups)
@@ -647,7 +664,7 @@ def test_compiled_scale_test_gives_the_array_formula_verdict(seed):
     """The compiled flat-step test returns the verdict, the row and the step of the array
     formulas, on random sparse Jacobians with rows of every scale (flat rows included)
     and points at and between bounds."""
-    from compass_sparse.acceptance import _scale_test, _scale_test_arrays
+    from compass_sparse.nms.acceptance import _scale_test, _scale_test_arrays
 
     rng = np.random.default_rng(seed)
     n = 30
@@ -747,7 +764,7 @@ def test_scaled_solve_judges_its_result_on_the_user_problem_again():
     on the scaled problem) is not handed to the Result: the Result's verdict is a fresh
     judgement of the returned point on the user's problem, and agrees with one."""
     from compass_sparse import MCP, solve_mcp
-    from compass_sparse.acceptance import judge
+    from compass_sparse.nms.acceptance import judge
 
     d = np.array([1e-5, 1.0, 1e5])
     q = np.array([-1e-5, 2.0, -3e5])

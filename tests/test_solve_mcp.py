@@ -607,7 +607,7 @@ def test_warm_basis_survives_presolve():
     """Result.basis is in the user's index space after presolve removed variables, and a
     re-solve from it (presolve runs again) needs no pivots; a basis of the wrong size is
     an input error, not a silent cold start."""
-    import compass_sparse.nms as nms_mod
+    import compass_sparse.nms.newton as nms_mod
     from compass_sparse import ShapeError
 
     n = 40

@@ -10,7 +10,7 @@ import pytest
 import scipy.sparse as sp
 
 from compass_sparse import MCP, Options, Status, solve_lcp, solve_mcp
-from compass_sparse.acceptance import FLAT_STEP_RTOL, judge
+from compass_sparse.nms.acceptance import FLAT_STEP_RTOL, judge
 from compass_sparse.presolve import presolve
 
 TOL = 1e-6
@@ -227,7 +227,7 @@ def test_no_solution_stationary_point_is_diagnosed_and_names_the_row():
                                            (0.2, False), (1.0, False)])
 def test_stationarity_threshold_on_x_squared_plus_one(x, stationary):
     # ratio = |2x (x^2 + 1)| max(1, |x|) / (0.5 (x^2 + 1)^2) = 4|x| / (x^2 + 1) near 0
-    from compass_sparse.stationary import STATIONARY_RTOL, stationarity
+    from compass_sparse.nms.stationarity import STATIONARY_RTOL, stationarity
 
     z = np.array([x])
     st = stationarity(z, z ** 2 + 1, sp.csc_matrix([[2 * x]]), np.array([-np.inf]),
@@ -278,7 +278,7 @@ def test_property_success_meets_both_residuals_and_infeasible_never_on_solvable(
 def _scaled_acceptance(J_user, f_user=None, raise_J=False):
     """An Acceptance of a 3-variable problem scaled by powers of two, with the scaled
     evaluator's guarded jac (the old route) and the user's J read directly."""
-    from compass_sparse.acceptance import Acceptance
+    from compass_sparse.nms.acceptance import Acceptance
     from compass_sparse.problem.evaluator import Evaluator
     from compass_sparse.scaling import Scaling
     from compass_sparse.problem.evaluator import ScaledEvaluator
@@ -332,13 +332,16 @@ def test_scaled_verdict_reads_the_users_jacobian_as_the_scaled_route_did(case):
 def test_scaled_solve_takes_the_solvers_verdict_for_its_result(monkeypatch):
     """A scaled solve that stops at a solution judged with the user's J does not judge
     it again for the Result, which is the Result of judging again."""
+    import compass_sparse.report as report
     import compass_sparse.solve as solve_mod
     from compass_sparse.generators.cge import ramsey_cge
 
     p = ramsey_cge(periods=11, sectors=1).with_shock(capital_tax=0.25).problem
     calls = []
-    real = solve_mod._judge_on
-    monkeypatch.setattr(solve_mod, "_judge_on", lambda *a, **k: calls.append(1) or real(*a, **k))
+    real = report.judge_on
+    for module in (solve_mod, report):  # the start point's verdict, and the Result's
+        monkeypatch.setattr(module, "judge_on",
+                            lambda *a, **k: calls.append(1) or real(*a, **k))
     r = solve_mcp(p.with_start(p.x0))
     assert r.passes["scaling"].ran and r.status is Status.SOLVED
     assert len(calls) == 1  # the start point only
@@ -355,7 +358,7 @@ def test_scale_test_of_a_non_canonical_jacobian_is_that_of_its_canonical_form():
     """The compiled canonical test lets a canonical J straight through; an unsorted one,
     one with duplicates (summed) or with int64 indices gets the verdict of its canonical
     form, unchanged."""
-    from compass_sparse.acceptance import _scale_test
+    from compass_sparse.nms.acceptance import _scale_test
     from compass_sparse.merit import fb_phi
 
     n = 3
@@ -380,7 +383,7 @@ def test_scale_test_of_a_non_canonical_jacobian_is_that_of_its_canonical_form():
 def test_residual_test_asks_the_natural_residual_first_with_the_same_answer():
     """Without Phi at hand the natural residual is tested first: the answer is still the
     conjunction of both tests, on points where either, both or none fails (NaN too)."""
-    from compass_sparse.acceptance import residuals_small
+    from compass_sparse.nms.acceptance import residuals_small
     from compass_sparse.merit import fb_phi, min_map
 
     rng = np.random.default_rng(1)

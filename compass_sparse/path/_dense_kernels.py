@@ -30,6 +30,9 @@ I_EK, I_EI, I_PIV, I_TSLOT, I_NFAC, I_NUPD, I_NETA, I_NBP, I_MSG, I_REFUSED, \
 N_ISTATE = 13
 F_ES, F_EV, F_T, F_BEST_T, F_RES, F_TLOW = range(6)
 N_FSTATE = 6
+# the per-pivot records of path_loop (a minor log): columns, and the two kinds of pivot
+REC_COLUMNS = 7
+REC_FLIP, REC_EXCHANGE = 0, 1
 
 
 @njit(cache=True)
@@ -196,17 +199,37 @@ def verify(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate, L, U,
     return TOLERANCE, MSG_TOL
 
 
+@njit(cache=True, inline="always")
+def _log_pivot(rec, rect, k, pivots, kind, ek, ei, lk, li, upd, t):
+    """Pivot record k of a call (see :func:`path_loop`), when the caller asked for them."""
+    if k < rec.shape[0]:
+        rec[k, 0] = pivots
+        rec[k, 1] = kind
+        rec[k, 2] = ek
+        rec[k, 3] = ei
+        rec[k, 4] = lk
+        rec[k, 5] = li
+        rec[k, 6] = upd
+        rect[k] = t
+
+
 @njit(cache=True)
 def path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_count,
               istate, fstate, L, U, R, perm, best_x, bp_t, bp_x, work, fwork,
               piv_tol_base, ratio_tol, rank_tol, update_tol, stab_tol, growth_limit,
               minor_limit, cycle_limit, max_pivots, free_below, below_limit,
-              t_progress):
+              t_progress, rec, rect):
     """PivotalPath._pivot_loop for at most max_pivots pivots (RUNNING when they are used
     up: the caller checks its clock and calls again).  t's lower bound is fstate[F_TLOW]:
     0, lifted (free_below: a path from the current point) when t blocks at 0 before the
     path has been above t_progress, for at most below_limit pivots (istate[I_BELOW]: the
-    pivot that lifted it); see compass_sparse.path.  Returns (code, message)."""
+    pivot that lifted it); see compass_sparse.path.  Returns (code, message).
+
+    ``rec`` (max_pivots x REC_COLUMNS, or no rows: nothing recorded) and ``rect`` receive
+    one record per pivot of this call, the Python loop's minor-log line as numbers: row
+    k (the call's pivot k) holds the pivot count, REC_FLIP or REC_EXCHANGE, the entering
+    kind and index, the leaving kind and index and the update's outcome (UPD_*), rect[k]
+    t after the pivot.  The records change nothing the path computes."""
     n = sk.shape[0]
     d = work[5]
     col = work[6]
@@ -281,6 +304,8 @@ def path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_coun
                     fstate[F_T] = xb[t_slot]
                 _record(sk, si, xb, zval, lb, ub, fstate[F_T], fstate, istate, best_x,
                         bp_t, bp_x, work)
+                _log_pivot(rec, rect, pivots - start, pivots + 1, REC_FLIP, ek, ei, -1, -1,
+                           -1, fstate[F_T])
                 continue
             return ERROR, MSG_BOUNDED_SLACK
         # a basic variable blocks: update values and exchange columns
@@ -334,6 +359,8 @@ def path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_coun
             return RAY, MSG_T_ZERO
         _record(sk, si, xb, zval, lb, ub, fstate[F_T], fstate, istate, best_x, bp_t, bp_x,
                 work)
+        _log_pivot(rec, rect, pivots - start, pivots + 1, REC_EXCHANGE, ek, ei, lk, li, upd,
+                   fstate[F_T])
         # complement rule
         if lk == VAR_W:
             istate[I_EK] = VAR_Z
@@ -368,7 +395,7 @@ def start_path(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_cou
                istate, fstate, L, U, R, perm, best_x, bp_t, bp_x, work, fwork,
                piv_tol_base, ratio_tol, rank_tol, update_tol, stab_tol, growth_limit,
                minor_limit, cycle_limit, max_pivots, free_below, below_limit, t_progress,
-               slack, use_slack, z, w, v):
+               slack, use_slack, z, w, v, rec, rect):
     """A path on the slot table (sk, si, xb) in one call: fresh state, the factorization
     (again on the slot table of the basis ``slack`` when ``use_slack`` and the first one
     is singular or holds artificials, as DensePathEngine.run_path did in Python), the
@@ -416,7 +443,7 @@ def start_path(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_cou
                            enter_count, istate, fstate, L, U, R, perm, best_x, bp_t, bp_x,
                            work, fwork, piv_tol_base, ratio_tol, rank_tol, update_tol,
                            stab_tol, growth_limit, minor_limit, cycle_limit, max_pivots,
-                           free_below, below_limit, t_progress)
+                           free_below, below_limit, t_progress, rec, rect)
     return True, code, msg
 
 
@@ -424,14 +451,14 @@ def start_path(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_cou
 def run_pivots(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_count,
                istate, fstate, L, U, R, perm, best_x, bp_t, bp_x, work, fwork, piv_tol_base,
                ratio_tol, rank_tol, update_tol, stab_tol, growth_limit, minor_limit,
-               cycle_limit, max_pivots, free_below, below_limit, t_progress):
+               cycle_limit, max_pivots, free_below, below_limit, t_progress, rec, rect):
     """Up to ``max_pivots`` pivots of the path (path_loop) and, when t reaches 1, the
     solution check (verify): (code, message), RUNNING when the pivots are used up."""
     code, msg = path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced,
                           enter_count, istate, fstate, L, U, R, perm, best_x, bp_t, bp_x,
                           work, fwork, piv_tol_base, ratio_tol, rank_tol, update_tol,
                           stab_tol, growth_limit, minor_limit, cycle_limit, max_pivots,
-                          free_below, below_limit, t_progress)
+                          free_below, below_limit, t_progress, rec, rect)
     if code == SOLVED:
         code, msg = verify(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate, L,
                            U, R, perm, rank_tol, lb, ub, fstate[F_TLOW], work, fwork)

@@ -3,8 +3,8 @@
 For small n the cost of a path is not arithmetic but the Python work around each pivot
 and each factorization (slot tables, column specs, manager calls: 50-200 us per pivot and
 ~1 ms per path, measured on 4-variable problems).  :class:`DensePathEngine` stands where a
-basis manager stands (the solver's manager factory hands it out for n <=
-``DENSE_ENGINE_MAX_N``) and :meth:`PivotalPath.run` hands it the slot table it set up; the
+basis manager stands (the solve's basis factory hands it out for n <=
+``compass_sparse.routes.DENSE_ENGINE_MAX_N``) and :meth:`PivotalPath.run` hands it the slot table it set up; the
 initial factorization with artificial repair, every pivot (FTRAN, Harris ratio test,
 column replacement, refactorization, complement rule, cycle rule) and the final solution
 check then run in :mod:`compass_sparse._dense_path_kernels` with no Python per pivot.
@@ -34,16 +34,14 @@ import numpy as np
 import scipy.sparse as sp
 
 from . import _dense_kernels as K
+from .._jit import NO_VALUES
 from . import _kernels as PK
 from ._dense_lu import allocate_factors
 from ..linalg._csc_kernels import csc_to_dense
 from ..basis.types import BasisStats
 from .outcome import LinearCode
 
-__all__ = ["DENSE_ENGINE_MAX_N", "DensePathEngine"]
-
-DENSE_ENGINE_MAX_N = 500
-"""Largest n solved by the compiled dense engine (above: the sparse basis manager)."""
+__all__ = ["DensePathEngine"]
 
 PIVOT_CHUNK = 1000
 """Pivots per compiled call: the time limit is checked between calls."""
@@ -51,6 +49,11 @@ PIVOT_CHUNK = 1000
 _NAMES = "zwvatS"
 
 _NO_BASIS = np.empty(0, dtype=np.int8)  # start_path's slack basis when there is none
+_NO_RECORDS = np.zeros((0, K.REC_COLUMNS), dtype=np.int64)  # a path that logs nothing
+
+_UPDATES = {K.UPD_OK: "OK", K.UPD_REFUSED: "REFUSED"}
+"""The Python loop's names (UpdateStatus) of the kernels' update outcomes; every other
+outcome made the path refactorize: REFACTORED."""
 
 _CODES = {K.SOLVED: LinearCode.SOLVED, K.RAY: LinearCode.RAY, K.CYCLE: LinearCode.CYCLE,
           K.MINOR_LIMIT: LinearCode.MINOR_LIMIT, K.SINGULAR: LinearCode.SINGULAR,
@@ -80,6 +83,7 @@ class DensePathEngine:
         self._dense = None
         self.set_matrix(M)
         self.L = None  # work areas: allocated by the first path (see _allocate)
+        self._rec = None  # the pivot records of a minor log (see _records)
         self.r = np.zeros(self.n)
 
     def _allocate(self):
@@ -143,23 +147,30 @@ class DensePathEngine:
         # the first chunk of pivots and the solution check in one compiled call: a small
         # path's Python around three calls cost more than its pivots
         use_slack = slack_basis is not None
+        log = path.log
+        rec, rect = self._records() if log is not None else (_NO_RECORDS, NO_VALUES)
         factored, code, msg = K.start_path(
             self.M, q, self.r, lb, ub, st.sk, st.si, st.xb, st.zval, st.art_sign,
             self.displaced, self.enter_count, istate, fstate, self.L, self.U, self.R,
             self.perm, self.best_x, self.bp_t, self.bp_x, self.work, self.fwork, *tolerances,
-            slack_basis if use_slack else _NO_BASIS, use_slack, z, w, v)
+            slack_basis if use_slack else _NO_BASIS, use_slack, z, w, v, rec, rect)
         if not factored:
             self._account(istate)
             return LinearCode.SINGULAR, self._message(msg, istate, fstate, path)
+        if log is not None:
+            _log_pivots(log, rec, rect, int(istate[K.I_PIV]))
         while code == K.RUNNING:
             if path.deadline is not None and time.perf_counter() > path.deadline:
                 code, msg = K.MINOR_LIMIT, -1
                 break
+            done = int(istate[K.I_PIV])
             code, msg = K.run_pivots(
                 self.M, q, self.r, lb, ub, st.sk, st.si, st.xb, st.zval,
                 st.art_sign, self.displaced, self.enter_count, istate, fstate, self.L,
                 self.U, self.R, self.perm, self.best_x, self.bp_t, self.bp_x, self.work,
-                self.fwork, *tolerances)
+                self.fwork, *tolerances, rec, rect)
+            if log is not None:
+                _log_pivots(log, rec, rect, int(istate[K.I_PIV]) - done)
         st.unbounded = msg == K.MSG_RAY_UNBOUNDED
         if st.unbounded:
             # z moves along dz: basic z's at their rates, an entering z at its direction
@@ -181,6 +192,13 @@ class DensePathEngine:
             st.best = (float(fstate[K.F_BEST_T]), self.best_x.copy())
         self._account(istate)
         return _CODES[int(code)], self._message(msg, istate, fstate, path)
+
+    def _records(self):
+        """The per-pivot record buffers of a logged path (made at its first log)."""
+        if self._rec is None:
+            self._rec = (np.zeros((PIVOT_CHUNK, K.REC_COLUMNS), dtype=np.int64),
+                         np.zeros(PIVOT_CHUNK))
+        return self._rec
 
     def _account(self, istate):
         self.stats.factorizations += int(istate[K.I_NFAC])
@@ -218,3 +236,14 @@ _MESSAGES = {
     K.MSG_LEAVE_KIND: "unexpected leaving kind",
     K.MSG_BOUNDED_SLACK: "bounded entering slack",
 }
+
+
+def _log_pivots(log, rec, rect, count):
+    """The minor-log lines of ``count`` pivot records, as the Python loop writes them."""
+    for k in range(count):
+        pivots, kind, ek, ei, lk, li, upd = (int(v) for v in rec[k])
+        if kind == K.REC_FLIP:
+            log(f"minor {pivots:7d} t {rect[k]:.6e} z[{ei}] to its other bound")
+        else:
+            log(f"minor {pivots:7d} t {rect[k]:.6e} in {_NAMES[ek]}[{ei}] "
+                f"out {_NAMES[lk]}[{li}] ({_UPDATES.get(upd, 'REFACTORED')})")

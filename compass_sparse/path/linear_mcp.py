@@ -15,7 +15,7 @@ from ..linalg.csc import trusted_csc
 from ..linalg.direct import DirectFactors
 from .direct_step import (FEASIBILITY_TOLERANCE, RESIDUAL_TOLERANCE, dense_direct_path,
                           dense_newton_direct, failed_direct_start)
-from .outcome import LinearCode, PathResult, WarmBasis
+from .outcome import DIRECT_STEP_LINE, LinearCode, PathResult, WarmBasis
 from .pivotal import PivotalPath
 
 __all__ = ["dense_newton_result", "solve_linear_mcp"]
@@ -39,8 +39,7 @@ def solve_linear_mcp(M, q, lb, ub, basis, options, x, *, warm: WarmBasis | None 
     """
     kw = dict(minor_limit=minor_limit, deadline=deadline, log=log)
     res = None
-    if (direct is not None and direct.dense and not ray_start and log is None
-            and r is not None):
+    if direct is not None and direct.dense and not ray_start and r is not None:
         # A small problem's start and dense direct step in one compiled call (the
         # Python of a path's set-up cost more than the step); the path runs only when
         # the step fails, then without trying it again.
@@ -76,6 +75,8 @@ def _dense_direct_result(M, q, lb, ub, manager, options, x, r, warm, direct, kw,
         return None
     kind, end, basic, nnz_lu = out
     if kind != "path":
+        if kind == "direct" and kw["log"] is not None:
+            kw["log"](DIRECT_STEP_LINE)
         return _decided_result(kind, end, basic, nnz_lu, manager, direct, t0)
     # the step failed: the path runs from the start the call computed
     if nnz_lu:

@@ -8,7 +8,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["LinearCode", "PathResult", "WarmBasis"]
+__all__ = ["DIRECT_STEP_LINE", "LinearCode", "PathResult", "WarmBasis"]
+
+DIRECT_STEP_LINE = "minor       0 t 1.000000e+00 direct step (no pivot: one solve)"
+"""The minor log's line for a path that the direct Newton step ended."""
 
 
 class LinearCode(enum.Enum):

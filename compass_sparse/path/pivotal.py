@@ -85,7 +85,7 @@ from . import _kernels as _PK
 from ._kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
 from ._slot_kernels import lemke_start, slot_basis, slot_point, slot_table
 from .direct_step import direct_step
-from .outcome import LinearCode, PathResult, WarmBasis
+from .outcome import DIRECT_STEP_LINE, LinearCode, PathResult, WarmBasis
 from .warm import components, default_basis, start_basis_with_guess
 
 _VAR_NAMES = "zwvatS"
@@ -200,7 +200,7 @@ class PivotalPath:
                                         "the basis kept turning singular in its solves")
 
     def _run(self, x_start, warm, ray_start, r, t0, st0, start=None) -> PathResult:
-        n, lb, ub = self.n, self.lb, self.ub
+        lb, ub = self.lb, self.ub
         slack_basis = None
         if ray_start:
             z, w, v, r, basic = self._lemke_start()
@@ -217,9 +217,8 @@ class PivotalPath:
                              ray_start=ray_start)
             res.time = time.perf_counter() - t0
             return res
-        if self.direct is not None and not ray_start and self.log is None:
-            # A path without pivots ends where one sparse solve says (direct_step.py);
-            # a minor-iteration log keeps the path, which it describes.
+        if self.direct is not None and not ray_start:
+            # A path without pivots ends where one sparse solve says (direct_step.py).
             td = time.perf_counter()
             end, self.direct_lu_nnz = direct_step(self.M, self.q, lb, ub, z, basic,
                                                   self.direct)
@@ -227,6 +226,8 @@ class PivotalPath:
                 self.bm.stats.record_direct_lu(self.direct_lu_nnz, time.perf_counter() - td,
                                                self.direct.method)
             if end is not None:
+                if self.log is not None:
+                    self.log(DIRECT_STEP_LINE)
                 res = PathResult(LinearCode.SOLVED, *end, 1.0, factorizations=1,
                                  basis=WarmBasis(basic.copy()), ray_start=False,
                                  direct_lu_nnz=self.direct_lu_nnz)

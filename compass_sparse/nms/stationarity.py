@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from .merit import fb_jacobian_diagonals, fb_phi
+from ..merit import fb_jacobian_diagonals, fb_phi
 
 __all__ = ["STATIONARY_RTOL", "Stationarity", "stationarity", "worst_rows"]
 

@@ -13,10 +13,6 @@ When a run of crash + NMS stops making progress, the solver restarts.  Restart k
 """
 from __future__ import annotations
 
-import numpy as np
-
-from .box import project
-
 __all__ = ["RestartSchedule", "FROM_START", "FROM_RANDOM", "FROM_NEAR_BEST"]
 
 FROM_START, FROM_RANDOM, FROM_NEAR_BEST = "start", "random", "near best"
@@ -52,16 +48,3 @@ class RestartSchedule:
         return self.options.replace(**self.configs[0]), FROM_NEAR_BEST
 
 
-def random_point(rng, z0, lb, ub):
-    """A uniform point of the box; unbounded directions get a range that grows with the
-    start point's magnitude, 10 (1 + |z0_i|) on each side."""
-    spread = 10.0 * (1.0 + np.abs(z0))
-    lo = np.where(np.isfinite(lb), lb, z0 - spread)
-    hi = np.where(np.isfinite(ub), ub, z0 + spread)
-    return rng.uniform(lo, hi)
-
-
-def near_point(rng, z, lb, ub):
-    """z moved by up to 10% of the box width (of 1 + |z_i| where unbounded), projected."""
-    width = np.where(np.isfinite(ub - lb), ub - lb, 1.0 + np.abs(z))
-    return project(z + 0.1 * width * rng.uniform(-1, 1, z.size), lb, ub)

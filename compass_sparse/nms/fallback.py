@@ -25,9 +25,9 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from .basis.backends import DENSE_SOLVE_MAX_N
-from .box import project
-from .merit import fb_jacobian_diagonals, fb_phi, fb_psi
+from ..basis.backends import DENSE_SOLVE_MAX_N
+from ..box import project
+from ..merit import fb_jacobian_diagonals, fb_phi, fb_psi
 
 __all__ = ["gradient_steps", "lm_step", "spd_solve", "cholmod_available"]
 

@@ -13,9 +13,9 @@ import math
 
 import numpy as np
 
-from ._jit import njit
-from .linalg._csc_kernels import csc_matvec
-from ._merit_kernels import max_abs_kernel
+from .._jit import njit
+from ..linalg._csc_kernels import csc_matvec
+from .._merit_kernels import max_abs_kernel
 
 
 @njit(cache=True, inline="always")

@@ -42,11 +42,11 @@ import math
 
 import numpy as np
 
-from ._merit_kernels import np_max, np_min
-from ._jit import njit
-from ._merit_kernels import (fb_directional_kernel, fb_phi_kernel, max_abs_kernel,
-                             min_map_within, normal_map_kernel)
-from .path.direct_step import dense_newton_direct
+from .._merit_kernels import np_max, np_min
+from .._jit import njit
+from .._merit_kernels import (fb_directional_kernel, fb_phi_kernel, max_abs_kernel, min_map_within,
+                              normal_map_kernel)
+from ..path.direct_step import dense_newton_direct
 
 # requests (returns)
 NEED_NEWTON, NEED_F_CAND, NEED_F_TRIAL, JUDGE, NEED_FALLBACK, TIME_UP, STALLED, NEED_PATH = \

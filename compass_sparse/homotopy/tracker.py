@@ -1,117 +1,28 @@
-"""Probability-one homotopy on the smoothed normal map: the fallback when the stabilized
-Newton method stalls at a stationary point of its merit function (Billups & Watson,
-SIAM J. Optim. 12, 2002; Zhou & Yu, J. Ind. Manag. Optim. 7, 2011; Speight 1999).
-
-The equation
-------------
-For the box B = [l, u] the normal map F_B(x) = F(pi(x)) + x - pi(x) vanishes exactly when
-z = pi(x) solves the MCP (thesis §3.1).  It is only piecewise smooth, so we follow a
-smoothed version.  With the smoothed plus function
-
-    s_mu(r) = (r + sqrt(r^2 + 4 mu^2)) / 2       (Chen-Harker-Kanzow-Smale; s_0 = max(r, 0))
-
-the smoothed projection is, row by row,
-
-    both bounds   p_mu(x) = l + s_mu(x - l) - s_mu(x - u)
-    lower only    p_mu(x) = l + s_mu(x - l)
-    upper only    p_mu(x) = u - s_mu(u - x)
-    free          p_mu(x) = x,
-
-smooth in (x, mu) for mu > 0 with 0 < d p_mu / dx < 1 on bounded rows, and p_0 = pi.  The
-smoothed normal map is G_mu(x) = F(p_mu(x)) + x - p_mu(x), with Jacobian
-G_x = J(p) D + I - D, D = diag(p_mu'(x)).
-
-The homotopy
-------------
-For a start point a (random in the box) and smoothing driven to 0 along the path,
-
-    H_a(x, lam) = lam G_{mu(lam)}(x) + (1 - lam)(x - a),    mu(lam) = mu0 (1 - lam).
-
-At lam = 0 the unique zero is x = a with H_x = I.  Because dH/da = -(1 - lam) I has full
-rank for lam < 1, the parametrized Sard theorem says that for almost every a the zero set
-of H_a in [0, 1) x R^n contains a smooth curve gamma_a starting at (a, 0) with no
-bifurcations (this is the "probability one").  When the box is bounded, x - p_mu(x) points
-outwards and F(p_mu(x)) stays bounded, so H_a has no zeros with large ||x||: gamma_a is
-bounded and reaches lam = 1, where its limit points x* solve F_B(x*) = 0.  With infinite
-bounds the curve stays bounded when the MCP has no "solution at infinity" (Zhou & Yu's
-condition); otherwise it can diverge, and that is reported (``HomotopyStatus.DIVERGED``).
-
-Path tracking
--------------
-gamma_a is followed in its arclength s (so lam may decrease: turning points are passed
-without special treatment) by a predictor-corrector method:
-
-* tangent: the unit kernel vector of DH = [H_x, H_lam], from the bordered system
-  [[H_x, H_lam], [v^T]] w = e_{n+1} with v the previous tangent, oriented so that
-  w^T v > 0 (at the start v = e_{n+1}, so lam increases first);
-* predictor: Euler step y_p = y + h tau;
-* corrector: chord Newton iterations on {H(y) = 0, v^T (y - y_p) = 0} with the bordered
-  matrix factorized at the last accepted point (one factorization per accepted step serves
-  both the tangent and the corrector);
-* step control (after Allgower & Georg): a corrector whose corrections do not contract
-  (ratio > ``CONTRACTION_MAX``), whose first correction is long compared with the step, or
-  that needs more than ``CORRECTOR_ITERATIONS`` iterations halves h and retries; an
-  accepted step rescales h by the observed contraction and first correction against
-  their nominal values (at most doubling it); h below ``homotopy_step_minimum`` ends the
-  path.  Points are followed to the relative accuracy ``CORRECTOR_TOLERANCE`` only, judged
-  by the estimated distance to the curve after the last correction
-  (``CORRECTOR_ESTIMATE``).
-
-The bordered matrix is factorized densely (LAPACK's getrf) when the Jacobian is dense or
-small and by SuperLU otherwise (the border adds one dense row and column).  A dense
-problem's tangent and each chord iteration are then one compiled call (triangular sweeps
-on getrf's factors), around the evaluation of F; the array route serves the others.
-
-The first path starts from ``homotopy_start``: the best point the stabilized Newton method
-found before it stalled (the default), or the user's start point.  Later paths start from
-random points drawn around the user's start point.
-
-End game (Speight's hybrid)
----------------------------
-Near the end of the path (lam >= ``homotopy_end_lambda``) every accepted point is handed to
-Newton's method on the piecewise smooth normal map, x+ = x - (J D_B + I - D_B)^{-1} F_B(x),
-D_B the 0/1 diagonal of pi' (Robinson's normal-map Newton), accepting only decreases of
-||F_B||.  If Newton does not reach the tolerance the path resumes with a later switch
-(the gap 1 - lam shrinks tenfold).  The caller may also pass a ``polish`` function (the
-stabilized Newton method) that receives the end point of the path.
-
-Every accepted path point and every end-game point is offered to the caller
-(``on_point``), so the best point is kept whatever happens; a path that fails is followed
-by a new one from a random point of the box, up to ``homotopy_path_limit`` paths.
-"""
+"""The path tracker of the homotopy pass: predictor-corrector on H_a(x, lam) = 0 in
+arclength, its step control and the normal-map Newton end game (see
+:mod:`compass_sparse.homotopy` for the mathematics).  A dense problem's path runs in
+compiled calls between two evaluations (:meth:`Tracker.follow` when the solve's routes
+chose the compiled tracker); the array route is the reference, and the route of every
+other problem."""
 from __future__ import annotations
 
-import contextlib
-import enum
-import logging
 import time
-from dataclasses import dataclass, field
 
 import numpy as np
-import scipy.linalg as sla
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
-from . import _homotopy_kernels as hk
-from .linalg.blas import BLAS_LIMIT_MIN_N, single_threaded_blas
-from .linalg.csc import csc_times, float_csc
-from ._homotopy_kernels import (bordered_pivots_ok, bordered_values, chord_step,
-                                homotopy_values, lu_solve, smoothed_projection,
-                                unit_tangent)
-from ._jit import NO_INDICES, NO_VALUES, cold_start
-from .linalg._csc_kernels import csc_to_dense
-from .box import all_finite
-from .box import dot_norm, float_vector, max_abs, project
-from .merit import fb_phi, fb_psi
-from .options import HOMOTOPY_DENSE_DENSITY, HOMOTOPY_DENSE_MAX_N
-from .box import float_vectors
-from .restarts import random_point
-from .status import PassStats
+from .._jit import NO_INDICES, NO_VALUES
+from ..box import all_finite, dot_norm, float_vector, float_vectors, max_abs, project
+from ..linalg.csc import csc_times, float_csc
+from ..merit import fb_phi, fb_psi
+from ..options import HOMOTOPY_DENSE_DENSITY, HOMOTOPY_DENSE_MAX_N
+from . import _kernels as hk
+from ._kernels import bordered_values, chord_step, homotopy_values, smoothed_projection, unit_tangent
+from .bordered import Bordered, dense_copy, solve_square
+from .outcome import HomotopyStatus
+from .smoothing import SmoothedNormalMap
 
-logger = logging.getLogger("compass_sparse")
-
-__all__ = ["HomotopyStatus", "HomotopyOutcome", "SmoothedNormalMap", "track_paths",
-           "homotopy_pass"]
+__all__ = ["HomotopyStop", "Tracker"]
 
 CORRECTOR_ITERATIONS = 6
 """Chord iterations allowed per step before the step is halved."""
@@ -154,165 +65,6 @@ END_GAP = 1e-10
 """A path point with lam >= 1 - END_GAP is the end of the path."""
 NEWTON_STEP_MAX = 1.0
 """Longest end-game Newton step, relative to 1 + ||x||_inf."""
-COMPILED_TRACKER = True
-"""Dense problems (n <= DENSE_MAX_N) follow their paths in compiled calls between two
-evaluations (``_Tracker._follow_dense``, the same points bit for bit); False keeps the
-Python route, the reference of the tests (and the route during the cold start, before
-numba is loaded: see compass_sparse._jit)."""
-
-
-class HomotopyStatus(enum.Enum):
-    """How a homotopy pass ended."""
-
-    SOLVED = "solved"  #: a point meeting the convergence tolerance was reached
-    END_REACHED = "end reached"  #: lam = 1 reached but the end game missed the tolerance
-    DIVERGED = "diverged"  #: ||x|| exceeded the divergence bound (unbounded curve)
-    STEP_TOO_SMALL = "step too small"  #: the corrector failed down to the minimum step
-    SINGULAR = "singular"  #: the augmented Jacobian [H_x, H_lam] lost rank (not a regular path)
-    STEP_LIMIT = "step limit"  #: homotopy_step_limit steps without reaching lam = 1
-    RETURNED = "returned"  #: the curve came back below lam = 0 (numerical failure)
-    EVALUATION_ERROR = "evaluation error"  #: F or J undefined along the path
-    TIME_LIMIT = "time limit"  #: the solve's deadline passed
-
-
-@dataclass
-class HomotopyOutcome:
-    status: HomotopyStatus
-    message: str
-    z: np.ndarray | None = None  #: best point (lowest merit) of the pass
-    lam: float = 0.0
-    paths: int = 0
-    steps: int = 0
-    rejected: int = 0
-    turning_points: int = 0
-    newton_iterations: int = 0
-    factorizations: int = 0
-    path_status: list = field(default_factory=list)  #: status of each path
-
-
-# ------------------------------------------------------------------ the smoothed equation
-def _splus(r, mu):
-    """s_mu(r) and its derivatives d/dr, d/dmu.  Written as max(r, 0) + 2 mu^2 / (q + |r|),
-    q = sqrt(r^2 + 4 mu^2) (the same value on both signs of r), so it has no cancellation
-    for r << 0 and no branch."""
-    if mu <= 0.0:
-        return np.maximum(r, 0.0), (r > 0).astype(float), np.zeros_like(r)
-    # hypot and mu * (2 mu / ...) instead of mu^2: mu^2 underflows below 1e-154 (0/0 at
-    # r = 0) and overflows above 1e154, both reachable through homotopy_smoothing.
-    q = np.hypot(r, 2.0 * mu)
-    val = np.maximum(r, 0.0) + mu * (2.0 * mu / (q + np.abs(r)))
-    return val, 0.5 * (1.0 + r / q), 2.0 * mu / q
-
-
-class SmoothedNormalMap:
-    """p_mu(x) and its derivatives for the box [lb, ub] (see the module docstring)."""
-
-    def __init__(self, lb, ub):
-        self.lb = np.asarray(lb, dtype=float)
-        self.ub = np.asarray(ub, dtype=float)
-        self._rows = None  # the array route's row data, made when it first runs
-
-    def _row_data(self):
-        """(has_l, has_u, c_l, c_u, l0, u0) of the array route.  One formula for every
-        kind of row: p = base + c_l s_mu(x - l) - c_u s_mu(x - u), base = l on rows with a
-        lower bound and x elsewhere (then s_mu(-r) = s_mu(r) - r gives the upper-bound-only
-        row u - s_mu(u - x) = x - s_mu(x - u))."""
-        if self._rows is None:
-            has_l, has_u = np.isfinite(self.lb), np.isfinite(self.ub)
-            self._rows = (has_l, has_u, has_l.astype(float), has_u.astype(float),
-                          np.where(has_l, self.lb, 0.0), np.where(has_u, self.ub, 0.0))
-        return self._rows
-
-    def project(self, x, mu):
-        """(p, dp/dx, dp/dmu) at x (one compiled pass for a float vector)."""
-        n = self.lb.size
-        if float_vectors(n, x, self.lb, self.ub):
-            p, dx, dmu = np.empty(n), np.empty(n), np.empty(n)
-            smoothed_projection(x, float(mu), self.lb, self.ub, p, dx, dmu)
-            return p, dx, dmu
-        return self.project_arrays(x, mu)
-
-    def project_arrays(self, x, mu):
-        """:meth:`project` by array operations (the compiled pass's reference)."""
-        has_l, _, cl, cu, l0, u0 = self._row_data()
-        sl, dl, ml = _splus(x - l0, mu)
-        su, du, mu_u = _splus(x - u0, mu)
-        p = np.where(has_l, l0, x) + cl * sl - cu * su
-        dx = (1.0 - cl) + cl * dl - cu * du
-        dmu = cl * ml - cu * mu_u
-        # The smoothed projection may leave the box by rounding only; clip it.
-        return np.clip(p, self.lb, self.ub), dx, dmu
-
-
-# ------------------------------------------------------------------ bordered linear algebra
-class _Bordered:
-    """LU of [[A, c], [v^T, 0]] (A n x n sparse, c, v dense), dense or sparse."""
-
-    def __init__(self, A, c, v, dense: bool):
-        n = A.shape[0]
-        self.dense = dense
-        if dense:
-            if c is None:
-                B = A  # the whole bordered matrix already (Fortran order: factored in place)
-            else:
-                B = np.empty((n + 1, n + 1))
-                B[:n, :n] = A
-                B[:n, n] = c[:n]
-                B[n, :] = v
-                B[n, n] = v[n]
-            lu, piv = self.lu = _dense_lu(B)
-            if not bordered_pivots_ok(lu):
-                raise np.linalg.LinAlgError("singular bordered matrix")
-        else:
-            col = sp.csc_matrix(c[:n].reshape(-1, 1))
-            row = sp.csr_matrix(v[:n].reshape(1, -1))
-            B = sp.bmat([[A, col], [row, sp.csc_matrix([[v[n]]])]], format="csc")
-            self.lu = spla.splu(B, permc_spec="COLAMD")
-
-    def solve(self, b):
-        if self.dense:
-            x = np.array(b, dtype=float)
-            finite = lu_solve(*self.lu, x)
-        else:
-            x = self.lu.solve(b)
-            finite = all_finite(x)
-        if not finite:
-            raise np.linalg.LinAlgError("non-finite solution of the bordered system")
-        return x
-
-
-def _solve_square(A, b, dense: bool):
-    """A^-1 b (non-finite entries when A is singular: the caller tests the step)."""
-    if dense:
-        # getrf and the compiled triangular solves: scipy's lu_factor and lu_solve cost a
-        # small problem's end game ~25 us per Newton iteration in their checks and dispatch
-        M = A.toarray() if sp.issparse(A) else A
-        x = np.array(b, dtype=float)
-        lu_solve(*_dense_lu(np.asarray(M, dtype=float)), x)
-        return x
-    return spla.splu(sp.csc_matrix(A), permc_spec="COLAMD").solve(b)
-
-
-_getrf = sla.lapack.get_lapack_funcs("getrf", (np.empty(1),))
-
-
-def _dense_lu(A):
-    """(lu, piv) of A by LAPACK's getrf directly, in place when A is Fortran-ordered (what
-    scipy.linalg.lu_factor calls, without its checks and dispatch: ~35 us a step at n = 1;
-    the solves with these factors are compiled: lu_solve).  An exactly singular A gives
-    factors with a zero pivot (the callers test the pivots or the solution)."""
-    lu, piv, info = _getrf(A, overwrite_a=True)
-    if info < 0:
-        raise ValueError(f"illegal argument {-info} of getrf")
-    return lu, piv
-
-
-def _dense(J):
-    """J (float CSC) as a new dense array, in one compiled pass (J.toarray() costs ~80 us
-    at n = 1)."""
-    out = np.empty(J.shape)
-    csc_to_dense(J.indptr, J.indices, J.data, out)
-    return out
 
 
 # ------------------------------------------------------------------ the tracker
@@ -322,16 +74,22 @@ _DENSE_ENDS = {hk.SINGULAR: HomotopyStatus.SINGULAR,
                hk.STEP_LIMIT: HomotopyStatus.STEP_LIMIT}
 
 
-class _Stop(Exception):
+class HomotopyStop(Exception):
+    """Raised through the tracker to end the pass: a solution, the time limit, an
+    evaluation error at a path's start."""
+
     def __init__(self, status: HomotopyStatus, message: str):
         self.status = status
         self.message = message
 
 
-class _Tracker:
-    """Follows the zero curves of H_a for one problem; counts its own work."""
+class Tracker:
+    """Follows the zero curves of H_a for one problem; counts its own work.  ``compiled``:
+    the solve's tracker route (:attr:`compass_sparse.routes.Routes.homotopy`): a problem of
+    order at most ``DENSE_MAX_N`` then follows its paths in compiled calls (the same points
+    bit for bit), where numba binds LAPACK's getrf; any other in the array route."""
 
-    def __init__(self, evalr, lb, ub, opt, *, deadline, on_point, tol, log):
+    def __init__(self, evalr, lb, ub, opt, *, deadline, on_point, tol, log, compiled=True):
         self.ev = evalr
         self.lb, self.ub = np.asarray(lb, float), np.asarray(ub, float)
         self.n = self.lb.size
@@ -340,6 +98,7 @@ class _Tracker:
         self.on_point = on_point
         self.tol = tol
         self.log = log
+        self.compiled = compiled
         self.smooth = SmoothedNormalMap(lb, ub)
         self.factorizations = 0
         self.steps = 0
@@ -364,7 +123,7 @@ class _Tracker:
     # -------------------------------------------------------------- evaluations
     def _check_time(self):
         if self.deadline is not None and time.perf_counter() > self.deadline:
-            raise _Stop(HomotopyStatus.TIME_LIMIT, "time limit reached on the path")
+            raise HomotopyStop(HomotopyStatus.TIME_LIMIT, "time limit reached on the path")
 
     def _offer(self, z, f):
         phi = fb_phi(z, f, self.lb, self.ub)
@@ -375,7 +134,7 @@ class _Tracker:
             # the caller's acceptance test decides what a solution is (it raises then)
             self.on_point(z, f, phi, psi)
         elif np.sqrt(2.0 * psi) <= self.tol:
-            raise _Stop(HomotopyStatus.SOLVED, "solution found on the homotopy pass")
+            raise HomotopyStop(HomotopyStatus.SOLVED, "solution found on the homotopy pass")
 
     def _mu(self, lam):
         """The smoothing mu(lam) = mu0 (1 - lam), 0 from lam = 1 on."""
@@ -428,7 +187,7 @@ class _Tracker:
         # H_x = lam (J D + I - D) + (1 - lam) I = lam J D + I - lam D
         # dH/dlam = G - (x - a) + lam (J - I) dp/dmu * dmu/dlam,  dmu/dlam = -mu0
         if self.dense:
-            Hx = _dense(J)
+            Hx = dense_copy(J)
             Hx *= lam * dx  # scales column j by lam dx_j
             Hx.flat[::n + 1] += 1.0 - lam * dx  # the diagonal
         else:
@@ -444,8 +203,8 @@ class _Tracker:
         B = Hx.base if isinstance(Hx, np.ndarray) else None
         if B is not None and Hlam.base is B:
             B[-1, :] = v  # residual()'s bordered matrix: its last row, then factored
-            return _Bordered(B, None, None, True)
-        return _Bordered(Hx, np.append(Hlam, 0.0), v, self.dense)
+            return Bordered(B, None, None, True)
+        return Bordered(Hx, np.append(Hlam, 0.0), v, self.dense)
 
     # -------------------------------------------------------------- one path
     def _end(self, status, y, h=0.0, bound=0.0):
@@ -473,8 +232,7 @@ class _Tracker:
 
     def follow(self, a, polish=None):
         """Track gamma_a from (a, 0).  Returns (status, message, last point (x, lam))."""
-        if (COMPILED_TRACKER and self.n <= DENSE_MAX_N and not cold_start()["interpreting"]
-                and hk.bind_lapack()):
+        if self.compiled and self.n <= DENSE_MAX_N and hk.bind_lapack():
             return self._follow_dense(a, polish)
         opt = self.opt
         n = self.n
@@ -486,7 +244,7 @@ class _Tracker:
         bound = opt.homotopy_divergence_bound * (1.0 + a_max)
         out = self.residual(y, a, True)
         if out is None:
-            raise _Stop(HomotopyStatus.EVALUATION_ERROR, "F or J undefined at the start of the path")
+            raise HomotopyStop(HomotopyStatus.EVALUATION_ERROR, "F or J undefined at the start of the path")
         H, Hx, Hlam = out
         lam_end = opt.homotopy_end_lambda
         h = opt.homotopy_initial_step * (1.0 + a_max)
@@ -536,7 +294,7 @@ class _Tracker:
                 return self._end(HomotopyStatus.EVALUATION_ERROR, y)
             H, Hx, Hlam = out
             if lam >= lam_end or lam >= 1.0 - END_GAP:
-                z_end = self.end_game(y[:-1])  # raises _Stop(SOLVED) on success
+                z_end = self.end_game(y[:-1])  # raises HomotopyStop(SOLVED) on success
                 if lam >= 1.0 - END_GAP:
                     return self._end_reached(z_end, polish, y)
                 lam_end = 1.0 - 0.1 * (1.0 - lam)
@@ -550,7 +308,7 @@ class _Tracker:
 
     def _follow_dense(self, a, polish):
         """:meth:`follow` of a dense problem: everything between two evaluations of the
-        user's functions in one compiled call (``_homotopy_kernels.follow_dense``, which
+        user's functions in one compiled call (``_kernels.follow_dense``, which
         says what it needs next); here only the evaluations, the candidate points, the
         time limit, the log and the end game.  The Python route's steps in its order: the
         same points bit for bit, without its ~50 us of Python per accepted step."""
@@ -619,7 +377,7 @@ class _Tracker:
                     f, J = self.ev.fj(p)
                     if f is None:
                         if si[hk.I_AT_START]:
-                            raise _Stop(HomotopyStatus.EVALUATION_ERROR,
+                            raise HomotopyStop(HomotopyStatus.EVALUATION_ERROR,
                                         "F or J undefined at the start of the path")
                         return self._end(HomotopyStatus.EVALUATION_ERROR, y.copy())
                     self._offer(p, f)
@@ -627,7 +385,7 @@ class _Tracker:
                     code = follow(sf, si, W, B, piv, f, J.indptr, J.indices, J.data, False)
                 elif code == hk.END_GAME:
                     lam = y[n]
-                    z_end = self.end_game(y[:n].copy())  # raises _Stop(SOLVED) on success
+                    z_end = self.end_game(y[:n].copy())  # raises HomotopyStop(SOLVED) on success
                     if lam >= 1.0 - END_GAP:
                         return self._end_reached(z_end, polish, y.copy())
                     sf[hk.F_LAM_END] = 1.0 - 0.1 * (1.0 - lam)
@@ -738,14 +496,14 @@ class _Tracker:
             d = ((x > lb) & (x < ub)).astype(float)
             J = float_csc(J)
             if self.dense:
-                A = _dense(J)
+                A = dense_copy(J)
                 A *= d  # J D + I - D, entry by entry as the sparse sum
                 A.flat[::self.n + 1] += 1.0 - d  # the diagonal
             else:
                 A = J @ sp.diags(d) + sp.diags(1.0 - d)
             try:
                 self.factorizations += 1
-                dx = _solve_square(A, -fb, self.dense)
+                dx = solve_square(A, -fb, self.dense)
             except (np.linalg.LinAlgError, RuntimeError, ValueError):
                 break
             if not all_finite(dx):
@@ -776,93 +534,3 @@ class _Tracker:
         return z
 
 
-def track_paths(evalr, lb, ub, z_start, opt, *, center=None, on_point=None, rng,
-                deadline=None, tol=1e-6, polish=None, log=None,
-                _tracker_out=None) -> HomotopyOutcome:
-    """Follow up to ``opt.homotopy_path_limit`` homotopy paths, the first from ``z_start``,
-    the others from random points of the box drawn around ``center`` (default z_start; the
-    user's start point when the first path starts from the best point found:
-    :func:`~compass_sparse.restarts.random_point`).
-
-    ``rng``: the random generator of those points, or a callable that returns it (called
-    when the second path starts).  ``on_point(z, f, phi, psi)`` receives every accepted
-    path point and every end-game point and may raise to stop the pass (the stabilized
-    Newton method raises when a point is a solution); ``polish(z)`` (optional) is called
-    with the end point of a path (lam = 1) whose Newton end game missed the tolerance."""
-    tr = _Tracker(evalr, lb, ub, opt, deadline=deadline, on_point=on_point, tol=tol, log=log)
-    if _tracker_out is not None:  # lets homotopy_pass count work when a stop is raised
-        _tracker_out["tracker"] = tr
-    lb = tr.lb
-    ub = tr.ub
-    statuses = []
-    status, message, y = HomotopyStatus.STEP_LIMIT, "no path followed", None
-    a = project(np.asarray(z_start, float), lb, ub)
-    center = np.asarray(z_start if center is None else center, float)
-    for k in range(opt.homotopy_path_limit):
-        if k > 0:
-            if callable(rng):  # made now: most passes end on their first path
-                rng = rng()
-            a = random_point(rng, center, lb, ub)
-        try:
-            status, message, y = tr.follow(a, polish=polish)
-        except _Stop as stop:
-            status, message = stop.status, stop.message
-        statuses.append(status)
-        if status is HomotopyStatus.SOLVED:
-            break
-        if log is not None:
-            log(f"homotopy path {k + 1}: {status.value} ({message}); "
-                f"{tr.steps} steps so far, {tr.factorizations} factorizations")
-        if status is HomotopyStatus.TIME_LIMIT:
-            break
-    z = tr.best[0] if tr.best is not None else None
-    return HomotopyOutcome(
-        status=status, message=message, z=z, lam=float(y[-1]) if y is not None else 0.0,
-        paths=len(statuses), steps=tr.steps, rejected=tr.rejected,
-        turning_points=tr.turning_points, newton_iterations=tr.newton_iterations,
-        factorizations=tr.factorizations, path_status=statuses)
-
-
-def homotopy_pass(solver, z_start, *, polish=None, center=None) -> HomotopyOutcome:
-    """The homotopy as a pass of the stabilized Newton method ``solver`` (an NMSSolver):
-    its evaluator, deadline, best-point bookkeeping and random stream.  The first path
-    starts from ``z_start``, the others around ``center`` (:func:`track_paths`).  The work
-    done is added to ``solver.passes['homotopy']`` whether the pass ends normally or by a
-    stop raised from ``solver._consider`` (a solution)."""
-    st = solver.passes.setdefault("homotopy", PassStats())
-    counters = solver.p.counters
-    nf0, nj0 = counters.nfev, counters.njev
-    t0 = time.perf_counter()
-    out = None
-    stopped = ""
-    tracker_box = {}
-
-    log = solver.log_major  # (None: no log lines, and the tracker skips making them)
-
-    try:
-        # dense LU of the bordered system: one BLAS thread (a multithreaded BLAS ran these
-        # factorizations 10x slower on a loaded machine: 150 ms against 15 ms at n = 500);
-        # below BLAS_LIMIT_MIN_N OpenBLAS keeps such small kernels on one thread itself
-        with (single_threaded_blas() if solver.n >= BLAS_LIMIT_MIN_N
-              else contextlib.nullcontext()):
-            out = track_paths(solver.ev, solver.lb, solver.ub, z_start, solver.opt0,
-                              center=center, on_point=solver._consider,
-                              rng=lambda: solver.rng,
-                              deadline=solver.deadline, tol=solver.tol, polish=polish, log=log,
-                              _tracker_out=tracker_box)
-        return out
-    except BaseException as exc:  # a solution or a limit of the solve, raised through us
-        stopped = getattr(exc, "message", type(exc).__name__)
-        raise
-    finally:
-        tr = tracker_box.get("tracker")
-        st.ran = True
-        st.time += time.perf_counter() - t0
-        st.nfev += counters.nfev - nf0
-        st.njev += counters.njev - nj0
-        if tr is not None:
-            st.iterations += tr.steps
-            st.factorizations += tr.factorizations
-        st.reason = (f"{out.status.value}: {out.message} ({out.paths} paths, {out.steps} steps, "
-                     f"{out.turning_points} turning points)" if out is not None
-                     else f"stopped on the path: {stopped}")
