@@ -19,8 +19,6 @@ import pytest
 from compass_sparse import MCP
 from compass_sparse.batch import (
     CGEScenarioModel,
-    Progress,
-    _paths,
     grid,
     parse_axis,
     read_results,
@@ -29,7 +27,10 @@ from compass_sparse.batch import (
     scenario_tree,
     solve_batch,
 )
+from compass_sparse.batch.runner import _Counts
+from compass_sparse.batch.tree import paths as _paths
 from compass_sparse.exceptions import OptionError
+from compass_sparse.progress import Progress
 
 pytest.importorskip("pyarrow", reason="the batch results need the pyarrow extra")
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -257,7 +258,7 @@ def test_progress_draws_a_bar_only_on_a_terminal(caplog):
     tty, pipe = _Tty(), io.StringIO()
     try:
         for stream in (tty, pipe):
-            p = Progress(10, 2, stream=stream, every=0.0)
+            p = _Counts(10, 2, Progress(True, stream=stream, after=0.0, every=0.0))
             p.update(3, 1)
             p.close()
     finally:

@@ -200,9 +200,7 @@ class CompiledRun:
         if solver.callback is not None:
             solver.call_back(self._current())
         if solver.progress.enabled:
-            solver.progress.update(solver.counts.nit, solver.counts.minor_iterations,
-                                   math.sqrt(2.0 * sf[nk.S_CPSI]),
-                                   math.sqrt(2.0 * sf[nk.S_BPSI]), solver.counts.restarts)
+            solver.show_progress(math.sqrt(2.0 * sf[nk.S_CPSI]), math.sqrt(2.0 * sf[nk.S_BPSI]))
         J_given, self.cur_J = self.cur_J, None
         self.code_res = LinearCode.ERROR
         newton = solver.newton

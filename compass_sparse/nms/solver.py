@@ -22,7 +22,7 @@ from ..homotopy.outcome import HomotopyStatus
 from ..homotopy.paths import homotopy_pass
 from ..merit import fb_directional, fb_phi, fb_psi, normal_map_at
 from ..path.outcome import LinearCode, WarmBasis
-from ..progress import ProgressLine
+from ..progress import Progress, solve_line
 from ..routes import Routes
 from ..status import IntermediateResult, PassStats, Status, WorkCounts
 from .acceptance import Acceptance
@@ -73,7 +73,7 @@ class NMSSolver:
                                  stats=self.passes["path"], counts=self.counts,
                                  deadline=deadline, log=log_minor, warm=warm_basis)
         self.log = MajorLog(log_major, problem.counters, problem.row_label)
-        self.progress = ProgressLine(options.progress)
+        self.progress = Progress(options.progress)
         self._rng = None
         self._start_verdict = start_verdict
         self._start0 = None  # the start Point of solve()
@@ -107,9 +107,15 @@ class NMSSolver:
                           f"cumulative pivot limit ({opt.cumulative_limit(self.n)}) reached")
 
     def _progress(self, cur: Point, final=False):
-        c = self.counts
-        self.progress.update(c.nit, c.minor_iterations, cur.fbn, self.best.point.fbn,
-                             c.restarts, final=final)
+        self.show_progress(cur.fbn, self.best.point.fbn, final)
+
+    def show_progress(self, fbn, best_fbn, final=False):
+        """The progress line (Options.progress) at an iterate and the best point."""
+        p = self.progress
+        if p.enabled and p.due(final):
+            c = self.counts
+            p.show(solve_line(c.nit, c.minor_iterations, fbn, best_fbn, c.restarts,
+                              p.elapsed), final=final)
 
     def call_back(self, cur: Point):
         """The user's callback at the current iterate (its return or StopIteration ends

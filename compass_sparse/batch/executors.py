@@ -17,6 +17,9 @@ import sys
 import threading
 
 import numpy as np
+from threadpoolctl import threadpool_limits
+
+from ..lcp import solve_lcp
 
 __all__ = [
     "DaskExecutor",
@@ -29,14 +32,7 @@ __all__ = [
 
 def prepare_worker() -> int:
     """Limit BLAS to one thread and load the compiled kernels (returns the pid)."""
-    try:
-        from threadpoolctl import threadpool_limits
-
-        threadpool_limits(limits=1)
-    except ImportError:  # pragma: no cover - a declared dependency
-        pass
-    from . import solve_lcp
-
+    threadpool_limits(limits=1)
     # A 3 x 3 LCP touches the crash, the path and its numba kernels.
     solve_lcp(np.array([[2.0, 1, 0], [1, 2, 1], [0, 1, 2]]), np.array([-1.0, 1, -1]))
     return os.getpid()
@@ -118,7 +114,7 @@ class DaskExecutor:
     name = "dask"
 
     def __init__(self, client):
-        from distributed import wait
+        from distributed import wait  # (dask: an optional extra, the batch one)
 
         self.client = client
         self._wait = wait
