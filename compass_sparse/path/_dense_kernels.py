@@ -229,7 +229,11 @@ def path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_coun
     one record per pivot of this call, the Python loop's minor-log line as numbers: row
     k (the call's pivot k) holds the pivot count, REC_FLIP or REC_EXCHANGE, the entering
     kind and index, the leaving kind and index and the update's outcome (UPD_*), rect[k]
-    t after the pivot.  The records change nothing the path computes."""
+    t after the pivot.  The records change nothing the path computes.
+
+    A compiled kernel whose length is the algorithm (one pivot's FTRAN, ratio test, update
+    and complement rule, in the Python loop's order): exempt from the package's limit of
+    100 lines per function."""
     n = sk.shape[0]
     d = work[5]
     col = work[6]

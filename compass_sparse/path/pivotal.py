@@ -443,16 +443,7 @@ class PivotalPath:
                 self.st.t_lower, self.st.below_from = -np.inf, pivots
                 leave, theta, leave_up = self._ratio_test(rate, piv_tol)
             if leave < 0 and not np.isfinite(theta_self):
-                # Ray termination: the entering variable grows without bound; z moves
-                # along dz (basic z's at their rates, an entering z at its direction).
-                self.st.unbounded = True
-                dz = np.zeros(self.n)
-                m = self.st.sk == VAR_Z
-                dz[self.st.si[m]] = rate[m]
-                if ek == VAR_Z:
-                    dz[ei] += es
-                self.st.ray = (self._current_point()[0], dz)
-                return LinearCode.RAY, f"ray: {_VAR_NAMES[ek]}[{ei}] unbounded"
+                return self._ray(ek, ei, es, rate)
             if leave < 0 or theta_self <= theta:
                 # The entering variable reaches its own bound first.
                 theta = theta_self
@@ -465,15 +456,7 @@ class PivotalPath:
                 pivots += 1
                 self.st.pivots = pivots
                 if ek == VAR_Z:
-                    # Bound flip: z_i moves to its other bound; its other slack enters.
-                    newv = self.ub[ei] if es > 0 else self.lb[ei]
-                    self.st.zval[ei] = newv
-                    entering = (VAR_V, ei, 1.0, 0.0) if es > 0 else (VAR_W, ei, 1.0, 0.0)
-                    self._update_t()
-                    self._record()
-                    if self.log is not None:
-                        self.log(f"minor {pivots:7d} t {self.st.t:.6e} z[{ei}] to its other "
-                                 "bound")
+                    entering = self._bound_flip(ei, es, pivots)
                     continue
                 return LinearCode.ERROR, "bounded entering slack"  # cannot happen
             # A basic variable blocks: update values and exchange columns.
@@ -507,20 +490,51 @@ class PivotalPath:
             if self.log is not None:
                 self.log(f"minor {pivots:7d} t {self.st.t:.6e} in {_VAR_NAMES[ek]}[{ei}] "
                          f"out {_VAR_NAMES[lk]}[{li}] ({status.name})")
-            # Complement rule.
-            if lk == VAR_W:
-                entering = (VAR_Z, li, 1.0, self.lb[li])
-            elif lk == VAR_V:
-                entering = (VAR_Z, li, -1.0, self.ub[li])
-            elif lk == VAR_Z:
-                entering = (VAR_V, li, 1.0, 0.0) if leave_at_upper else (VAR_W, li, 1.0, 0.0)
-            elif lk == VAR_A:
-                j = self.st.displaced.pop(li, None)
-                if j is None:
-                    return LinearCode.ERROR, "artificial without a displaced variable"
-                entering = (VAR_Z, j, 0.0, self.st.zval[j])
-            else:
-                return LinearCode.ERROR, f"unexpected leaving kind {lk}"
+            entering, code, msg = self._complement(lk, li, leave_at_upper)
+            if code is not None:
+                return code, msg
+
+    def _complement(self, lk, li, leave_at_upper):
+        """The complement rule: (the next entering variable, None, "") after variable
+        (lk, li) left the basis (at its upper bound: ``leave_at_upper``), or (None, code,
+        message) when there is none."""
+        if lk == VAR_W:
+            return (VAR_Z, li, 1.0, self.lb[li]), None, ""
+        if lk == VAR_V:
+            return (VAR_Z, li, -1.0, self.ub[li]), None, ""
+        if lk == VAR_Z:
+            return ((VAR_V, li, 1.0, 0.0) if leave_at_upper else (VAR_W, li, 1.0, 0.0)), \
+                None, ""
+        if lk == VAR_A:
+            j = self.st.displaced.pop(li, None)
+            if j is None:
+                return None, LinearCode.ERROR, "artificial without a displaced variable"
+            return (VAR_Z, j, 0.0, self.st.zval[j]), None, ""
+        return None, LinearCode.ERROR, f"unexpected leaving kind {lk}"
+
+    def _ray(self, ek, ei, es, rate):
+        """Ray termination: the entering variable grows without bound; z moves along dz
+        (basic z's at their rates, an entering z at its direction)."""
+        self.st.unbounded = True
+        dz = np.zeros(self.n)
+        m = self.st.sk == VAR_Z
+        dz[self.st.si[m]] = rate[m]
+        if ek == VAR_Z:
+            dz[ei] += es
+        self.st.ray = (self._current_point()[0], dz)
+        return LinearCode.RAY, f"ray: {_VAR_NAMES[ek]}[{ei}] unbounded"
+
+    def _bound_flip(self, ei, es, pivots):
+        """z_i moves to its other bound (pivot ``pivots``); returns its other slack, the
+        next entering variable."""
+        newv = self.ub[ei] if es > 0 else self.lb[ei]
+        self.st.zval[ei] = newv
+        entering = (VAR_V, ei, 1.0, 0.0) if es > 0 else (VAR_W, ei, 1.0, 0.0)
+        self._update_t()
+        self._record()
+        if self.log is not None:
+            self.log(f"minor {pivots:7d} t {self.st.t:.6e} z[{ei}] to its other bound")
+        return entering
 
     def _bound_of(self, kind, index, upper):
         """The bound a leaving basic variable stops at."""
