@@ -15,6 +15,14 @@ import time
 
 import numpy as np
 
+from . import generators as gen
+from .batch import grid, parse_axis, read_scenarios, solve_batch
+from .generators.cge import economics_report, static_cge
+from .lcp import solve_lcp
+from .options import Options
+from .problem.mcp import MCP
+from .solve import solve_mcp
+
 
 def _opts(args):
     # The command prints the summary itself; -v adds the major-iteration log, -vv the
@@ -43,9 +51,6 @@ def _print_result(name, n, res, problem=None, build_time=None):
 
 
 def _demo(args) -> int:
-    from . import solve_lcp, solve_mcp
-    from . import generators as gen
-
     kind = args.problem
     t0 = time.perf_counter()
     if kind == "obstacle":
@@ -63,8 +68,6 @@ def _demo(args) -> int:
         build = time.perf_counter() - t0
         res = solve_mcp(g.problem, options=_opts(args))
     elif kind == "cge":
-        from .generators.cge import static_cge
-
         # the shocked model is the one solved, so it is the one the result is checked on
         g = static_cge(seed=args.seed).with_shock(output_tax=0.0)
         build = time.perf_counter() - t0
@@ -84,8 +87,6 @@ def _demo(args) -> int:
                              [6 * x1 + x2, x1 + 4 * x2, 2, 3],
                              [2 * x1, 6 * x2, 2, 3]], dtype=float)
 
-        from .problem.mcp import MCP
-
         prob = MCP(F, J, 0.0, np.inf, np.zeros(4))
         build = time.perf_counter() - t0
         res = solve_mcp(prob, options=_opts(args))
@@ -99,9 +100,6 @@ def _demo(args) -> int:
 
 
 def _cge(args) -> int:
-    from . import solve_mcp
-    from .generators.cge import static_cge
-
     t0 = time.perf_counter()
     model = static_cge(regions=args.regions, sectors=args.sectors, households=args.households,
                        seed=args.seed)
@@ -130,8 +128,6 @@ def _cge(args) -> int:
     print(f"shock: {shock}")
     res = solve_mcp(shocked.problem, options=_opts(args))
     _print_result("counterfactual", shocked.problem.n, res, shocked.problem)
-    from .generators.cge import economics_report
-
     econ = economics_report(shocked, shocked.benchmark, res.x)
     print()
     print("economics of the counterfactual" + ("" if res.success else
@@ -145,8 +141,6 @@ def _cge(args) -> int:
 
 def _cge_scenarios(args, model) -> int:
     """A scenario batch of the CGE model: results to Parquet, a table of headlines."""
-    from .batch import grid, parse_axis, read_scenarios, solve_batch
-
     scenarios = grid(**dict(parse_axis(a) for a in args.scenarios)) if args.scenarios else []
     if args.scenarios_file:
         scenarios += read_scenarios(args.scenarios_file)
@@ -239,8 +233,6 @@ def main(argv=None) -> int:
     if args.cmd == "cge":
         return _cge(args)
     if args.cmd == "options":
-        from .options import Options
-
         print(Options.describe())
         return 0
     ap.print_help()

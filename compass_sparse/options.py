@@ -350,7 +350,7 @@ class Options(OptionsMixin):
     @classmethod
     def path_name(cls, name: str) -> str | None:
         """PATH 5.2's name of option ``name`` (None when PATH has no such option)."""
-        cls._check_names([name])
+        cls.check_names([name])
         return PATH_NAMES.get(name, name)
 
     @classmethod

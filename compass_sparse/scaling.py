@@ -36,6 +36,7 @@ import scipy.sparse as sp
 from .linalg.csc import trusted_csc, without_duplicates
 from ._jit import njit
 from .linalg._csc_kernels import csc_max_norm_spread, csc_scaled_abs_maxima
+from .linalg._csc_kernels import csc_scale, positive_spread
 from .problem.evaluator import ScaledEvaluator
 from .problem.mcp import MCP
 
@@ -74,8 +75,6 @@ def scale_entries(J, row, col) -> sp.csc_matrix:
     """diag(row) J diag(col) as a new CSC matrix, entry by entry in one compiled pass
     ((a_ij row_i) col_j, the value diag(row) @ J @ diag(col) computes; the stored entries,
     explicit zeros included, are kept)."""
-    from .linalg._csc_kernels import csc_scale
-
     J = J if sp.issparse(J) and J.format == "csc" else sp.csc_matrix(J)
     data = np.empty(J.data.shape)
     csc_scale(J.indptr, J.indices, J.data.astype(float, copy=False), row, col, data)
@@ -94,8 +93,6 @@ def _maxnorms(A: sp.csc_matrix, row=None, col=None):
 
 
 def _spread(v) -> float:
-    from .linalg._csc_kernels import positive_spread
-
     return float(positive_spread(v))
 
 

@@ -96,10 +96,10 @@ def test_tiny_problem_with_a_declared_linear_row_still_presolved_in_every_solve(
     (np.array([-0.0, 0.0]), False),
 ])
 def test_memo_key_is_none_exactly_for_points_with_a_nan(x, none):
-    k = Memo._key(x)
+    k = Memo.key_of(x)
     assert (k is None) == none
     if not none:  # equal points (-0.0 == 0.0) share the key
-        assert k == Memo._key(np.where(x == 0, 0.0, x))
+        assert k == Memo.key_of(np.where(x == 0, 0.0, x))
 
 
 def test_memo_key_made_once_still_finds_the_pinned_start_point():

@@ -486,10 +486,10 @@ def test_compiled_slot_readout_matches_array_formulas(seed):
     p = PivotalPath.__new__(PivotalPath)
     p.n, p.st = n, st
     p.lb, p.ub = lb, ub
-    got = p._current_point()
+    got = p.current_point()
     p.lb, p.ub = lb.tolist(), ub.tolist()  # not float vectors: the array formulas
     with np.errstate(invalid="ignore"):
-        ref = p._current_point()
+        ref = p.current_point()
     for a, b in zip(got, ref):
         assert np.array_equal(a, b, equal_nan=True)
         assert np.array_equal(np.signbit(a), np.signbit(b))

@@ -17,6 +17,7 @@ RESULTS_FILE = "results.parquet"
 
 # ---------------------------------------------------------------------------- storage
 def _schema(rows):
+    # (pyarrow: an optional extra, the batch one)
     import pyarrow as pa
 
     fixed = [("index", pa.int64()), ("key", pa.string()), ("params", pa.string()),
@@ -37,6 +38,7 @@ class ResultStore:
 
     def __init__(self, path):
         try:
+            # (pyarrow: an optional extra, the batch one)
             import pyarrow
             import pyarrow.parquet  # noqa: F401
         except ImportError:  # pragma: no cover - CI installs the extra
@@ -52,6 +54,7 @@ class ResultStore:
 
     def load(self) -> dict:
         """key -> row of every finished scenario on disk (first copy wins)."""
+        # (pyarrow: an optional extra, the batch one)
         import pyarrow.parquet as pq
 
         out = {}
@@ -61,6 +64,7 @@ class ResultStore:
         return out
 
     def write(self, rows):
+        # (pyarrow: an optional extra, the batch one)
         import pyarrow as pa
         import pyarrow.parquet as pq
 
@@ -76,6 +80,7 @@ class ResultStore:
     def compact(self):
         """Merge every file into results.parquet (rename first, then delete the parts: a
         kill in between leaves duplicates that load() ignores)."""
+        # (pyarrow: an optional extra, the batch one)
         import pyarrow as pa
         import pyarrow.parquet as pq
 
@@ -103,6 +108,7 @@ def _storable(row):
 def read_results(path):
     """The rows of a results directory as a pyarrow Table, ordered by scenario index."""
     rows = sorted(ResultStore(path).load().values(), key=lambda r: r["index"])
+    # (pyarrow: an optional extra, the batch one)
     import pyarrow as pa
 
     return pa.Table.from_pylist(rows, schema=_schema(rows))

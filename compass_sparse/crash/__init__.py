@@ -22,7 +22,8 @@ One factorization of J_II and one Jacobian per iteration: it is a Newton method 
 current face, which is why it finds the active set of well-behaved large problems in a
 few steps.  When the inactive set moved by at most ``REUSE_MAX_CHANGES`` indices, the step
 is first sought by GMRES preconditioned with the previous step's factors (an inexact
-Newton step; see :func:`compass_sparse.crash.reduced.reuse_solve`) and J_II is factored only when that fails: on the
+Newton step; see :func:`compass_sparse.crash.reduced.reuse_solve`) and J_II is factored
+only when that fails: on the
 large CGE models a factorization costs as much as tens of solves with old factors.
 
 Modules: ``driver`` (:func:`crash`: the route, the BLAS block), ``projected_newton`` (the

@@ -225,6 +225,7 @@ def bind_lapack() -> bool:
     global _XXGETRF
     if _XXGETRF is None:
         try:
+            # (lazy: numba costs 0.2-0.4 s of import; see compass_sparse._jit)
             import numba
             from numba.np.linalg import _LAPACK
 

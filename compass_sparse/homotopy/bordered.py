@@ -3,16 +3,16 @@ dense (LAPACK's getrf, compiled solves) or sparse (SuperLU), and the end game's 
 solves."""
 from __future__ import annotations
 
+import functools
+
 import numpy as np
-import scipy.linalg as sla
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from ..box import all_finite
 from ..linalg._csc_kernels import csc_to_dense
 from ._kernels import bordered_pivots_ok, lu_solve
 
-__all__ = ["Bordered", "dense_copy", "dense_lu", "solve_square"]
+__all__ = ["Bordered", "dense_copy", "dense_lu", "lapack_getrf", "solve_square"]
 
 
 # ------------------------------------------------------------------ bordered linear algebra
@@ -38,7 +38,10 @@ class Bordered:
             col = sp.csc_matrix(c[:n].reshape(-1, 1))
             row = sp.csr_matrix(v[:n].reshape(1, -1))
             B = sp.bmat([[A, col], [row, sp.csc_matrix([[v[n]]])]], format="csc")
-            self.lu = spla.splu(B, permc_spec="COLAMD")
+            # (lazy: scipy.sparse.linalg adds ~0.15 s to the package's import)
+            from scipy.sparse.linalg import splu
+
+            self.lu = splu(B, permc_spec="COLAMD")
 
     def solve(self, b):
         if self.dense:
@@ -61,10 +64,19 @@ def solve_square(A, b, dense: bool):
         x = np.array(b, dtype=float)
         lu_solve(*dense_lu(np.asarray(M, dtype=float)), x)
         return x
-    return spla.splu(sp.csc_matrix(A), permc_spec="COLAMD").solve(b)
+    # (lazy: scipy.sparse.linalg adds ~0.15 s to the package's import)
+    from scipy.sparse.linalg import splu
+
+    return splu(sp.csc_matrix(A), permc_spec="COLAMD").solve(b)
 
 
-_getrf = sla.lapack.get_lapack_funcs("getrf", (np.empty(1),))
+@functools.lru_cache(maxsize=1)
+def lapack_getrf():
+    """LAPACK's dgetrf, as scipy.linalg binds it (looked up when first needed)."""
+    # (lazy: scipy.linalg adds ~0.12 s to the package's import)
+    import scipy.linalg as sla
+
+    return sla.lapack.get_lapack_funcs("getrf", (np.empty(1),))
 
 
 def dense_lu(A):
@@ -72,7 +84,7 @@ def dense_lu(A):
     scipy.linalg.lu_factor calls, without its checks and dispatch: ~35 us a step at n = 1;
     the solves with these factors are compiled: lu_solve).  An exactly singular A gives
     factors with a zero pivot (the callers test the pivots or the solution)."""
-    lu, piv, info = _getrf(A, overwrite_a=True)
+    lu, piv, info = lapack_getrf()(A, overwrite_a=True)
     if info < 0:
         raise ValueError(f"illegal argument {-info} of getrf")
     return lu, piv

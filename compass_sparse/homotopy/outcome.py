@@ -1,4 +1,5 @@
-"""How a homotopy pass ended (:class:`HomotopyStatus`) and what it did (:class:`HomotopyOutcome`)."""
+"""How a homotopy pass ended (:class:`HomotopyStatus`) and what it did
+(:class:`HomotopyOutcome`)."""
 from __future__ import annotations
 
 import enum

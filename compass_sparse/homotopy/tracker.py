@@ -17,7 +17,8 @@ from ..linalg.csc import csc_times, float_csc
 from ..merit import fb_phi, fb_psi
 from ..options import HOMOTOPY_DENSE_DENSITY, HOMOTOPY_DENSE_MAX_N
 from . import _kernels as hk
-from ._kernels import bordered_values, chord_step, homotopy_values, smoothed_projection, unit_tangent
+from ._kernels import (bordered_values, chord_step, homotopy_values, smoothed_projection,
+                       unit_tangent)
 from .bordered import Bordered, dense_copy, solve_square
 from .outcome import HomotopyStatus
 from .smoothing import SmoothedNormalMap
@@ -244,7 +245,8 @@ class Tracker:
         bound = opt.homotopy_divergence_bound * (1.0 + a_max)
         out = self.residual(y, a, True)
         if out is None:
-            raise HomotopyStop(HomotopyStatus.EVALUATION_ERROR, "F or J undefined at the start of the path")
+            raise HomotopyStop(HomotopyStatus.EVALUATION_ERROR,
+                               "F or J undefined at the start of the path")
         H, Hx, Hlam = out
         lam_end = opt.homotopy_end_lambda
         h = opt.homotopy_initial_step * (1.0 + a_max)

@@ -79,10 +79,12 @@ def path_available() -> bool:
     if not gams_state().runs:
         return False
     try:
+        # (GAMSPy: an optional extra)
         import gamspy  # noqa: F401
     except Exception:
         return False
     try:
+        # (GAMSPy: an optional extra)
         from gamspy import utils
 
         solvers = [s.upper() for s in utils.getInstalledSolvers()]
@@ -307,6 +309,7 @@ class PathSession:
             raise ValueError("n must be positive")
         self.quadratic = bool(quadratic)
         require_gams("run PATH")
+        # (GAMSPy: an optional extra)
         import gamspy as gp
 
         self._gp = gp
@@ -335,6 +338,7 @@ class PathSession:
 
     # ------------------------------------------------------------------ #
     def _set_records(self, A, b, lb, ub, x0, D):
+        # (pandas: an optional extra, with GAMSPy)
         import pandas as pd
 
         gp = self._gp

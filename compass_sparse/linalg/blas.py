@@ -28,6 +28,7 @@ def single_threaded_blas():
     """A context manager limiting BLAS to one thread (a no-op without threadpoolctl)."""
     if not _CONTROLLER:
         try:
+            # (lazy: ~15 ms of import, for the BLAS limit only)
             from threadpoolctl import ThreadpoolController
         except ImportError:  # pragma: no cover - a declared dependency
             return contextlib.nullcontext()

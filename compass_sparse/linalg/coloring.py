@@ -6,6 +6,8 @@ colouring in natural order uses at most (max entries per row - 1) * (max entries
 column) + 1 colours; for stencil-like patterns it is close to the maximum row count.
 """
 import numpy as np
+import scipy.sparse as sp
+
 from .._jit import njit
 
 
@@ -30,8 +32,6 @@ def _greedy(indptr, indices, rptr, rcols, n):
 
 def color_columns(indptr, indices, n):
     """Colour the columns of an n x n CSC pattern; returns an int array of colours."""
-    import scipy.sparse as sp
-
     P = sp.csc_matrix((np.ones(len(indices)), indices, indptr), shape=(n, n))
     R = P.tocsr()
     return _greedy(

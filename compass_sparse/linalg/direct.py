@@ -11,10 +11,13 @@ the choice to it.  The basis manager's factors, which it updates and reuses, com
 """
 from __future__ import annotations
 
+import ctypes
+import inspect
 import os
 import threading
 
 import numpy as np
+from scipy.sparse import csc_array
 
 from ._csc_kernels import csc_is_canonical, csc_same_pattern
 
@@ -59,8 +62,9 @@ class DirectFactors:
 
     def __init__(self, klu: bool = True, dense: bool = False, rank_tolerance: float = 1e-9):
         #: small problems (order below ``DIRECT_MIN_N``): M_FF is solved densely in one
-        #: compiled pass with the end point (:mod:`compass_sparse.path.direct_step`), no sparse LU; a block
-        #: singular to the compiled engine's ``rank_tolerance`` is left to the path
+        #: compiled pass with the end point (:mod:`compass_sparse.path.direct_step`), no
+        #: sparse LU; a block singular to the compiled engine's ``rank_tolerance`` is left
+        #: to the path
         self.dense = dense
         self.rank_tolerance = float(rank_tolerance)
         self.klu = klu and not dense and klu_available()
@@ -89,6 +93,7 @@ class DirectFactors:
 
     def _klu_solve(self, K, rhs):
         klu = _klu_module()
+        # (lazy: kvxopt loads SuiteSparse's libraries; imported where they are used)
         from kvxopt import matrix
 
         self.method = ("klu", "btf+amd")
@@ -128,6 +133,7 @@ def superlu_colamd(K):
     routine is called with splu's own arguments directly, without its wrapper's checks and
     conversions (~15 us of a 0.15 ms factorization at n = 100): the same call, so the same
     factors.  Anything else, or a scipy without that routine, goes through splu."""
+    # (lazy: scipy's linalg adds ~0.15 s to the package's import)
     from scipy.sparse.linalg import splu
 
     gstrf = _superlu_gstrf()
@@ -150,9 +156,7 @@ def _superlu_gstrf():
     if not hasattr(_superlu_gstrf, "fn"):
         _superlu_gstrf.fn = None
         try:
-            import inspect
-
-            from scipy.sparse import csc_array
+            # (lazy: scipy's linalg adds ~0.15 s to the package's import)
             from scipy.sparse.linalg._dsolve import _superlu, linsolve
 
             sig = inspect.signature(linsolve.splu)
@@ -203,6 +207,7 @@ def _klu_analysis(K):
     [None]) for a K that is not canonical (kvxopt sorts the entries it is given: the
     values of such a K could not be copied in later), whose analysis the caller makes
     and does not keep."""
+    # (lazy: kvxopt loads SuiteSparse's libraries; imported where they are used)
     from kvxopt import matrix, spmatrix
 
     with _KLU_LOCK:  # (solves in several threads share the cache)
@@ -261,8 +266,6 @@ def _klu_counts(Fn):
     struct its capsule holds), or None when they cannot be read."""
     if not _KLU_COUNTS:
         try:
-            import ctypes
-
             get = ctypes.pythonapi.PyCapsule_GetPointer
             get.restype = ctypes.c_void_p
             get.argtypes = [ctypes.py_object, ctypes.c_char_p]
@@ -300,6 +303,7 @@ costs a few microseconds at every factorization)."""
 def _klu_module():
     if not _KLU_MODULE:
         try:
+            # (lazy: kvxopt loads SuiteSparse's libraries; imported where they are used)
             from kvxopt import klu
         except ImportError:  # pragma: no cover - kvxopt is a dependency
             klu = None

@@ -36,6 +36,7 @@ from ..linalg.csc import without_duplicates
 from .._merit_kernels import flat_step_kernel, min_map_within, scale_test_kernel
 from ..box import dot_norm, max_abs
 from ..merit import fb_jacobian_diagonals, fb_phi, min_map
+from ..merit import fb_jacobian_diagonals_arrays
 from ..box import float_vectors
 from ..scaling import scale_entries
 
@@ -123,8 +124,6 @@ def _scale_test(z, f, lb, ub, phi, J) -> Verdict:
 
 def _scale_test_arrays(z, f, lb, ub, phi, J) -> Verdict:
     """_scale_test with array operations (the reference of the compiled kernel)."""
-    from ..merit import fb_jacobian_diagonals_arrays
-
     da, db = fb_jacobian_diagonals_arrays(z, f, lb, ub)
     J = sp.csc_matrix(J)
     rows = np.flatnonzero(phi)

@@ -1,6 +1,7 @@
 """The Newton point of each major iteration: J at z_k, the linear MCP M = J + eps I,
 q = F - M z_k with covering vector r (:mod:`compass_sparse.path.linearize`), and its
-pivotal path warm-started from the last path's basis (:func:`~compass_sparse.path.solve_linear_mcp`).
+pivotal path warm-started from the last path's basis
+(:func:`~compass_sparse.path.solve_linear_mcp`).
 
 :class:`NewtonStep` owns what the paths of a solve share: the linearizer (made once per
 Jacobian pattern), the basis of the paths (made on the first linear MCP by the solve's

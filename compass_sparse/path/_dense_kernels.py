@@ -37,7 +37,7 @@ REC_FLIP, REC_EXCHANGE = 0, 1
 
 @njit(cache=True)
 def current_point(sk, si, xb, zval, lb, ub, z, w, v):
-    """(z, w, v) of the current basic solution (PivotalPath._current_point)."""
+    """(z, w, v) of the current basic solution (PivotalPath.current_point)."""
     n = sk.shape[0]
     z[:] = zval
     w[:] = 0.0

@@ -44,7 +44,7 @@ def components(x, lb, ub, z, w, v):
 
 @njit(cache=True)
 def slot_point(sk, si, xb, zval, lb, ub, z, w, v):
-    """PivotalPath._current_point into z, w, v: z from zval with the basic z's from the
+    """PivotalPath.current_point into z, w, v: z from zval with the basic z's from the
     table, w and v the nonnegative parts of basic slacks (a fixed variable's free slack s
     gives w = max(s, 0), v = max(-s, 0)), z projected onto [lb, ub]."""
     n = z.shape[0]

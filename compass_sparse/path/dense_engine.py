@@ -4,10 +4,11 @@ For small n the cost of a path is not arithmetic but the Python work around each
 and each factorization (slot tables, column specs, manager calls: 50-200 us per pivot and
 ~1 ms per path, measured on 4-variable problems).  :class:`DensePathEngine` stands where a
 basis manager stands (the solve's basis factory hands it out for n <=
-``compass_sparse.routes.DENSE_ENGINE_MAX_N``) and :meth:`PivotalPath.run` hands it the slot table it set up; the
-initial factorization with artificial repair, every pivot (FTRAN, Harris ratio test,
-column replacement, refactorization, complement rule, cycle rule) and the final solution
-check then run in :mod:`compass_sparse._dense_path_kernels` with no Python per pivot.
+``compass_sparse.routes.DENSE_ENGINE_MAX_N``) and :meth:`PivotalPath.run` hands it the slot
+table it set up; the initial factorization with artificial repair, every pivot (FTRAN,
+Harris ratio test, column replacement, refactorization, complement rule, cycle rule) and
+the final solution check then run in :mod:`compass_sparse.path._dense_kernels` with no
+Python per pivot.
 Results are returned through the same PivotalPath fields, so the algorithm, the codes and
 the messages are those of the Python loop.
 
@@ -181,7 +182,7 @@ class DensePathEngine:
             dz[st.si[m]] = self.work[7][m]
             if ek == K.VAR_Z:
                 dz[ei] += fstate[K.F_ES]
-            st.ray = (path._current_point()[0], dz)
+            st.ray = (path.current_point()[0], dz)
         st.t = float(fstate[K.F_T])
         st.t_lower, st.below_from = float(fstate[K.F_TLOW]), int(istate[K.I_BELOW])
         st.t_slot = int(istate[K.I_TSLOT])

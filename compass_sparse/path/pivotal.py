@@ -272,7 +272,7 @@ class PivotalPath:
         if art.any() and np.max(np.abs(self.st.xb[art])) > tol:
             return LinearCode.SINGULAR, "t reached 1 with nonzero artificial variables"
         for attempt in range(2):
-            z, w, v = self._current_point()
+            z, w, v = self.current_point()
             Mz = self._times_M(z)
             res = float(np.max(np.abs(Mz + self.q - w + v)))
             scale = 1.0 + float(np.max(np.abs(Mz))) + float(np.max(np.abs(self.q)))
@@ -521,7 +521,7 @@ class PivotalPath:
         dz[self.st.si[m]] = rate[m]
         if ek == VAR_Z:
             dz[ei] += es
-        self.st.ray = (self._current_point()[0], dz)
+        self.st.ray = (self.current_point()[0], dz)
         return LinearCode.RAY, f"ray: {_VAR_NAMES[ek]}[{ei}] unbounded"
 
     def _bound_flip(self, ei, es, pivots):
@@ -584,7 +584,7 @@ class PivotalPath:
             if len(self.st.breakpoints) < min(200, max(1, 5_000_000 // self.n)):
                 self.st.breakpoints.append((self.st.t, x))
 
-    def _current_point(self):
+    def current_point(self):
         if float_vectors(self.n, self.st.zval, self.st.xb, self.lb, self.ub):
             z, w, v = np.empty(self.n), np.empty(self.n), np.empty(self.n)
             slot_point(self.st.sk, self.st.si, self.st.xb, self.st.zval, self.lb, self.ub,
@@ -608,7 +608,7 @@ class PivotalPath:
         return z, w, v
 
     def _current_x(self):
-        z, w, v = self._current_point()
+        z, w, v = self.current_point()
         return z - w + v
 
     def _finish(self, code, t, t0, st0, ray_start, msg):
@@ -620,11 +620,11 @@ class PivotalPath:
             z, w, v = (c.copy() for c in self.st.start)
             t = 0.0
         elif code is LinearCode.SOLVED or self.st.best[1] is None:
-            z, w, v = self._current_point() if self.st.xb is not None else (self.st.zval, 0, 0)
+            z, w, v = self.current_point() if self.st.xb is not None else (self.st.zval, 0, 0)
         else:
             # Not solved: return the point with the largest t (PATH's return-best-point).
             if self.st.t >= self.st.best[0]:
-                z, w, v = self._current_point()
+                z, w, v = self.current_point()
             else:
                 x = self.st.best[1]
                 z, w, v = components(x, self.lb, self.ub)

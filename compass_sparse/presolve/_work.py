@@ -75,7 +75,7 @@ def _index_arrays(J0):
     return out
 
 
-def _index(problem, J0):
+def pattern_index(problem, J0):
     """The index arrays of J0's structure (:func:`_index_arrays`), made once per Jacobian
     pattern when J0 is stored on the problem's pattern (a loop of solves of one model
     made them in every solve: an argsort and five array passes over the entries)."""
@@ -108,7 +108,7 @@ class Workspace:
         self.opts = options
         self.n = n
         self.warnings = warnings
-        self.ec, self.er, self.col_ptr, self.row_order, self.row_ptr = _index(P, J0)
+        self.ec, self.er, self.col_ptr, self.row_order, self.row_ptr = pattern_index(P, J0)
         self.ev = J0.data.astype(float).copy()
         self.const = const_mask.copy()
         self.lb = P.lb.copy()

@@ -37,6 +37,7 @@ user call is counted exactly once, whichever problem asked for it.
 """
 from __future__ import annotations
 
+import copy
 import logging
 from typing import Callable
 
@@ -47,6 +48,7 @@ from ..box import F64, all_finite, float_vector
 from ..exceptions import (CompassError, EvaluationError, JacobianPatternError, ProblemError,
                           ShapeError)
 from ..linalg._csc_kernels import csc_copy_on_pattern, csc_same_pattern
+from ..linalg.coloring import color_columns
 from ..linalg.csc import I32, canonical_csc, dense_csc, is_csc, pattern_keys, trusted_csc
 from .memo import EvalCounters, Memo
 from .pattern_cache import PatternCache
@@ -285,8 +287,6 @@ class Evaluator:
 
     def _fd_jacobian(self, x, f):
         """Forward differences on the pattern, one F call per colour of columns."""
-        from ..linalg.coloring import color_columns
-
         self.counters.njev += 1
         P = self._pattern
         if self._colors is None:
@@ -428,7 +428,7 @@ class Evaluator:
         """(f, J), or (None, None) when either is rejected (the memo key of x is made
         once for both)."""
         x = np.asarray(x, dtype=float)
-        k = Memo._key(x)
+        k = Memo.key_of(x)
         f = self.f(x, k)
         if f is None:
             return None, None
@@ -442,7 +442,7 @@ class Evaluator:
         """Keep F(x) and J(x), evaluated last, in the memo until :meth:`forget`: the start
         point's values are asked for by several passes."""
         x = np.asarray(x, dtype=float)
-        k = Memo._key(x)
+        k = Memo.key_of(x)
         self._mf.pin(x, k)
         self._mj.pin(x, k)
 
@@ -479,8 +479,6 @@ class Evaluator:
 
     def fresh(self) -> "Evaluator":
         """An evaluator of the same functions and pattern with new counters and no memo."""
-        import copy
-
         other = copy.copy(self)
         other.counters = EvalCounters()
         other.last_error = ""

@@ -32,6 +32,7 @@ CSC form on the pattern.
 """
 from __future__ import annotations
 
+import copy
 from typing import Callable, Sequence
 
 import numpy as np
@@ -356,8 +357,6 @@ class MCP:
 
     def with_start(self, x0) -> "MCP":
         """A shallow copy of this problem with another start point (pattern kept)."""
-        import copy
-
         other = copy.copy(self)
         x0 = _as_start(x0, self.n)
         if not np.all(np.isfinite(x0)):

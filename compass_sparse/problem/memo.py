@@ -44,7 +44,7 @@ class Memo:
         self.clear()
 
     @staticmethod
-    def _key(x):
+    def key_of(x):
         """(shape, bytes, False) equal for two float arrays exactly when they are equal
         elementwise; None for an array with a NaN (equal to nothing)."""
         k = Memo.probe(x)
@@ -64,7 +64,7 @@ class Memo:
         return x.shape, y.tobytes(), bool(np.isnan(y).any())
 
     def get(self, x, k=None):
-        """The value at x, or None; ``k``: _key(x) when the caller has it."""
+        """The value at x, or None; ``k``: key_of(x) when the caller has it."""
         if self.key is None and self.pkey is None:
             return None
         if k is None:
@@ -76,18 +76,18 @@ class Memo:
         return None
 
     def put(self, x, value, k=None):
-        """Store the value at x; ``k``: _key(x) when the caller has it.  (Only the key
+        """Store the value at x; ``k``: key_of(x) when the caller has it.  (Only the key
         is kept: it is a copy of the point's bytes.)"""
-        self.key = self._key(np.asarray(x, dtype=float)) if k is None else k
+        self.key = self.key_of(np.asarray(x, dtype=float)) if k is None else k
         self.value = value
         if self.key is not None and self.key == self.pkey:
             self.pvalue = value
 
     def pin(self, x, k=None):
         """Keep the value at x (the last point) beyond the next evaluations; ``k``:
-        _key(x) when the caller has it."""
+        key_of(x) when the caller has it."""
         if k is None:
-            k = self._key(np.asarray(x, dtype=float))
+            k = self.key_of(np.asarray(x, dtype=float))
         if k is not None and k == self.key:
             self.pvalue, self.pkey = self.value, self.key
 
