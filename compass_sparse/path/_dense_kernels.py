@@ -353,18 +353,20 @@ def path_loop(M, q, r, lb, ub, sk, si, xb, zval, art_sign, displaced, enter_coun
             msg = refactor(M, q, r, sk, si, xb, zval, art_sign, displaced, istate, fstate,
                            L, U, R, perm, rank_tol, lb, ub, t_lower, work, fwork)
             if msg != 0:
+                _log_pivot(rec, rect, pivots - start, pivots + 1, REC_EXCHANGE, ek, ei, lk,
+                           li, upd, fstate[F_T])
                 return SINGULAR, msg
         project_slots(sk, si, xb, lb, ub, t_lower)
         if istate[I_TSLOT] >= 0:
             fstate[F_T] = xb[istate[I_TSLOT]]
+        _log_pivot(rec, rect, pivots - start, pivots + 1, REC_EXCHANGE, ek, ei, lk, li, upd,
+                   fstate[F_T])
         if lk == VAR_T:
             if leave_up:
                 return SOLVED, MSG_NONE
             return RAY, MSG_T_ZERO
         _record(sk, si, xb, zval, lb, ub, fstate[F_T], fstate, istate, best_x, bp_t, bp_x,
                 work)
-        _log_pivot(rec, rect, pivots - start, pivots + 1, REC_EXCHANGE, ek, ei, lk, li, upd,
-                   fstate[F_T])
         # complement rule
         if lk == VAR_W:
             istate[I_EK] = VAR_Z

@@ -479,20 +479,25 @@ class PivotalPath:
             else:
                 code = None
             if code is not None:
+                self._log_exchange(pivots, ek, ei, lk, li, status)
                 return code, msg
             self._project()
             self._update_t()
+            self._log_exchange(pivots, ek, ei, lk, li, status)
             if lk == VAR_T:
                 if leave_at_upper:
                     return LinearCode.SOLVED, ""
                 return LinearCode.RAY, "t decreased to 0"
             self._record()
-            if self.log is not None:
-                self.log(f"minor {pivots:7d} t {self.st.t:.6e} in {_VAR_NAMES[ek]}[{ei}] "
-                         f"out {_VAR_NAMES[lk]}[{li}] ({status.name})")
             entering, code, msg = self._complement(lk, li, leave_at_upper)
             if code is not None:
                 return code, msg
+
+    def _log_exchange(self, pivots, ek, ei, lk, li, status):
+        """The minor-log line of pivot ``pivots``: (ek, ei) entered, (lk, li) left."""
+        if self.log is not None:
+            self.log(f"minor {pivots:7d} t {self.st.t:.6e} in {_VAR_NAMES[ek]}[{ei}] "
+                     f"out {_VAR_NAMES[lk]}[{li}] ({status.name})")
 
     def _complement(self, lk, li, leave_at_upper):
         """The complement rule: (the next entering variable, None, "") after variable
