@@ -280,7 +280,8 @@ class Options(OptionsMixin):
     engine: str = _opt(
         "auto", "'auto': compiled loops where they apply -- the stabilized Newton method's "
         "bookkeeping (up to n = 5000, on a problem the scaling pass left unscaled), the crash "
-        "(when every block is dense, n <= 200) and the homotopy's path tracker (n <= 300); "
+        "(when every block is dense, n <= 200), the homotopy's path tracker (n <= 300) and a "
+        "small problem's path start and dense direct step in one call (n < 150); "
         "'reference': their Python loops, which compute the same points bit for bit (the "
         "tests hold the two against each other).  Result.routes records what ran",
         choices=("auto", "reference"))

@@ -17,12 +17,17 @@ log level and never from the clock -- and recorded in ``Result.routes``:
               by the scaling pass, n <= ``COMPILED_NMS_MAX_N``) or "python";
 ``crash``     "compiled" (``engine = "auto"``, every block dense: n <= ``DENSE_SOLVE_MAX_N``)
               or "python";
-``homotopy``  "compiled" (``engine = "auto"``, compiled kernels, n <= ``HOMOTOPY_DENSE_MAX_N``)
-              or "python".
+``homotopy``  "compiled" (``engine = "auto"``, compiled kernels, n <= ``HOMOTOPY_DENSE_MAX_N``,
+              and numba binds LAPACK's getrf) or "python".
+
+``engine = "reference"`` also has a small problem's path (n < ``DIRECT_MIN_N``, on the
+dense engine) compute its start and its dense direct step in Python, where the automatic
+route makes them in one compiled call with the linearization
+(:meth:`compass_sparse.nms.newton.NewtonStep.dense_lane`).
 
 The compiled loops and their Python references give the same points bit for bit (the
-tests hold them against each other: ``engine = "reference"`` forces the Python ones); the
-three bases take the same pivots up to rounding.  Verbosity only decides what is written
+tests hold them against each other in tests/routes/); the three bases take the same
+pivots up to rounding.  Verbosity only decides what is written
 to the log: the compiled engines report their pivots and major iterations to it from
 record buffers they fill (see :mod:`compass_sparse.path.dense_engine` and
 :mod:`compass_sparse.nms`), so a solve logs what a silent solve computes.
@@ -40,6 +45,7 @@ from .basis.backends import DENSE_SOLVE_MAX_N
 from .basis.dense import DenseBasis
 from .basis.manager import BasisManager
 from .basis.types import BasisOptions
+from .homotopy.tracker import compiled_tracker_available
 from .options import HOMOTOPY_DENSE_MAX_N, Options
 from .path.dense_engine import DensePathEngine
 
@@ -111,7 +117,8 @@ def choose_routes(n: int, options: Options, *, kernels: str = "compiled",
         path=path_route(n, options),
         nms="compiled" if running and not scaled and 0 < n <= COMPILED_NMS_MAX_N else "python",
         crash="compiled" if compiled and 0 < n <= DENSE_SOLVE_MAX_N else "python",
-        homotopy="compiled" if running and n <= HOMOTOPY_DENSE_MAX_N else "python")
+        homotopy="compiled" if (running and n <= HOMOTOPY_DENSE_MAX_N
+                                and compiled_tracker_available()) else "python")
 
 
 def basis_factory(route: str, options: Options, deadline=None):

@@ -75,7 +75,7 @@ def initial_shift(indptr, indices, data, n, perturb, eps0):
 
 @njit(cache=True)
 def dense_perturbed_solve(dense, rhs, eps, eps0, perturb, attempts, step_limit):
-    """The attempts of :func:`compass_sparse.crash._solve_reduced` on a dense block.
+    """The attempts of :func:`compass_sparse.crash.reduced.solve_reduced` on a dense block.
 
     ``dense``: the block (Fortran order); ``eps``: the first shift (0, or eps0 for a
     structurally singular block).  Attempt k solves (dense + eps I) d = rhs; a solution is
@@ -172,7 +172,7 @@ def dense_crash_step(indptr, indices, data, z, f, lb, ub, prev_free, has_prev,
 NEED_J, NEED_F, DONE = 1, 2, 3
 # What a call brings (``arg``)
 NOTHING, J_GIVEN, J_FAILED, F_GIVEN, F_FAILED, STOP = 0, 1, 2, 3, 4, 5
-# Stop reasons (crash.py's texts, in this order)
+# Stop reasons (the texts of crash.compiled._REASONS, in this order)
 (R_ITERATION_LIMIT, R_CONVERGED, R_DOMAIN_J, R_NO_CHANGE, R_SINGULAR, R_NO_PROGRESS,
  R_TIME) = range(7)
 # Rows of the work area W ((CW_ROWS, n)): the current point z, F(z) and its normal-map
@@ -363,7 +363,7 @@ def crash_dense(sf, si, W, prev_free, ft, indptr, indices, data, arg):
 
 @njit(cache=True)
 def crash_active_set(z, f, lb, ub, diag, free, d):
-    """The crash's active set and Newton target (crash.py): with g_i = |J_ii| (1 where it
+    """The crash's active set and Newton target (projected_newton.py): with g_i = |J_ii| (1 where it
     is 0 or NaN), index i is active at its lower bound when z_i - f_i / g_i <= l_i, else at
     its upper bound when that point is >= u_i (a NaN point is neither); ``free`` is the
     complement, and d_i = z_i - (its bound) on the active indices, 0 elsewhere.  The array

@@ -54,7 +54,7 @@ def _dense_settings(opt, tol):
 
 def crash_compiled(evalr, z, f0, J0, lb, ub, opt, tol, deadline, log, on_point, stats, t0):
     """:func:`crash` of a problem whose blocks are all dense: everything between two
-    evaluations of the user's F or J in one compiled call (``_crash_kernels.crash_dense``,
+    evaluations of the user's F or J in one compiled call (``crash._kernels.crash_dense``,
     which says what it needs next); here only the evaluations, the trial points offered
     to ``on_point``, the time limit, the counts and the log.  The Python route's steps in
     its order: the same points bit for bit."""

@@ -56,7 +56,7 @@ def solve_reduced(Jii, rhs, perturb, eps0, deadline=None, labels=None, lu=("auto
     eps = initial_shift(Jii.indptr, Jii.indices, Jii.data, n, bool(perturb), float(eps0))
     if 0 < n <= DENSE_SOLVE_MAX_N:
         # A block that solve_sparse factors densely: all attempts in one compiled call
-        # (the same LAPACK routines, so the same steps; see compass_sparse._crash_kernels).
+        # (the same LAPACK routines, so the same steps; see compass_sparse.crash._kernels).
         # Eight attempts at this order cost milliseconds at most: the deadline is checked
         # before them, not between them.
         if deadline is not None and time.perf_counter() > deadline:

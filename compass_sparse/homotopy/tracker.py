@@ -23,7 +23,7 @@ from .bordered import Bordered, dense_copy, solve_square
 from .outcome import HomotopyStatus
 from .smoothing import SmoothedNormalMap
 
-__all__ = ["HomotopyStop", "Tracker"]
+__all__ = ["HomotopyStop", "Tracker", "compiled_tracker_available"]
 
 CORRECTOR_ITERATIONS = 6
 """Chord iterations allowed per step before the step is halved."""
@@ -73,6 +73,13 @@ _DENSE_ENDS = {hk.SINGULAR: HomotopyStatus.SINGULAR,
                hk.STEP_TOO_SMALL: HomotopyStatus.STEP_TOO_SMALL,
                hk.DIVERGED: HomotopyStatus.DIVERGED, hk.RETURNED: HomotopyStatus.RETURNED,
                hk.STEP_LIMIT: HomotopyStatus.STEP_LIMIT}
+
+
+def compiled_tracker_available() -> bool:
+    """Whether this numba binds LAPACK's getrf, which the compiled tracker calls (through
+    numba's internal interface: a numba without it leaves the tracker on its Python
+    route).  Asked by the routes when a solve starts; it loads numba."""
+    return hk.bind_lapack()
 
 
 class HomotopyStop(Exception):

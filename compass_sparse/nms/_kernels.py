@@ -33,8 +33,8 @@ sf[S_LOG_FBN].  The best point lives in rows W_BZ, W_BF, W_BPHI while the kernel
 (si[I_BEST_NEW] says it changed); the driver hands it to the solver before any Python
 that reads it.  Every formula is the Python route's in its order (its norms as BLAS
 products, numpy's max/min tie rules, Python's max and min over the memory), so the
-points, steps and counts are the same bits; the Python route (``nms.COMPILED_NMS =
-False``) is the reference of the tests.
+points, steps and counts are the same bits; the Python route (option ``engine =
+"reference"``, :mod:`compass_sparse.routes`) is the reference of the tests.
 """
 from __future__ import annotations
 

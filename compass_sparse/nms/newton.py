@@ -75,9 +75,10 @@ class NewtonStep:
     def dense_lane(self, opt, first: bool) -> bool:
         """Whether a small dense problem's linear MCP and its dense direct step are one
         compiled call (from the second major iteration: the basis and the direct step's
-        factors are made on the first)."""
+        factors are made on the first; never with ``engine = "reference"``)."""
         return (self.basis is not None and self.direct is not None
-                and self.crash_factors is None and not self.start_ray(opt, first))
+                and self.crash_factors is None and not self.start_ray(opt, first)
+                and opt.engine == "auto")
 
     def point(self, cur, x, eps, opt, first: bool):
         """(PathResult or None, J, its code) of the major iteration at ``cur`` (a

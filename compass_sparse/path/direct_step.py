@@ -255,7 +255,7 @@ def dense_newton_direct(jdata, pos_j, scatter, pos_d, eps, indptr, indices, zk, 
                         ub, previous, use_previous, mdata, q, r, z, w, v, basic, slack, zt,
                         wt, vt, tol, rank_tol, res_tol):
     """A major iteration's linear MCP and its path's start and dense direct step, in one
-    compiled call: :func:`~compass_sparse._merit_kernels.newton_linearization` (M's
+    compiled call: :func:`~compass_sparse.path._kernels.newton_linearization` (M's
     entries into ``mdata``, q, r at z_k = ``zk``, F(z_k) = ``fk``), then
     :func:`_dense_direct_from` on that M, then the test of :func:`_accepted`.  Returns
     (code, |F|, accepted, guessed): code 0 when r = 0, 1 after a direct step, which
@@ -282,7 +282,7 @@ def dense_direct_path(M, q, lb, ub, x, r, previous, factors: DirectFactors):
     None), basic, nnz)`` when the path must run (the step failed: the path's start, for
     ``PivotalPath.run(start=)``), or None when the arguments are not the compiled call's
     (the path then does everything itself).  The same values, bit for bit, as
-    PivotalPath.run's own start and :func:`direct_step` (``test_direct_step.py``)."""
+    PivotalPath.run's own start and :func:`direct_step` (``tests/path/test_direct_step.py``)."""
     if not (factors.dense and float_vector(x) and M.data.dtype == np.float64):
         return None
     n = x.shape[0]

@@ -32,14 +32,16 @@ def solve_linear_mcp(M, q, lb, ub, basis, options, x, *, warm: WarmBasis | None 
     solves, reaches a larger t, or (``keep_ray``) ends in a genuine ray, which is what
     an infeasibility verdict needs; pivots and factorizations of both paths are counted.
     ``direct``: first try the path's end point by one sparse solve with these factors
-    (:mod:`compass_sparse.direct_step`; the first path only, not the ray-start retry).
-    ``dense_start``: what :func:`~compass_sparse.direct_step.dense_direct_path` returns
+    (:mod:`compass_sparse.path.direct_step`; the first path only, not the ray-start retry).
+    ``dense_start``: what :func:`~compass_sparse.path.direct_step.dense_direct_path` returns
     for these arguments, when the caller has computed it (a failed step is not made
-    again).
+    again).  With ``options.engine = "reference"`` the path makes its start and its
+    direct step itself (the reference of the one compiled call: the same bits).
     """
     kw = dict(minor_limit=minor_limit, deadline=deadline, log=log)
     res = None
-    if direct is not None and direct.dense and not ray_start and r is not None:
+    if (direct is not None and direct.dense and not ray_start and r is not None
+            and options.engine == "auto"):
         # A small problem's start and dense direct step in one compiled call (the
         # Python of a path's set-up cost more than the step); the path runs only when
         # the step fails, then without trying it again.
@@ -65,7 +67,7 @@ def solve_linear_mcp(M, q, lb, ub, basis, options, x, *, warm: WarmBasis | None 
 def _dense_direct_result(M, q, lb, ub, manager, options, x, r, warm, direct, kw, out=None):
     """What ``PivotalPath(..., direct=direct).run(x, warm=warm, r=r)`` returns, the same
     values and counts, with its start and direct step computed by
-    :func:`~compass_sparse.direct_step.dense_direct_path` (``out``: its outcome, when
+    :func:`~compass_sparse.path.direct_step.dense_direct_path` (``out``: its outcome, when
     the caller has it); None when that call does not apply."""
     t0 = time.perf_counter()
     M = M if (sp.issparse(M) and M.format == "csc") else sp.csc_matrix(M)
@@ -109,7 +111,7 @@ def dense_newton_result(lin, J, eps, zk, fk, x, lb, ub, manager, warm, direct):
     zk, fk, x)``, and what ``solve_linear_mcp(M, q, lb, ub, manager, ..., x, warm=warm,
     r=r, direct=direct)`` returns when the path's start or its dense direct step decides
     it, in one compiled call for a small dense problem
-    (:func:`~compass_sparse.direct_step.dense_newton_direct`): the same values, counts and
+    (:func:`~compass_sparse.path.direct_step.dense_newton_direct`): the same values, counts and
     bits.  When the step fails, res is None and ``start`` is the outcome for that call's
     ``dense_start`` (the path runs from the start computed here).  All None when the
     arguments are not the compiled call's."""

@@ -218,7 +218,7 @@ class PivotalPath:
             res.time = time.perf_counter() - t0
             return res
         if self.direct is not None and not ray_start:
-            # A path without pivots ends where one sparse solve says (direct_step.py).
+            # A path without pivots ends where one sparse solve says (path/direct_step.py).
             td = time.perf_counter()
             end, self.direct_lu_nnz = direct_step(self.M, self.q, lb, ub, z, basic,
                                                   self.direct)
@@ -244,7 +244,7 @@ class PivotalPath:
         self._reset_slots(basic, z, w, v)
         self.bm.set_dense_column(r)
         if getattr(self.bm, "runs_paths", False):
-            # The small-problem engine (dense_path.py): factorization, pivots and the
+            # The small-problem engine (path/dense_engine.py): factorization, pivots and the
             # solution check in compiled code, on this slot table.
             code, msg = self.bm.run_path(self, z, w, v, slack_basis)
             return self._finish(code, self.st.t, t0, st0, ray_start, msg)

@@ -25,7 +25,7 @@ ways to give J:
   groups of structurally orthogonal columns together (greedy column colouring, as in
   Curtis–Powell–Reid), so one Jacobian costs (number of colours) extra F evaluations.
 
-Evaluations go through the problem's :class:`~compass_sparse.evaluation.Evaluator`
+Evaluations go through the problem's :class:`~compass_sparse.problem.evaluator.Evaluator`
 (``MCP.evaluator``), the only code that calls the user's functions: it passes *copies* of
 x, counts evaluations, memoizes the last point, checks shapes and returns J in canonical
 CSC form on the pattern.
@@ -296,7 +296,7 @@ class MCP:
     @property
     def counters(self) -> EvalCounters:
         """Calls of the user's F and J so far (an
-        :class:`~compass_sparse.evaluation.EvalCounters`)."""
+        :class:`~compass_sparse.problem.memo.EvalCounters`)."""
         return self.evaluator.counters
 
     @property

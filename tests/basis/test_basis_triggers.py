@@ -1,10 +1,13 @@
 """Each refactorization trigger fires in a constructed scenario; solves agree after."""
 
 import numpy as np
+import pytest
 
 from basis_helpers import (check_solves, dominant_dense_column, dominant_matrix,
                            family_move, family_start)
 from compass_sparse.basis import BasisManager, BasisOptions, UpdateStatus
+
+pytestmark = pytest.mark.usefixtures("lu_choice")
 
 TOL = 1e-9
 

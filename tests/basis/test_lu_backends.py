@@ -12,6 +12,8 @@ from compass_sparse.basis.backends import (FactorBudget, FactorBudgetError, Supe
                                            UmfpackBackend, make_backend)
 from compass_sparse.exceptions import OptionError
 
+pytestmark = pytest.mark.usefixtures("lu_choice")
+
 
 def badly_scaled_sparse(n, rng, density=0.08):
     """Random sparse regular matrix whose rows span 1e-4 .. 1e4 (row scaling matters)."""

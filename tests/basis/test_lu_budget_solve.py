@@ -9,6 +9,8 @@ from compass_sparse.basis import backends
 from compass_sparse.generators import structured_quadratic
 from compass_sparse.status import Status
 
+pytestmark = pytest.mark.usefixtures("lu_choice")
+
 
 @pytest.fixture
 def problem():

@@ -33,7 +33,7 @@ from compass_sparse.exceptions import OptionError
 from compass_sparse.progress import Progress
 
 pytest.importorskip("pyarrow", reason="the batch results need the pyarrow extra")
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 
 @pytest.fixture(scope="module")

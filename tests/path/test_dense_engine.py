@@ -1,17 +1,20 @@
-"""The small-problem engine (compass_sparse.path.dense_engine): its repair against the thesis' rule, and
-its paths against the Python pivot loop on the dense reference basis (same algorithm:
-same codes, pivots and points) on random, degenerate and rank-deficient linear MCPs.
+"""The small-problem engine (compass_sparse.path.dense_engine): its repair against the
+thesis' rule, the time limit between pivot chunks, and its paths from degenerate starts
+(t's bound, ties, the pivot budget below zero, the singular inward guess).  Its paths
+against the Python pivot loop: tests/routes/test_path_routes.py.
 
-The ordinary path tests (tests/test_path.py) run with this engine as a third manager; its
-LU and Forrest-Tomlin kernels are checked against numpy in tests/test_dense_lu_update.py.
+The ordinary path tests (tests/path/test_pivotal.py) run with this engine as a third
+manager; its LU and Forrest-Tomlin kernels are checked against numpy in
+tests/path/test_dense_lu.py.
 """
+
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 import compass_sparse.generators as gen
-from compass_sparse import MCP, Options, solve_lcp, solve_mcp
+from compass_sparse import Options
 from compass_sparse.path import dense_engine as dense_path
 from compass_sparse.path import _dense_lu as K
 from compass_sparse.path._kernels import VAR_A, VAR_S, VAR_T, VAR_W, VAR_Z
@@ -81,42 +84,6 @@ def _assert_same_path(py, cc, M, q):
         assert np.allclose(cc.ray, py.ray, rtol=1e-8, atol=1e-8)
 
 
-@pytest.mark.parametrize("structure", ["grid", "banded"])
-@pytest.mark.parametrize("bounds", ["ncp", "box", "mixed"])
-@pytest.mark.parametrize("n,seed", [(12, 0), (45, 1), (100, 2)])
-def test_same_path_as_python_loop_on_p_matrix_lcps(structure, bounds, n, seed):
-    g = gen.p_matrix_lcp(n, structure, seed, bounds)
-    py, cc = _both(g.lcp)
-    _assert_same_path(py, cc, *g.lcp[:2])
-    assert cc.code is LinearCode.SOLVED
-    assert np.max(np.abs(cc.z - g.solution)) <= 1e-8
-
-
-@pytest.mark.parametrize("seed", [0, 1, 2])
-@pytest.mark.parametrize("ray_start", [False, True])
-def test_same_path_on_degenerate_and_rank_deficient_lcps(seed, ray_start):
-    for g in (gen.obstacle_problem(8, seed, degenerate_fraction=0.5),
-              gen.monotone_lcp(30, seed, rank=10),
-              gen.duplicated_columns_lcp(40, seed, bounds="mixed")):
-        py, cc = _both(g.lcp, ray_start=ray_start)
-        _assert_same_path(py, cc, *g.lcp[:2])
-
-
-@pytest.mark.parametrize("seed", [0, 1])
-def test_same_status_on_infeasible_lcp(seed):
-    g = gen.infeasible_lcp(20, seed)
-    py, cc = _both(g.lcp, ray_start=True)
-    _assert_same_path(py, cc, *g.lcp[:2])
-    assert cc.code is LinearCode.RAY
-
-
-def test_same_limits_cycle_and_minor():
-    g = gen.p_matrix_lcp(60, "grid", 5, "mixed")
-    for opt in (Options(lemke_cycle_limit=1), Options(minor_iteration_limit=3)):
-        py, cc = _both(g.lcp, options=opt)
-        _assert_same_path(py, cc, *g.lcp[:2])
-
-
 def test_engine_path_stops_at_the_time_limit_between_pivot_chunks(monkeypatch):
     """The deadline is checked between compiled chunks of pivots: with a chunk of one
     pivot and a deadline in the past the path stops after one pivot."""
@@ -130,54 +97,6 @@ def test_engine_path_stops_at_the_time_limit_between_pivot_chunks(monkeypatch):
     assert res.code is LinearCode.MINOR_LIMIT
     assert res.message == "time limit during the path"
     assert res.pivots == 1
-
-
-def test_solves_agree_with_and_without_the_engine(monkeypatch):
-    """solve_lcp and solve_mcp give the same statuses and points with the compiled engine
-    and with the Python loop on the dense reference basis (option path_basis)."""
-    cases = [gen.p_matrix_lcp(40, "banded", 3, "mixed"), gen.obstacle_problem(7, 2),
-             gen.duplicated_columns_lcp(30, 1, bounds="box")]
-    points = {}
-    for basis in ("auto", "dense"):
-        opt = {"path_basis": basis}
-        points[basis] = []
-        for g in cases:
-            M, q, lb, ub = g.lcp
-            r = solve_lcp(M, q, lb, ub, options=opt)
-            assert r.routes["path"] == ("dense engine" if basis == "auto" else "dense basis")
-            assert r.success, r.message
-            points[basis].append(r.x)
-            Md = M.toarray()
-
-            def F(z, Md=Md, q=q):
-                return Md @ z + q + 0.1 * z**3 * (z > 0)
-
-            def J(z, Md=Md):
-                return Md + np.diag(0.3 * z**2 * (z > 0))
-
-            rm = solve_mcp(MCP(F, J, lb, ub, np.clip(np.zeros(q.size), lb, ub)), options=opt)
-            assert rm.success, rm.message
-            points[basis].append(rm.x)
-    for a, b in zip(points["dense"], points["auto"]):
-        assert np.max(np.abs(a - b)) <= 1e-6 * (1 + np.abs(b).max())
-
-
-@pytest.mark.parametrize("kw", [{"growth_limit": 1.0}, {"stability_tolerance": 0.0},
-                                {"growth_limit": 1e300, "stability_tolerance": 1.0}])
-def test_same_path_whatever_the_update_safeguards_decline(kw):
-    """The Forrest-Tomlin safeguards only choose between an update and a refactorization:
-    declining (almost) every update, or none, leaves the path pivot for pivot that of the
-    Python loop."""
-    for g in (gen.p_matrix_lcp(60, "banded", 4, "mixed"),
-              gen.duplicated_columns_lcp(40, 2, bounds="mixed")):
-        M, q, lb, ub = g.lcp
-        x = np.clip(np.zeros(q.size), lb, ub)
-        py = PivotalPath(M, q, lb, ub, DenseBasis(M), Options()).run(x)
-        eng = DensePathEngine(M, **kw)
-        cc = PivotalPath(M, q, lb, ub, eng, Options()).run(x)
-        _assert_same_path(py, cc, M, q)
-        if kw.get("growth_limit") == 1.0 and py.pivots > 20:
-            assert eng.stats.refactor_by_stability > 0
 
 
 def _fam2_n10_seed1_linearization():

@@ -10,7 +10,7 @@ from compass_sparse import solve_mcp
 from compass_sparse.generators.cge import static_cge
 from compass_sparse.merit import natural_residual
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 from static_cge_gamspy import solve_static_with_path  # noqa: E402
 
 

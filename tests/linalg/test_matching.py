@@ -3,13 +3,12 @@ layered reduced Jacobian on which scipy's Hopcroft-Karp did not return."""
 from pathlib import Path
 
 import numpy as np
-import pytest
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, maximum_bipartite_matching
 
 from compass_sparse.linalg.matching import column_matching, matching
 
-DATA = Path(__file__).parent / "data"
+DATA = Path(__file__).resolve().parents[1] / "data"
 
 
 def _check_valid(A, row_of, col_of):
