@@ -33,3 +33,41 @@ def test_every_option_is_read_somewhere():
     unread = [f.name for f in dataclasses.fields(cs.Options)
               if not re.search(r"\.\s*" + f.name + r"\b", src)]
     assert unread == []
+
+
+def test_options_from_equal_dicts_shared_but_true_and_one_stay_apart():
+    from compass_sparse import Options
+    from compass_sparse.exceptions import OptionError
+
+    a = Options.coerce({"verbosity": 1, "time_limit": 5.0})
+    assert Options.coerce({"time_limit": 5.0, "verbosity": 1}) is a
+    assert Options.coerce(None) is Options.coerce({})
+    with pytest.raises(OptionError):
+        Options.coerce({"verbosity": True})  # equal to 1, but not an integer option value
+    with pytest.raises(OptionError):
+        Options.coerce({"time_limit": float("nan")})
+    assert Options.coerce({"time_limit": float("inf")}).time_limit == float("inf")
+
+
+def test_options_replace_shares_equal_copies_and_still_validates():
+    """Restarts replace fields of the same options: the copy is built and validated once
+    and shared (frozen), equal to a fresh dataclasses.replace; values that differ only in
+    type (True and 1) give different copies, and invalid values still raise."""
+    import dataclasses
+
+    from compass_sparse import Options
+    from compass_sparse.exceptions import OptionError
+
+    base = Options.coerce({"time_limit": 7.0})
+    a = base.replace(crash_method="none", nms_memory_size=2)
+    assert base.replace(nms_memory_size=2, crash_method="none") is a
+    assert a == dataclasses.replace(base, crash_method="none", nms_memory_size=2)
+    assert a.time_limit == 7.0 and a.crash_method == "none" and base.crash_method != "none"
+    assert Options.coerce({"time_limit": 8.0}).replace(crash_method="none") is not a
+    with pytest.raises(OptionError):
+        base.replace(nms_memory_size=True)   # equal to 1, but not an integer
+    with pytest.raises(OptionError):
+        base.replace(no_such_option=1)
+    with pytest.raises(OptionError):
+        base.replace(time_limit=float("nan"))
+

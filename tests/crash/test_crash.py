@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import scipy.sparse as sp
 
 import compass_sparse as cs
@@ -125,10 +126,7 @@ def test_crash_step_on_a_singular_reduced_jacobian_does_not_run_away():
     the first eps (~1e-7) gave a step of length ~1e7 that the search rejected through 13 F
     evaluations; such a step is now refused and eps grows until the step is at most
     CRASH_STEP_LIMIT (1 + max|z|) long."""
-    import sys
-    from pathlib import Path
 
-    sys.path.insert(0, str(Path(__file__).parent))
     import known_problems as kp
 
     from compass_sparse.crash.outcome import CRASH_STEP_LIMIT
@@ -234,10 +232,7 @@ def test_crash_report_of_a_solve_whose_restart_ran_it_is_not_a_skip_reason():
     """With crash_method none the first run skips the crash and billups' restarts run it
     (their schedule turns it on); the report said ran=True with the reason
     'crash_method none'.  It now gives the stop reason of the crash that ran."""
-    import sys
-    from pathlib import Path
 
-    sys.path.insert(0, str(Path(__file__).parent))
     import known_problems as kp
 
     p = kp.billups()
@@ -317,3 +312,26 @@ def test_crash_factors_small_sparse_blocks_by_klu_and_large_ones_by_superlu(monk
         np.testing.assert_allclose(d, d_s, rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose((M + eps * sp.identity(n)) @ d, b, atol=1e-9)
         assert held_s is not None and (held is None) == klu_available()
+
+
+@pytest.mark.parametrize("n, blocks", [(4, 0), (20, 1)])
+def test_crash_limits_blas_threads_only_from_the_size_where_blas_could_use_threads(
+        monkeypatch, n, blocks):
+    """Below BLAS_LIMIT_MIN_N the crash leaves the BLAS thread count alone (OpenBLAS keeps
+    kernels that small on one thread itself); from there on one block spans the crash."""
+    import numpy as np
+
+    from compass_sparse import solve_mcp
+    from compass_sparse.crash import driver as C
+
+    opened = []
+    real = C.single_threaded_blas
+    monkeypatch.setattr(C, "single_threaded_blas", lambda: opened.append(1) or real())
+    rng = np.random.default_rng(3)
+    A = rng.normal(size=(n, n)) * 0.1 + 3 * np.eye(n)
+    b = rng.normal(size=n)
+    r = solve_mcp(lambda x: A @ x + b, lambda x: A, np.zeros(n), np.full(n, np.inf),
+                  np.ones(n), options={"crash_minimum_dimension": 1})
+    assert r.success and r.passes["crash"].ran
+    assert len(opened) == blocks
+

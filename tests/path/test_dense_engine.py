@@ -12,13 +12,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 import compass_sparse.generators as gen
 from compass_sparse import Options
-from compass_sparse.path import dense_engine as dense_path
-from compass_sparse.path import _dense_lu as K
-from compass_sparse.path._kernels import VAR_A, VAR_S, VAR_T, VAR_W, VAR_Z
 from compass_sparse.basis.dense import DenseBasis
+from compass_sparse.path import _dense_lu as K
+from compass_sparse.path import dense_engine as dense_path
+from compass_sparse.path._kernels import VAR_A, VAR_S, VAR_T, VAR_W, VAR_Z
 from compass_sparse.path.dense_engine import DensePathEngine
 from compass_sparse.path.outcome import LinearCode
 from compass_sparse.path.pivotal import PivotalPath
@@ -286,3 +287,30 @@ def test_singular_inward_guess_falls_back_to_the_slack_basis_in_the_engine(seed)
     assert r[j] < 0.0
     py, cc = _both((Ms, q, lb, ub), x=x, r=r)
     _assert_same_path(py, cc, Ms, q)
+
+
+def test_dense_engine_refills_its_matrix_in_place_from_each_linearization():
+    """The engine's dense copy of M is allocated once per order and refilled by every
+    set_matrix: CSC (duplicates summed, unsorted indices), other sparse formats and dense
+    input give M exactly; a new order gets a new array."""
+    from compass_sparse.path.dense_engine import DensePathEngine
+
+    rng = np.random.default_rng(4)
+    A = sp.random(6, 6, density=0.5, format="csc", random_state=4)
+    eng = DensePathEngine(A)
+    buf = eng.M
+    np.testing.assert_array_equal(eng.M, A.toarray())
+    dup = sp.csc_matrix((np.array([1.0, 2.0, 3.0]), np.array([4, 1, 4]),
+                         np.array([0, 3, 3, 3, 3, 3, 3])), shape=(6, 6))
+    eng.set_matrix(dup)
+    assert eng.M is buf and eng.M.flags.f_contiguous
+    np.testing.assert_array_equal(eng.M, dup.toarray())
+    D = rng.standard_normal((6, 6))
+    for M in (sp.csr_matrix(D), D):
+        eng.set_matrix(M)
+        assert eng.M is buf
+        np.testing.assert_array_equal(eng.M, D)
+    eng.set_matrix(sp.identity(3, format="csc"))
+    assert eng.M.shape == (3, 3) and eng.n == 3
+    np.testing.assert_array_equal(eng.M, np.eye(3))
+

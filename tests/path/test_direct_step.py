@@ -277,10 +277,7 @@ def test_dense_direct_step_does_not_run_off_a_flat_tail_of_mathiesen():
     (2, 1, 0.5, 0.5) its Newton steps ran off to |x| ~ 6e6 along a flat direction and the
     solve reported success there, far from the solution set {(s, 0, 0, 0): 0 <= s <= 3}.
     With the engine's rank test the solve reaches the solution set."""
-    import sys
-    from pathlib import Path
 
-    sys.path.insert(0, str(Path(__file__).parent))
     import known_problems as kp
 
     p = kp.ALL_SOLVABLE["mathiesen"](np.array([2.0, 1.0, 0.5, 0.5]))

@@ -1,4 +1,5 @@
 """The evaluation layer: one owner of the user's F and J (copies, memo, counters, guards)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -6,8 +7,8 @@ import pytest
 import scipy.sparse as sp
 
 import compass_sparse as cs
-from compass_sparse.problem.evaluator import Evaluator
 from compass_sparse.exceptions import JacobianPatternError, ShapeError
+from compass_sparse.problem.evaluator import Evaluator
 
 
 def _counting_ncp(n, seed=0, cubic=0.1):
@@ -361,3 +362,64 @@ def test_f_once_is_f_without_the_memo_on_every_kind_of_evaluator():
     wrong = Evaluator(lambda x: np.ones(3), None, 2, pattern=sp.identity(2, format="csc"))
     with pytest.raises(ShapeError):
         wrong.f_once(np.zeros(2))
+
+
+
+def test_dense_jacobian_on_its_full_pattern_matches_the_general_route():
+    """A dense float J (the user's array) on the stored full pattern is copied straight
+    into the pattern's column order: the same matrix as canonical_csc + _fix_pattern, its
+    zeros kept, owning its arrays (the pattern's stay untouched); an integer array or a
+    Fortran-ordered one give that route's matrix too."""
+    from compass_sparse.linalg.csc import canonical_csc
+    from compass_sparse.problem.evaluator import Evaluator
+
+    n = 4
+    A = np.arange(16.0).reshape(n, n)
+    A[1, 2] = 0.0
+    ev = Evaluator(lambda x: np.zeros(n), lambda x: A, n)
+    ev.J(np.zeros(n))  # records the (full) pattern
+    for J in (A, np.asfortranarray(A), A.astype(np.int64), A[:, ::-1].copy()):
+        ref = ev._fix_pattern(canonical_csc(J, n))
+        got = ev._user_J_on_pattern(J)
+        for a in ("indptr", "indices", "data"):
+            assert np.array_equal(getattr(got, a), getattr(ref, a)), a
+            assert getattr(got, a) is not getattr(ev.pattern_ref, a)
+        assert got.nnz == n * n and np.array_equal(got.toarray(), J)
+        got.data[:] = -1.0
+        assert np.array_equal(ev._user_J_on_pattern(J).toarray(), J)  # no shared buffer
+
+
+def test_dense_jacobian_in_fortran_order_is_copied_not_viewed():
+    from compass_sparse.linalg.csc import canonical_csc
+
+    A = np.asfortranarray(np.arange(9.0).reshape(3, 3))
+    C = canonical_csc(A, 3)
+    A[:] = -1.0
+    np.testing.assert_array_equal(C.toarray(), np.arange(9.0).reshape(3, 3))
+
+
+def test_evaluators_jacobians_are_marked_canonical_only_when_they_are():
+    """A J the evaluator returns (dense, on the stored pattern, a canonical CSC copy)
+    carries the canonical mark, which lets without_duplicates return it unscanned; every
+    marked matrix passes the scan; an unmarked matrix with duplicates is still summed."""
+    from compass_sparse.linalg._csc_kernels import csc_is_canonical
+    from compass_sparse.linalg.csc import _CANONICAL, trusted_csc, without_duplicates
+    from compass_sparse.problem.evaluator import Evaluator
+
+    rng = np.random.default_rng(3)
+    A = sp.random(6, 6, density=0.5, format="csc", random_state=4) + sp.eye(6, format="csc")
+    A = A.tocsc()
+    A.indices, A.indptr = A.indices.astype(np.int32), A.indptr.astype(np.int32)
+    for jac in (lambda x: A.toarray(), lambda x: A.copy()):
+        ev = Evaluator(lambda x: x, jac, 6)
+        for _ in range(3):
+            J = ev.J(rng.standard_normal(6))
+            assert J.__dict__.get(_CANONICAL) is True
+            assert csc_is_canonical(J.indptr, J.indices, 6, J.indptr[-1])
+            assert without_duplicates(J) is J
+    dup = trusted_csc(np.array([1.0, 2.0]), np.array([0, 0], dtype=np.int32),
+                      np.array([0, 2], dtype=np.int32), (1, 1))
+    assert dup.__dict__.get(_CANONICAL) is None
+    summed = without_duplicates(dup)
+    assert summed is not dup and summed.nnz == 1 and summed.data[0] == 3.0
+

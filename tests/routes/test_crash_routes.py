@@ -78,10 +78,7 @@ def test_compiled_perturbed_attempts_give_the_python_routes_steps_bit_for_bit():
 def _crash_problems(trials):
     """The known small problems and ``trials`` random ones: singular and structurally
     singular reduced blocks, points at bounds, box constraints, a runaway-step limit."""
-    import sys
-    from pathlib import Path
 
-    sys.path.insert(0, str(Path(__file__).parent))
     import known_problems as kp
 
     problems = [cs.MCP(q.F, q.J, q.lb, q.ub, q.x0) for q in (

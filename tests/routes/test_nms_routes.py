@@ -14,10 +14,7 @@ from compass_sparse.generators import thesis_family
 def _nms_problems(trials):
     """Known small problems, thesis families and ``trials`` random nonlinear ones (some
     with boxes), and problems whose F or J fail at points away from the start."""
-    import sys
-    from pathlib import Path
 
-    sys.path.insert(0, str(Path(__file__).parent))
     import known_problems as kp
 
     made = [kp.kojima_shindo(), kp.josephy(), kp.mathiesen(), kp.nash_cournot_mss(),

@@ -6,18 +6,16 @@ pivot it makes."""
 from __future__ import annotations
 
 import logging
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
 
+import known_problems as kp
+
 import compass_sparse as cs
 import compass_sparse.generators as gen
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-import known_problems as kp  # noqa: E402
 
 
 def _record(r):
