@@ -4,7 +4,8 @@ route, and the end game's dense Newton solve."""
 
 import numpy as np
 import pytest
-import scipy.sparse as sp
+
+import known_problems as kp
 
 import compass_sparse.homotopy.bordered as bordered
 import compass_sparse.homotopy.tracker as hom
@@ -12,35 +13,10 @@ from compass_sparse import solve_mcp
 from compass_sparse.generators import thesis_family
 
 
-def _quadratic(D, A, b):
-    D, A, b = (np.asarray(v, dtype=float) for v in (D, A, b))
-
-    def F(x):
-        return D * x * x + A @ x + b
-
-    def J(x):
-        return sp.csc_matrix(np.diag(2.0 * D * x) + A)
-
-    return F, J
-
-
-# A one-dimensional MCP on the box [-3.04, 3.18] with F(x) = 0.27 x^2 - 0.69 x - 5.68 < 0
-# on the whole box: its only solution is the upper bound.  The merit function has a
-# stationary point over the box at the lower bound (F decreases there, so the Newton
-# model pushes the wrong way and no descent direction stays in the box).
-STATIONARY = dict(D=[0.27], A=[[-0.69]], b=[-5.68], lb=[-3.04], ub=[3.18], x0=[-2.9])
-
-
-def _stationary_problem():
-    d = STATIONARY
-    F, J = _quadratic(d["D"], d["A"], d["b"])
-    return F, J, np.array(d["lb"]), np.array(d["ub"]), np.array(d["x0"])
-
-
 def test_dense_end_game_and_bordered_factors_match_the_sparse_route(monkeypatch):
     """The dense route (compiled dense copy of J, LAPACK's getrf/getrs called directly)
     follows the same path as the sparse one on a problem that needs the homotopy."""
-    F, J, lb, ub, x0 = _stationary_problem()
+    F, J, lb, ub, x0 = kp.stationary_quadratic()
     dense = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"})
     monkeypatch.setattr(hom, "DENSE_MAX_N", 0)
     monkeypatch.setattr(hom, "DENSE_DENSITY", 2.0)

@@ -5,7 +5,8 @@ where, its options and the pass table."""
 
 import numpy as np
 import pytest
-import scipy.sparse as sp
+
+import known_problems as kp
 
 import compass_sparse.homotopy.tracker as hom
 from compass_sparse import Options, solve_mcp
@@ -15,31 +16,6 @@ from compass_sparse.merit import fb_gradient, fb_phi, natural_residual
 from compass_sparse.status import Status
 
 
-def _quadratic(D, A, b):
-    D, A, b = (np.asarray(v, dtype=float) for v in (D, A, b))
-
-    def F(x):
-        return D * x * x + A @ x + b
-
-    def J(x):
-        return sp.csc_matrix(np.diag(2.0 * D * x) + A)
-
-    return F, J
-
-
-# A one-dimensional MCP on the box [-3.04, 3.18] with F(x) = 0.27 x^2 - 0.69 x - 5.68 < 0
-# on the whole box: its only solution is the upper bound.  The merit function has a
-# stationary point over the box at the lower bound (F decreases there, so the Newton
-# model pushes the wrong way and no descent direction stays in the box).
-STATIONARY = dict(D=[0.27], A=[[-0.69]], b=[-5.68], lb=[-3.04], ub=[3.18], x0=[-2.9])
-
-
-def _stationary_problem():
-    d = STATIONARY
-    F, J = _quadratic(d["D"], d["A"], d["b"])
-    return F, J, np.array(d["lb"]), np.array(d["ub"]), np.array(d["x0"])
-
-
 def _projected_gradient(F, J, z, lb, ub):
     f = F(z)
     g = fb_gradient(z, f, J(z), lb, ub, fb_phi(z, f, lb, ub))
@@ -47,7 +23,7 @@ def _projected_gradient(F, J, z, lb, ub):
 
 
 def test_nms_stalls_at_a_stationary_point_where_the_homotopy_reaches_the_solution():
-    F, J, lb, ub, x0 = _stationary_problem()
+    F, J, lb, ub, x0 = kp.stationary_quadratic()
     stalled = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "off", "restart_limit": 0})
     assert not stalled.success
     assert stalled.residual.fb_norm > 0.1
@@ -64,7 +40,7 @@ def test_nms_stalls_at_a_stationary_point_where_the_homotopy_reaches_the_solutio
 
 
 def test_homotopy_alone_reaches_the_solution_of_the_stationary_problem():
-    F, J, lb, ub, x0 = _stationary_problem()
+    F, J, lb, ub, x0 = kp.stationary_quadratic()
     res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"})
     assert res.success
     assert natural_residual(res.x, F(res.x), lb, ub) <= 1e-6
@@ -82,20 +58,8 @@ def test_homotopy_alone_solves_thesis_instances(family, n, seed):
     assert natural_residual(res.x, f, info["lb"], info["ub"]) <= 1e-6
 
 
-def _diverging_problem(n=2):
-    # F(x) = -x on free variables: the solution is 0, but the zero curve of
-    # H = lam (-x) + (1 - lam)(x - a) is x = (1 - lam) a / (1 - 2 lam), unbounded at lam = 1/2.
-    def F(x):
-        return -x
-
-    def J(x):
-        return -sp.identity(x.size, format="csc")
-
-    return F, J, np.full(n, -np.inf), np.full(n, np.inf), np.ones(n)
-
-
 def test_solve_reports_a_diverged_homotopy_as_no_progress_with_the_best_point():
-    F, J, lb, ub, x0 = _diverging_problem()
+    F, J, lb, ub, x0 = kp.diverging_free()
     res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"})
     assert res.status is Status.NO_PROGRESS and not res.success
     assert "diverged" in res.message
@@ -132,7 +96,7 @@ def test_a_solve_stopped_before_the_homotopy_says_so():
 
 
 def test_pass_table_says_why_the_homotopy_did_not_run():
-    F, J = _quadratic([0.0, 0.0], [[2.0, 0.0], [0.0, 3.0]], [-1.0, 1.0])
+    F, J = kp.quadratic([0.0, 0.0], [[2.0, 0.0], [0.0, 3.0]], [-1.0, 1.0])
     res = solve_mcp(F, J, 0.0, np.inf, [1.0, 1.0])
     assert res.success
     h = res.passes["homotopy"]
@@ -143,7 +107,7 @@ def test_pass_table_says_why_the_homotopy_did_not_run():
 
 @pytest.mark.parametrize("tol", [1e-4, 1e-8, 1e-10])
 def test_homotopy_meets_each_convergence_tolerance(tol):
-    F, J, lb, ub, x0 = _stationary_problem()
+    F, J, lb, ub, x0 = kp.stationary_quadratic()
     res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only",
                                                "convergence_tolerance": tol})
     assert res.success and res.residual.fb_norm <= tol
@@ -161,7 +125,7 @@ def test_homotopy_options_are_validated():
 
 
 def test_pass_table_names_the_stop_that_ended_the_homotopy():
-    F, J, lb, ub, x0 = _stationary_problem()
+    F, J, lb, ub, x0 = kp.stationary_quadratic()
     res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"})
     assert res.passes["homotopy"].reason == "stopped on the path: solution found"
 

@@ -3,25 +3,14 @@ around the center, the random generator made only when needed, the BLAS thread l
 
 import numpy as np
 import pytest
-import scipy.sparse as sp
+
+import known_problems as kp
 
 import compass_sparse.homotopy.paths as paths
 import compass_sparse.homotopy.tracker as hom
 from compass_sparse import MCP, Options, solve_mcp
 from compass_sparse.generators import thesis_family
 from compass_sparse.homotopy import track_paths
-
-
-def _diverging_problem(n=2):
-    # F(x) = -x on free variables: the solution is 0, but the zero curve of
-    # H = lam (-x) + (1 - lam)(x - a) is x = (1 - lam) a / (1 - 2 lam), unbounded at lam = 1/2.
-    def F(x):
-        return -x
-
-    def J(x):
-        return -sp.identity(x.size, format="csc")
-
-    return F, J, np.full(n, -np.inf), np.full(n, np.inf), np.ones(n)
 
 
 def test_later_homotopy_paths_start_at_random_points_around_the_center(monkeypatch):
@@ -55,7 +44,7 @@ def test_later_homotopy_paths_start_at_random_points_around_the_center(monkeypat
 def test_homotopy_random_generator_is_made_only_when_a_second_path_starts():
     """The generator of the later paths' start points is asked for when a second path
     starts, and only then: a pass that ends on its first path never makes it."""
-    F, J, lb, ub, x0 = _diverging_problem()
+    F, J, lb, ub, x0 = kp.diverging_free()
     made = []
 
     def rng():

@@ -4,7 +4,8 @@ corrections, and its compiled steps against the array formulas."""
 
 import numpy as np
 import pytest
-import scipy.sparse as sp
+
+import known_problems as kp
 
 import compass_sparse.homotopy.smoothing as smoothing
 import compass_sparse.homotopy.tracker as hom
@@ -15,45 +16,8 @@ from compass_sparse.merit import natural_residual
 from compass_sparse.status import Status
 
 
-def _quadratic(D, A, b):
-    D, A, b = (np.asarray(v, dtype=float) for v in (D, A, b))
-
-    def F(x):
-        return D * x * x + A @ x + b
-
-    def J(x):
-        return sp.csc_matrix(np.diag(2.0 * D * x) + A)
-
-    return F, J
-
-
-# A one-dimensional MCP on the box [-3.04, 3.18] with F(x) = 0.27 x^2 - 0.69 x - 5.68 < 0
-# on the whole box: its only solution is the upper bound.  The merit function has a
-# stationary point over the box at the lower bound (F decreases there, so the Newton
-# model pushes the wrong way and no descent direction stays in the box).
-STATIONARY = dict(D=[0.27], A=[[-0.69]], b=[-5.68], lb=[-3.04], ub=[3.18], x0=[-2.9])
-
-
-def _stationary_problem():
-    d = STATIONARY
-    F, J = _quadratic(d["D"], d["A"], d["b"])
-    return F, J, np.array(d["lb"]), np.array(d["ub"]), np.array(d["x0"])
-
-
-def _diverging_problem(n=2):
-    # F(x) = -x on free variables: the solution is 0, but the zero curve of
-    # H = lam (-x) + (1 - lam)(x - a) is x = (1 - lam) a / (1 - 2 lam), unbounded at lam = 1/2.
-    def F(x):
-        return -x
-
-    def J(x):
-        return -sp.identity(x.size, format="csc")
-
-    return F, J, np.full(n, -np.inf), np.full(n, np.inf), np.ones(n)
-
-
 def test_path_divergence_is_reported_with_its_status():
-    F, J, lb, ub, x0 = _diverging_problem()
+    F, J, lb, ub, x0 = kp.diverging_free()
     ev = MCP(F, J, lb, ub, x0).evaluator
     seen = []
     out = track_paths(ev, lb, ub, x0, Options(homotopy_path_limit=2),
@@ -70,7 +34,7 @@ def test_tight_path_tracking_reaches_the_same_solution(monkeypatch):
     # CORRECTOR_TOLERANCE only decides how closely the path is followed; a 1e4 times
     # tighter value must follow the same curve to the same end point (the stationary
     # problem's unique solution, and the same solution of a thesis instance).
-    F, J, lb, ub, x0 = _stationary_problem()
+    F, J, lb, ub, x0 = kp.stationary_quadratic()
     g = thesis_family(25, 2, seed=4)
     loose = [solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only"}),
              solve_mcp(g.problem, options={"homotopy": "only"})]
@@ -87,7 +51,7 @@ def test_corrector_accepts_tiny_steps_from_a_base_point_on_the_curve_to_tracking
     # The accepted points are on the curve only to CORRECTOR_TOLERANCE; a first correction
     # of that size must not reject a tiny step (it once rejected every step down to 1e-9
     # and ended paths of family 2 at n = 500 as "step too small").
-    F, J, lb, ub, x0 = _stationary_problem()
+    F, J, lb, ub, x0 = kp.stationary_quadratic()
     ev = MCP(F, J, lb, ub, x0).evaluator
     tr = hom.Tracker(ev, lb, ub, Options(), deadline=None, on_point=None, tol=1e-12, log=None)
     a = x0.copy()
@@ -119,7 +83,7 @@ def test_step_limit_ends_every_path_with_its_status():
 
 
 def test_a_smaller_divergence_bound_stops_the_path_earlier():
-    F, J, lb, ub, x0 = _diverging_problem()
+    F, J, lb, ub, x0 = kp.diverging_free()
     ev = MCP(F, J, lb, ub, x0).evaluator
     lams = []
     for bound in (1e2, 1e4):
@@ -133,7 +97,7 @@ def test_a_smaller_divergence_bound_stops_the_path_earlier():
 
 
 def test_end_game_from_the_end_of_the_path_only_still_solves():
-    F, J, lb, ub, x0 = _stationary_problem()
+    F, J, lb, ub, x0 = kp.stationary_quadratic()
     res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only", "homotopy_end_lambda": 1.0})
     assert res.success
 
@@ -171,7 +135,7 @@ def test_a_non_finite_correction_shortens_the_step_instead_of_failing_the_solve(
         monkeypatch.setattr(hom, "float_vectors", lambda *args: False)
         monkeypatch.setattr(smoothing, "float_vectors", lambda *args: False)
         monkeypatch.setattr(hom.Bordered, "solve", flaky)
-    F, J, lb, ub, x0 = _stationary_problem()
+    F, J, lb, ub, x0 = kp.stationary_quadratic()
     res = solve_mcp(F, J, lb, ub, x0, options={"homotopy": "only", "engine": "reference"})
     assert calls["n"] >= 3
     assert res.x.shape == (1,) and res.passes["homotopy"].ran

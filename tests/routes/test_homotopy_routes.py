@@ -5,8 +5,8 @@ where numba offers no LAPACK binding."""
 
 import copy
 
-import numpy as np
-import scipy.sparse as sp
+
+import known_problems as kp
 
 import compass_sparse.homotopy.tracker as hom
 from compass_sparse import solve_mcp
@@ -14,37 +14,12 @@ from compass_sparse.generators import thesis_family
 from compass_sparse.status import Status
 
 
-def _quadratic(D, A, b):
-    D, A, b = (np.asarray(v, dtype=float) for v in (D, A, b))
-
-    def F(x):
-        return D * x * x + A @ x + b
-
-    def J(x):
-        return sp.csc_matrix(np.diag(2.0 * D * x) + A)
-
-    return F, J
-
-
-# A one-dimensional MCP on the box [-3.04, 3.18] with F(x) = 0.27 x^2 - 0.69 x - 5.68 < 0
-# on the whole box: its only solution is the upper bound.  The merit function has a
-# stationary point over the box at the lower bound (F decreases there, so the Newton
-# model pushes the wrong way and no descent direction stays in the box).
-STATIONARY = dict(D=[0.27], A=[[-0.69]], b=[-5.68], lb=[-3.04], ub=[3.18], x0=[-2.9])
-
-
-def _stationary_problem():
-    d = STATIONARY
-    F, J = _quadratic(d["D"], d["A"], d["b"])
-    return F, J, np.array(d["lb"]), np.array(d["ub"]), np.array(d["x0"])
-
-
 def _route_runs():
     g = [(f"thesis {fam} n{n} s{seed}", thesis_family(n, fam, seed).problem)
          for fam in (1, 2) for n in (10, 20) for seed in (1, 2, 3)]
     runs = [(name, (p,), {"homotopy": "only"}) for name, p in g]
     runs += [(name + " auto", (p,), {}) for name, p in g[:3]]
-    F, J, lb, ub, x0 = _stationary_problem()
+    F, J, lb, ub, x0 = kp.stationary_quadratic()
     runs.append(("stationary", (F, J, lb, ub, x0), {"homotopy": "only"}))
     runs.append(("stationary, tight tracking", (F, J, lb, ub, x0),
                  {"homotopy": "only", "homotopy_initial_step": 1e-3}))
