@@ -48,8 +48,11 @@ def main(argv=None):
     ap.add_argument("--solves", type=int, default=300)
     a = ap.parse_args(argv)
 
-    from compass_sparse import _homotopy_kernels as hk
-    from compass_sparse import evaluation, homotopy, nms, solve_mcp
+    from compass_sparse import solve_mcp
+    from compass_sparse.homotopy import _kernels as hk
+    from compass_sparse.homotopy import tracker
+    from compass_sparse.nms import newton, solver
+    from compass_sparse.problem import evaluator as evaluation
     from compass_sparse._jit import end_cold_start
 
     # compiled kernels from the first call: the warm-up solves of a small problem would
@@ -83,11 +86,11 @@ def main(argv=None):
     for name in ("f", "f_once", "fj", "jac"):
         timed(evaluation.Evaluator, name, "the evaluator")
     timed(hk, "follow_dense", "the homotopy's compiled tracker")
-    timed(homotopy._Tracker, "_offer", "the homotopy's offers of accepted points")
-    timed(nms.NMSSolver, "_homotopy", "the homotopy's driver")
-    timed(nms, "crash", "the crash")
-    timed(nms.NMSSolver, "_run", "the NMS runs")
-    timed(nms.NMSSolver, "_solve_linear", "the paths")
+    timed(tracker.Tracker, "_offer", "the homotopy's offers of accepted points")
+    timed(solver.NMSSolver, "_homotopy", "the homotopy's driver")
+    timed(solver, "crash", "the crash")
+    timed(solver.NMSSolver, "run", "the NMS runs")
+    timed(newton.NewtonStep, "solve_linear", "the paths")
     for _ in range(30):
         solve_mcp(prob, options={"time_limit": 60})
     rows = []  # per solve: {phase: seconds}, "total"

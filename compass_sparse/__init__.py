@@ -20,9 +20,11 @@ import logging as _logging
 from .exceptions import (BoundsError, CompassError, EvaluationError, JacobianPatternError,
                          OptionError, ProblemError, ShapeError, StartPointError)
 from .options import Options
-from .problem import MCP
-from .result import IntermediateResult, Iteration, PassStats, PointStatus, Result, Status
-from .solve import MCPSolver, solve_lcp, solve_mcp
+from .problem.mcp import MCP
+from .result import Result
+from .status import IntermediateResult, Iteration, PassStats, PointStatus, Status
+from .lcp import solve_lcp
+from .solve import MCPSolver, solve_mcp
 
 __version__ = "0.1.0"
 

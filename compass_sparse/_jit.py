@@ -19,88 +19,132 @@ A module loaded later keeps its stand-in, which forwards each call to the dispat
 Cold start.  Loading numba and its first kernel costs 0.5-0.8 s (its import, then the set-up
 of its compiler's contexts, then ~5 ms per kernel from the cache), while the kernels' own
 Python bodies, run by the interpreter, solve a small problem in a few milliseconds.  So a
-process starts by interpreting: a stand-in whose kernel is not built runs its Python body
-(with numpy's floating-point warnings off, as compiled code raises none) as long as the
-call's arrays are small (at most ``INTERPRET_MAX_ENTRIES`` entries each) and less than
-``INTERPRET_WINDOW`` seconds have passed since the process first interpreted a kernel; the
-first call past either limit loads numba, and from then on every kernel is compiled.  A
-one-shot script solving a small model, or a fresh worker of a batch, answers without
-loading numba; a process that goes on solving interprets for the window only and then
-compiles.  An interpreted kernel's numpy scalars are returned as the Python floats, ints
-and bools numba returns.
-The window is wall time, not kernel time: it bounds what the interpreted start can cost
-such a process whatever the share of the kernels (measured on 200 solves of one small
-problem: see benchmarks/bench_cold_start.py and small.md, round 12).  The interpreted and
-compiled kernels compute the same formulas in the same order; their last bits may differ
-where numba's LAPACK or math functions differ from numpy's and Python's (math.hypot, for
-one), and since the switch comes after a time, which solves of a long run are interpreted
-depends on the machine's speed.  The environment variable ``COMPASS_SPARSE_JIT=always``
-(read at import) compiles from the first call: runs that must repeat bit for bit set it.
+process starts by interpreting.  Whether a solve's kernels are interpreted is decided once,
+when the solve starts (:func:`compass_sparse.routes.kernel_route`, recorded in
+``Result.routes["kernels"]``), from the process's state and the problem's size, never from
+the clock: a solve is interpreted while no kernel has been compiled in the process, its
+problem has at most ``INTERPRET_MAX_N`` variables and fewer than ``INTERPRET_SOLVES`` solves
+of the process were interpreted; then every kernel call of that solve runs its Python body
+(with numpy's floating-point warnings off, as compiled code raises none), whatever the size
+of its arrays, and no solve switches in its middle.  Any other solve compiles its kernels
+(and, on its first call, loads numba).  Kernels called outside a solve (building a problem,
+a generator) are interpreted under the same conditions when their arrays are small (at most
+``INTERPRET_MAX_ENTRIES`` entries each).  A one-shot script solving a small model, or a
+fresh worker of a batch, answers without loading numba; a process that goes on solving
+interprets its first solves only.  An interpreted kernel's numpy scalars are returned as
+the Python floats, ints and bools numba returns.  The interpreted and compiled kernels
+compute the same formulas in the same order; their last bits may differ where numba's
+LAPACK or math functions differ from numpy's and Python's (math.hypot, for one).  The
+environment variable ``COMPASS_SPARSE_JIT`` (read at import) changes the rule: ``always``
+compiles from the first call (runs that must repeat bit for bit set it); ``interpret``
+interprets every solve of a problem of at most ``INTERPRET_MAX_N`` variables, however many
+came before (the tests of the interpreted route).
 """
 from __future__ import annotations
 
 import os
 import sys
 import threading
-import time
 
 import numpy as np
 
-__all__ = ["INTERPRET_MAX_ENTRIES", "INTERPRET_WINDOW", "LazyKernel", "NO_INDICES",
-           "NO_VALUES", "cold_start", "end_cold_start", "materialize", "njit"]
+__all__ = ["INTERPRET_MAX_ENTRIES", "INTERPRET_MAX_N", "INTERPRET_SOLVES", "LazyKernel",
+           "NO_INDICES", "NO_VALUES", "cold_start", "end_cold_start", "kernels_interpreted",
+           "materialize", "may_interpret", "njit"]
 
 NO_VALUES = np.zeros(0)
 NO_INDICES = np.zeros(0, dtype=np.int32)
 """Empty float and int32 arrays: the arguments of a compiled call (reverse communication)
 that its request leaves unused (one object each, so that no call allocates them)."""
 
-INTERPRET_WINDOW = 0.2
-"""Seconds of wall time, from a process's first interpreted kernel call, during which
-kernels are interpreted: the first solve of the small problems of the benchmarks takes
-3-120 ms interpreted (thesis family 2 n = 10 seed 1 the longest, with the package's own
-first imports), and a process that goes on solving loses at most about this much."""
+INTERPRET_MAX_N = 20
+"""Largest problem whose solve may run interpreted: the small-problem engine's work area
+(200 n entries) and every dense block then stay within ``INTERPRET_MAX_ENTRIES``, so no
+interpreted call of the solve is long (at n = 50 one interpreted path of the engine took
+longer than loading numba)."""
+
+INTERPRET_SOLVES = 16
+"""Solves a process interprets before it compiles (if no kernel was compiled earlier): a
+one-shot script or a fresh batch worker answers without numba, and a process that goes on
+solving pays numba's loading once, after a bounded interpreted start.  Measured
+(benchmarks/bench_cold_start.py, 16 solves a process, medians of 3): kojshin answers all
+16 in 0.38 s from the import against 1.16 s compiling from the first call; a thesis
+instance at n = 10 (34 ms an interpreted solve, 3.3 ms compiled) in 0.82 s against 0.88 s.
+Interpreting beyond ~25 solves of such a problem would cost more than loading numba."""
 
 INTERPRET_MAX_ENTRIES = 4096
-"""Largest array (entries) an interpreted kernel call takes (a dense block of order 64); a
-call with a larger one loads numba.  It also bounds a single interpreted call, which the
-window is only checked before: the small-problem engine's work area has 200 n entries, so
-its paths run interpreted up to n = 20 only, and the longest interpreted calls left (a
-dense direct step or crash step of order 64) take tens of milliseconds."""
+"""Largest array (entries) a kernel called outside a solve takes interpreted (a dense block
+of order 64); a call with a larger one loads numba."""
 
 
 class _ColdStart:
-    """The process's cold start: whether stand-ins still interpret, and since when."""
+    """The process's cold start: whether it may still interpret, and its solves' modes."""
 
     def __init__(self):
-        self.on = os.environ.get("COMPASS_SPARSE_JIT", "auto").strip().lower() != "always"
-        self.since = None  # perf_counter() of the first interpreted call
-        self.local = threading.local()  # .depth: interpreted kernels running in this thread
+        mode = os.environ.get("COMPASS_SPARSE_JIT", "auto").strip().lower()
+        self.always = mode == "always"
+        self.interpret = mode == "interpret"  # no budget, whatever is compiled
+        self.built = False  # a kernel was compiled (numba is loaded)
+        self.interpreted_solves = 0
+        self.local = threading.local()  # .mode of this thread's solve, .depth
 
-    def open(self) -> bool:
-        """Whether the window is still open (it opens at the first interpreted call)."""
-        now = time.perf_counter()
-        if self.since is None:
-            self.since = now
-        elif now - self.since > INTERPRET_WINDOW:
-            self.on = False
-        return self.on
+    def may_interpret(self) -> bool:
+        """Whether a solve starting now may be interpreted (the size aside)."""
+        if self.interpret:
+            return True
+        return (not self.always and not self.built
+                and self.interpreted_solves < INTERPRET_SOLVES)
 
 
 _COLD = _ColdStart()
 
 
 def cold_start() -> dict:
-    """The cold start's state: ``interpreting`` (stand-ins still run their Python bodies)
-    and ``seconds`` since the first interpreted kernel call (None before one)."""
-    since = _COLD.since
-    return {"interpreting": _COLD.on,
-            "seconds": None if since is None else time.perf_counter() - since}
+    """The cold start's state: ``interpreting`` (a small problem's next solve would run its
+    kernels interpreted) and ``interpreted_solves`` (solves of this process interpreted)."""
+    return {"interpreting": _COLD.may_interpret(),
+            "interpreted_solves": _COLD.interpreted_solves}
 
 
 def end_cold_start():
     """Compile every kernel from its next first call on (benchmarks of warm solves call this
     first, so that they time compiled kernels)."""
-    _COLD.on = False
+    _COLD.always = True
+
+
+class kernels_interpreted:
+    """Context of one solve (:func:`compass_sparse.routes.kernel_route` enters it): every
+    kernel called in this thread inside it runs interpreted (``interpreted``) or compiled.
+    A solve inside a solve (a hand-over to the general method) keeps the outer one's mode:
+    ``interpreted`` is then ignored, and :attr:`interpreted` says which mode holds."""
+
+    def __init__(self, interpreted: bool):
+        self.interpreted = interpreted
+        self._outer = None
+
+    def __enter__(self):
+        local = _COLD.local
+        self._outer = getattr(local, "mode", None)
+        if self._outer is None:
+            local.mode = "interpreted" if self.interpreted else "compiled"
+            if self.interpreted:
+                _COLD.interpreted_solves += 1
+        self.interpreted = local.mode == "interpreted"
+        return self
+
+    def __exit__(self, *exc):
+        _COLD.local.mode = self._outer
+        return False
+
+
+def may_interpret() -> bool:
+    """Whether a solve starting now in this thread may be interpreted, the problem's size
+    aside: no kernel compiled yet, the interpreted solves not used up, and not inside a
+    compiled solve (a solve inside an interpreted one is interpreted too)."""
+    mode = getattr(_COLD.local, "mode", None)
+    if mode is not None:
+        return mode == "interpreted"
+    return _COLD.may_interpret()
 
 
 def _small(args) -> bool:
@@ -161,17 +205,20 @@ class LazyKernel:
 
     def _build(self):
         if self._dispatcher is None:
-            import numba
+            import numba  # (lazy: 0.2-0.4 s that a solve which never compiles should not pay)
 
-            _COLD.on = False  # numba is loaded: every kernel compiles from now on
+            _COLD.built = True  # numba is loaded: later solves compile
             self._dispatcher = numba.njit(**self.options)(self.py_func)
         return self._dispatcher
 
     def __call__(self, *args):
+        mode = getattr(_COLD.local, "mode", None)
+        if mode == "interpreted":  # the solve's route: every call, whatever its size
+            return _interpret(self.py_func, args)
         d = self._dispatcher
         if d is None:
-            if _COLD.on and _small(args) and _COLD.open():
-                return _interpret(self.py_func, args)
+            if mode is None and _COLD.may_interpret() and _small(args):
+                return _interpret(self.py_func, args)  # outside a solve, small arrays
             d = self.dispatcher
         return d(*args)
 

@@ -1,6 +1,7 @@
-"""Compiled Fischer–Burmeister vector and J^T u for :mod:`compass_sparse.merit`, and the
-small CSC helpers of a small problem's per-iteration work (M z, row and column maxima,
-the dense copy of M for the compiled path engine).
+"""Compiled Fischer–Burmeister vector, its generalized Jacobian's diagonals, gradient and
+directional derivative for :mod:`compass_sparse.merit`, the norms of :mod:`compass_sparse.box`,
+the normal map, the residual report and the acceptance test's kernels (the CSC helpers
+they call are :mod:`compass_sparse.linalg._csc_kernels`).
 
 Same formulas as merit.fischer / merit.fb_phi, one element at a time: the arguments of
 phi(a, b) = sqrt(a^2 + b^2) - a - b are scaled by the power of two of max(|a|, |b|) (exact)
@@ -12,8 +13,8 @@ import math
 
 import numpy as np
 
-from ._eval_kernels import top_abs_distinct
 from ._jit import njit
+from .linalg._csc_kernels import csc_abs_maxima
 
 
 @njit(cache=True, inline="always")
@@ -47,21 +48,6 @@ def fb_phi_kernel(z, f, lb, ub, phi):
 
 
 @njit(cache=True)
-def memo_key_kernel(x, out):
-    """out = x with -0.0 made 0.0 (the bytes of equal points are then equal); returns
-    whether x holds a NaN (evaluation._Memo.probe)."""
-    nan = False
-    for i in range(x.shape[0]):
-        v = x[i]
-        if v == 0.0:
-            v = 0.0
-        elif v != v:
-            nan = True
-        out[i] = v
-    return nan
-
-
-@njit(cache=True)
 def max_abs_kernel(x, y, diff):
     """max |x_i - y_i| when ``diff``, else max |x_i| (y unread): NaN when a term is one, as
     np.max; 0 for empty vectors."""
@@ -82,16 +68,6 @@ def all_finite_kernel(x):
         if not np.isfinite(x[i]):
             return False
     return True
-
-
-@njit(cache=True)
-def csc_rmatvec(indptr, indices, data, u, out):
-    """out = A^T u for A in CSC form (column j of A is row j of A^T)."""
-    for j in range(out.shape[0]):
-        s = 0.0
-        for k in range(indptr[j], indptr[j + 1]):
-            s += data[k] * u[indices[k]]
-        out[j] = s
 
 
 @njit(cache=True, inline="always")
@@ -156,107 +132,6 @@ def fb_directional_kernel(z, f, lb, ub, phi, indptr, indices, data, zc, g, d):
     return np.dot(g, d)
 
 
-@njit(cache=True)
-def csc_diagonal(indptr, indices, data, diag):
-    """diag[j] = A_jj of a CSC matrix A (duplicates summed, 0 where not stored), as
-    scipy's A.diagonal() without its dispatch (~15 us on a small matrix)."""
-    for j in range(diag.shape[0]):
-        d = 0.0
-        for k in range(indptr[j], indptr[j + 1]):
-            if indices[k] == j:
-                d += data[k]
-        diag[j] = d
-
-
-@njit(cache=True)
-def crash_active_set(z, f, lb, ub, diag, free, d):
-    """The crash's active set and Newton target (crash.py): with g_i = |J_ii| (1 where it
-    is 0 or NaN), index i is active at its lower bound when z_i - f_i / g_i <= l_i, else at
-    its upper bound when that point is >= u_i (a NaN point is neither); ``free`` is the
-    complement, and d_i = z_i - (its bound) on the active indices, 0 elsewhere.  The array
-    formulas' values element by element, in one pass."""
-    for i in range(z.shape[0]):
-        g = abs(diag[i])
-        if not g > 0.0:
-            g = 1.0
-        xm = z[i] - f[i] / g
-        if xm <= lb[i]:
-            free[i] = False
-            d[i] = z[i] - lb[i]
-        elif xm >= ub[i]:
-            free[i] = False
-            d[i] = z[i] - ub[i]
-        else:
-            free[i] = True
-            d[i] = 0.0
-
-
-@njit(cache=True)
-def csc_abs_maxima(indptr, indices, data, rows, cols, diag):
-    """Of a canonical CSC matrix A: rows[i] = max_j |A_ij|, cols[j] = max_i |A_ij| and
-    diag[j] = A_jj (0 where not stored), in one pass over the stored entries (a NaN entry
-    makes its row and column maxima NaN, as np.maximum does).  The caller zeroes rows."""
-    for j in range(cols.shape[0]):
-        c = 0.0
-        d = 0.0
-        for k in range(indptr[j], indptr[j + 1]):
-            i = indices[k]
-            a = abs(data[k])
-            if a > c or a != a:
-                c = a
-            if a > rows[i] or a != a:
-                rows[i] = a
-            if i == j:
-                d = data[k]
-        cols[j] = c
-        diag[j] = d
-
-
-@njit(cache=True)
-def csc_scaled_abs_maxima(indptr, indices, data, row, col, rows, cols):
-    """Row and column max-norms of diag(row) A diag(col) for a canonical CSC A, entry
-    (|a_ij| row_i) col_j as scaling._maxnorms' array formula (NaN propagates as in
-    np.maximum); the caller zeroes rows and cols."""
-    for j in range(cols.shape[0]):
-        c = 0.0
-        for k in range(indptr[j], indptr[j + 1]):
-            i = indices[k]
-            a = abs(data[k]) * row[i] * col[j]
-            if a > c or a != a:
-                c = a
-            if a > rows[i] or a != a:
-                rows[i] = a
-        cols[j] = c
-
-
-@njit(cache=True)
-def csc_is_canonical(indptr, indices, nrows, nnz):
-    """Whether CSC index arrays are valid and canonical: indptr runs from 0 to nnz without
-    decreasing, and every column's row indices lie in [0, nrows) strictly increasing
-    (sorted, no duplicates)."""
-    if indptr[0] != 0 or indptr[indptr.shape[0] - 1] != nnz or indices.shape[0] < nnz:
-        return False
-    for j in range(indptr.shape[0] - 1):
-        a, b = indptr[j], indptr[j + 1]
-        if b < a:
-            return False
-        prev = -1
-        for k in range(a, b):
-            i = indices[k]
-            if i <= prev or i >= nrows:
-                return False
-            prev = i
-    return True
-
-
-@njit(cache=True)
-def csc_scale(indptr, indices, data, row, col, out):
-    """out[k] = (a_k row_i) col_j for every stored entry k = (i, j) of a CSC matrix."""
-    for j in range(indptr.shape[0] - 1):
-        for k in range(indptr[j], indptr[j + 1]):
-            out[k] = data[k] * row[indices[k]] * col[j]
-
-
 @njit(cache=True, inline="always")
 def _absorbed(zi, fi, li, ui):
     """(w, v) of merit.normal_map_at for one index: the part of F absorbed by the normal
@@ -287,7 +162,7 @@ def normal_map_kernel(z, f, lb, ub, x, nm):
 
 @njit(cache=True)
 def flat_step_kernel(z, phi, da, db, indptr, indices, data, row_max, col_max, diag):
-    """The scale test of :mod:`compass_sparse.acceptance` on a canonical CSC J: over the
+    """The scale test of :mod:`compass_sparse.nms.acceptance` on a canonical CSC J: over the
     rows with Phi_i != 0, the largest d_i / (1 + |z_i|) with d_i = |Phi_i| / ||H_i||_inf,
     H = diag(da) + diag(db) J (d_i = inf where H_i = 0).  Returns (row, d_row, ratio), row
     -1 when Phi = 0; the first row attains a tie.  ``row_max`` (zeroed), ``col_max`` and
@@ -352,7 +227,7 @@ def residual_maxima_kernel(z, f, lb, ub, phi, mm):
 def residual_report_kernel(z, f, lb, ub, phi, mm, idx):
     """The numbers of merit.residual_report in one call (a Python route of six array
     operations and calls cost a small solve ~10 us): the maxima of
-    :func:`residual_maxima_kernel`, ||Phi||_2 as merit._norm2 takes it (scaled by
+    :func:`residual_maxima_kernel`, ||Phi||_2 as box.norm2 takes it (scaled by
     ||Phi||_inf against over- and underflow: m sqrt(s . s), s = Phi / m; m itself when
     it is 0 or not finite), Phi . Phi (merit.fb_psi's product) and the rows of the
     len(idx) largest |Phi_i| by :func:`top_abs_distinct` (whose answer, False on a tie,
@@ -365,20 +240,6 @@ def residual_report_kernel(z, f, lb, ub, phi, mm, idx):
         fb_norm = fb_inf * math.sqrt(np.dot(s, s))
     distinct = top_abs_distinct(phi, idx) if idx.shape[0] > 0 else False
     return fb_inf, natural, nm_inf, fb_norm, np.dot(phi, phi), distinct
-
-
-@njit(cache=True)
-def positive_spread(v):
-    """max / min of the positive entries of v (1 when there are none)."""
-    lo = np.inf
-    hi = 0.0
-    for x in v:
-        if x > 0.0:
-            if x < lo:
-                lo = x
-            if x > hi:
-                hi = x
-    return hi / lo if hi > 0.0 else 1.0
 
 
 @njit(cache=True)
@@ -401,54 +262,52 @@ def min_map_within(z, f, lb, ub, tol):
 
 
 @njit(cache=True)
-def csc_max_norm_spread(indptr, indices, data, n):
-    """max(positive_spread(rows), positive_spread(cols)) of the row and column max-norms
-    of a canonical square CSC matrix of order n (scaling.spread in one call: the scaling
-    trigger asks for it in every solve)."""
-    rows = np.zeros(n)
-    cols = np.zeros(n)
-    csc_abs_maxima(indptr, indices, data, rows, cols, np.empty(n))
-    return max(positive_spread(rows), positive_spread(cols))
+def top_abs_distinct(v, idx):
+    """The indices of the k = len(idx) largest |v_i|, largest first, into idx, when that
+    answer is unique: the k largest values distinct and the k-th larger than the next
+    (ties are ordered by the caller's own sort instead, which this pass need not
+    imitate).  Returns False (idx undefined) on a tie, a NaN, or k > len(v)."""
+    k = idx.shape[0]
+    n = v.shape[0]
+    if k == 0 or k > n:
+        return False
+    vals = np.empty(k + 1)
+    ids = np.empty(k + 1, dtype=np.int64)
+    cnt = 0
+    for i in range(n):
+        a = abs(v[i])
+        if a != a:  # NaN
+            return False
+        if cnt == k + 1 and not a > vals[k]:
+            continue
+        # insertion into the descending list (the last entry drops when it is full)
+        p = cnt if cnt < k + 1 else k
+        while p > 0 and vals[p - 1] < a:
+            if p < k + 1:
+                vals[p] = vals[p - 1]
+                ids[p] = ids[p - 1]
+            p -= 1
+        vals[p] = a
+        ids[p] = i
+        if cnt < k + 1:
+            cnt += 1
+    for j in range(1, k):
+        if not vals[j - 1] > vals[j]:
+            return False
+    if cnt > k and not vals[k - 1] > vals[k]:
+        return False
+    for j in range(k):
+        idx[j] = ids[j]
+    return True
 
 
-@njit(cache=True)
-def csc_matvec(indptr, indices, data, x, out):
-    """out = A x for A in CSC form, column by column (scipy's csc_matvec order)."""
-    out[:] = 0.0
-    for j in range(x.shape[0]):
-        xj = x[j]
-        for k in range(indptr[j], indptr[j + 1]):
-            out[indices[k]] += data[k] * xj
+@njit(cache=True, inline="always")
+def np_max(a, b):
+    """np.maximum(a, b) of two floats, b not NaN: b on a tie, as numpy (0.0 and -0.0)."""
+    return a if (a > b or a != a) else b
 
 
-@njit(cache=True)
-def csc_to_dense(indptr, indices, data, out):
-    """out[:, :] = A for A in CSC form (duplicate entries summed), in place."""
-    out[:, :] = 0.0
-    for j in range(out.shape[1]):
-        for k in range(indptr[j], indptr[j + 1]):
-            out[indices[k], j] += data[k]
-
-
-@njit(cache=True)
-def newton_linearization(jdata, pos_j, scatter, pos_d, eps, indptr, indices, z, f, x,
-                         mdata, q, r):
-    """The linear MCP of a major iteration in one pass (nms.Linearizer.linearize):
-    mdata = the entries of M = J + eps I on M's pattern (``scatter``: J's entry k at
-    position pos_j[k], the others 0; else J's entries in M's order), q = f - M z (M z
-    summed column by column, as :func:`csc_matvec`) and r = f + x - z: the bits of the
-    array formulas."""
-    if scatter:
-        mdata[:] = 0.0
-        for k in range(jdata.shape[0]):
-            mdata[pos_j[k]] = jdata[k]
-    else:
-        for k in range(jdata.shape[0]):
-            mdata[k] = jdata[k]
-    if eps != 0.0:
-        for k in range(pos_d.shape[0]):
-            mdata[pos_d[k]] += eps
-    csc_matvec(indptr, indices, mdata, z, q)
-    for i in range(q.shape[0]):
-        q[i] = f[i] - q[i]
-        r[i] = f[i] + x[i] - z[i]
+@njit(cache=True, inline="always")
+def np_min(a, b):
+    """np.minimum(a, b) of two floats, b not NaN: b on a tie, as numpy."""
+    return a if (a < b or a != a) else b

@@ -23,7 +23,7 @@ def keyword_checked(cls):
 
     @functools.wraps(init)
     def __init__(self, *args, **kwargs):
-        cls._check_names(kwargs)
+        cls.check_names(kwargs)
         if len(args) > n_fields:
             raise OptionError(f"{cls.__name__} takes at most {n_fields} values; give options "
                               "by name")
@@ -68,7 +68,7 @@ class OptionsMixin:
     _what = "option"
 
     @classmethod
-    def _check_names(cls, keys):
+    def check_names(cls, keys):
         names = _field_names(cls)
         if names.issuperset(keys):
             return
@@ -83,7 +83,7 @@ class OptionsMixin:
     @classmethod
     def from_dict(cls, d: Mapping[str, Any]):
         if not cls.__dataclass_params__.frozen:
-            cls._check_names(d)
+            cls.check_names(d)
             return cls(**dict(d))
         # A frozen instance can be shared: a solve loop passing the same dict every time
         # gets the options built and validated once.  The key holds each value's type,
@@ -96,10 +96,10 @@ class OptionsMixin:
             key = (cls, *(sorted(items) if len(items) > 1 else items))
             hit = _BUILT.get(key)
         except TypeError:  # an unhashable value: built (and rejected) as usual
-            cls._check_names(d)
+            cls.check_names(d)
             return cls(**dict(d))
         if hit is None:
-            cls._check_names(d)
+            cls.check_names(d)
             hit = cls(**dict(d))
             if len(_BUILT) >= _BUILT_MAX:
                 _BUILT.clear()
@@ -123,7 +123,7 @@ class OptionsMixin:
         instance's copies are shared as :meth:`from_dict`'s are: every restart of a solve
         replaces a few fields of the same options, and building and validating them cost
         ~0.15 ms per restart of a small problem."""
-        self._check_names(changes)
+        self.check_names(changes)
         if not self.__dataclass_params__.frozen:
             return dataclasses.replace(self, **changes)
         try:

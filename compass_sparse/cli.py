@@ -14,6 +14,7 @@ with exit code 130 (a scenario batch says how many scenarios were saved and how 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import logging
 import os
 import shutil
@@ -23,7 +24,15 @@ import time
 
 import numpy as np
 
+from . import __version__
+from . import generators as gen
+from .batch import grid, parse_axis, read_scenarios, solve_batch
 from .exceptions import CompassError
+from .generators.cge import economics_report, static_cge
+from .lcp import solve_lcp
+from .options import Options
+from .problem.mcp import MCP
+from .solve import solve_mcp
 
 EXIT_USAGE = 2
 """Exit code of a mistake on the command line (argparse's own)."""
@@ -63,9 +72,6 @@ def _print_result(name, n, res, problem=None, build_time=None, verbose=0):
 
 
 def _demo(args) -> int:
-    from . import solve_lcp, solve_mcp
-    from . import generators as gen
-
     kind = args.problem
     t0 = time.perf_counter()
     if kind == "obstacle":
@@ -83,8 +89,6 @@ def _demo(args) -> int:
         build = time.perf_counter() - t0
         res = solve_mcp(g.problem, options=_opts(args))
     elif kind == "cge":
-        from .generators.cge import static_cge
-
         # the shocked model is the one solved, so it is the one the result is checked on
         g = static_cge(seed=args.seed).with_shock(output_tax=0.0)
         build = time.perf_counter() - t0
@@ -103,8 +107,6 @@ def _demo(args) -> int:
                              [4 * x1 + 1, 2 * x2, 3, 2],
                              [6 * x1 + x2, x1 + 4 * x2, 2, 3],
                              [2 * x1, 6 * x2, 2, 3]], dtype=float)
-
-        from .problem import MCP
 
         prob = MCP(F, J, 0.0, np.inf, np.zeros(4))
         build = time.perf_counter() - t0
@@ -147,8 +149,6 @@ def _check_cge_args(args):
 
 def _scenario_list(args):
     """The scenarios of --scenarios and --scenarios-file (a bad spec is a UsageError)."""
-    from .batch import grid, parse_axis, read_scenarios
-
     try:
         scenarios = (grid(**dict(parse_axis(a) for a in args.scenarios))
                      if args.scenarios else [])
@@ -162,9 +162,6 @@ def _scenario_list(args):
 
 
 def _cge(args) -> int:
-    from . import solve_mcp
-    from .generators.cge import static_cge
-
     _check_cge_args(args)
     scenarios = _scenario_list(args) if (args.scenarios or args.scenarios_file) else None
     t0 = time.perf_counter()
@@ -196,8 +193,6 @@ def _cge(args) -> int:
     res = solve_mcp(shocked.problem, options=_opts(args))
     _print_result("counterfactual", shocked.problem.n, res, shocked.problem,
                   verbose=args.verbose)
-    from .generators.cge import economics_report
-
     econ = economics_report(shocked, shocked.benchmark, res.x)
     print()
     print("economics of the counterfactual" + ("" if res.success else
@@ -211,8 +206,6 @@ def _cge(args) -> int:
 
 def _cge_scenarios(args, model, scenarios) -> int:
     """A scenario batch of the CGE model: results to Parquet, a table of headlines."""
-    from .batch import solve_batch
-
     names = sorted({k for s in scenarios for k in s})
     if "tariff" in names and model.info["regions"] < 2:
         raise UsageError("tariff scenarios need trade between regions: give --regions 2 or "
@@ -254,10 +247,6 @@ def _cge_scenarios(args, model, scenarios) -> int:
 def _options_table(width: int) -> str:
     """Every option with its default and meaning, wrapped to ``width`` columns: the meaning
     continues under itself, or (on a narrow terminal) under the option's line."""
-    import dataclasses
-
-    from .options import Options
-
     out = []
     for f in dataclasses.fields(Options):
         head = f"{f.name:36s} {f.default!r:>12}  "
@@ -273,8 +262,6 @@ def _options_table(width: int) -> str:
 
 
 def _parser() -> argparse.ArgumentParser:
-    from . import __version__
-
     ap = argparse.ArgumentParser(
         prog="compass-sparse",
         description="Sparse solver for mixed complementarity problems (PATH's method).",

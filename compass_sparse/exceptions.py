@@ -1,6 +1,6 @@
 """The package's exception hierarchy.
 
-Bad input is an exception; a failed solve is a status (see :mod:`compass_sparse.result`).
+Bad input is an exception; a failed solve is a status (see :mod:`compass_sparse.status`).
 Every exception derives from :class:`CompassError`; input problems also derive from
 ``ValueError`` so that generic callers can catch them the usual way.
 """

@@ -19,7 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from .result import Status
+from .status import Status
+from .linalg.blas import single_threaded_blas
 
 __all__ = ["solve_free_lcp", "FreeSystemOutcome", "CERTIFICATE_RTOL", "DENSE_MAX_N"]
 
@@ -40,12 +41,11 @@ class FreeSystemOutcome:
 def solve_free_lcp(M: sp.csc_matrix, q: np.ndarray, tol: float) -> FreeSystemOutcome | None:
     n = q.size
     if n <= DENSE_MAX_N:
-        # single-threaded (see compass_sparse._blas): 25 s against 0.8 s at n = 1000
-        from ._blas import single_threaded_blas
-
+        # single-threaded (see compass_sparse.linalg.blas): 25 s against 0.8 s at n = 1000
         with single_threaded_blas():
             z = np.linalg.lstsq(M.toarray(), -q, rcond=None)[0]
     else:
+        # (lazy: scipy's linalg adds ~0.15 s to the package's import)
         from scipy.sparse.linalg import lsmr
 
         z = lsmr(M, -q, atol=1e-14, btol=1e-14, maxiter=20 * n)[0]

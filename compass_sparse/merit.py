@@ -22,20 +22,23 @@ the box; x solves F_B(x) = 0 iff z = pi(x) solves the MCP.  The natural (minimum
 residual ||z - pi(z - F(z))||_inf is the independent check applied to every returned
 point.
 
+The box's own toolkit (the projection pi, the norms, the float-vector tests) is
+:mod:`compass_sparse.box`.
+
 phi is evaluated in the cancellation-free form -2ab / (sqrt(a^2+b^2) + a + b) when
 a + b > 0, so that Phi keeps full relative accuracy near a solution with a, b > 0.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 
-from ._merit_kernels import (csc_rmatvec, fb_diagonals_kernel, fb_directional_kernel,
-                             fb_gradient_kernel, fb_phi_kernel, max_abs_kernel, normal_map_kernel,
-                             residual_report_kernel)
+from .linalg._csc_kernels import csc_rmatvec
+from ._merit_kernels import (fb_diagonals_kernel, fb_directional_kernel, fb_gradient_kernel,
+                             fb_phi_kernel, normal_map_kernel, residual_report_kernel)
+from .box import broadcast_box, float_vector, max_abs, norm2, project, solver_vectors
 
 __all__ = [
     "fischer",
@@ -44,7 +47,6 @@ __all__ = [
     "fb_jacobian_diagonals",
     "fb_gradient",
     "fb_directional",
-    "project",
     "normal_map",
     "normal_map_at",
     "natural_residual",
@@ -83,32 +85,12 @@ def _fischer_grad(a, b):
     return ga, gb
 
 
-def _broadcast_box(lb, ub, z):
-    """Broadcast scalar (or array) bounds to the shape of z (no validation: that is
-    :func:`compass_sparse.problem.as_bounds`, for user input)."""
-    if (isinstance(lb, np.ndarray) and isinstance(ub, np.ndarray) and lb.shape == z.shape
-            and ub.shape == z.shape and lb.dtype == float and ub.dtype == float):
-        return lb, ub  # the solver's own bound arrays: nothing to broadcast
-    return (np.broadcast_to(np.asarray(lb, dtype=float), z.shape),
-            np.broadcast_to(np.asarray(ub, dtype=float), z.shape))
 
 
-_F64 = np.dtype(np.float64)
 
 
-def float_vector(x) -> bool:
-    """x is a float64 vector, the compiled kernels' argument (every point of a solve).
-    (Identity tests: a tenth of a microsecond where ``dtype ==`` and the flags cost a
-    microsecond, asked several times at every evaluated point.)"""
-    return x.__class__ is np.ndarray and x.ndim == 1 and x.dtype is _F64
 
 
-def _solver_vectors(z, f, lb, ub) -> bool:
-    """z, F, l, u are float64 vectors of one length: the solver's own vectors at every
-    evaluated point, handed straight to the compiled kernels (a microsecond of tests
-    instead of the conversions of the general case)."""
-    return (float_vector(z) and float_vector(f) and float_vector(lb) and float_vector(ub)
-            and z.shape == f.shape == lb.shape == ub.shape)
 
 
 def _kinds(lb, ub):
@@ -119,14 +101,14 @@ def _kinds(lb, ub):
 
 def fb_phi(z, f, lb, ub):
     """The Fischer–Burmeister vector Phi(z) for given F values f = F(z)."""
-    if _solver_vectors(z, f, lb, ub):
+    if solver_vectors(z, f, lb, ub):
         # the solver's own vectors (every evaluated point): straight to the kernel
         phi = np.empty(z.shape[0])
         fb_phi_kernel(z, f, lb, ub, phi)
         return phi
     z = np.asarray(z, dtype=float)
     f = np.asarray(f, dtype=float)
-    lb, ub = _broadcast_box(lb, ub, z)
+    lb, ub = broadcast_box(lb, ub, z)
     if z.ndim == 1 and f.shape == z.shape:
         phi = np.empty_like(z)
         fb_phi_kernel(np.ascontiguousarray(z), np.ascontiguousarray(f),
@@ -139,7 +121,7 @@ def fb_phi_arrays(z, f, lb, ub):
     """fb_phi with array operations (the reference of the compiled kernel)."""
     z = np.asarray(z, dtype=float)
     f = np.asarray(f, dtype=float)
-    lb, ub = _broadcast_box(lb, ub, z)
+    lb, ub = broadcast_box(lb, ub, z)
     lo, up, box, free = _kinds(lb, ub)
     phi = np.empty_like(z)
     if lo.any():
@@ -166,7 +148,7 @@ def fb_jacobian_diagonals(z, f, lb, ub):
     """Diagonals (da, db) with H = diag(da) + diag(db) J an element of d Phi(z)."""
     z = np.asarray(z, dtype=float)
     f = np.asarray(f, dtype=float)
-    lb, ub = _broadcast_box(lb, ub, z)
+    lb, ub = broadcast_box(lb, ub, z)
     if z.ndim == 1 and f.shape == z.shape:
         da = np.empty_like(z)
         db = np.empty_like(z)
@@ -180,7 +162,7 @@ def fb_jacobian_diagonals_arrays(z, f, lb, ub):
     """fb_jacobian_diagonals with array operations (the reference of the compiled kernel)."""
     z = np.asarray(z, dtype=float)
     f = np.asarray(f, dtype=float)
-    lb, ub = _broadcast_box(lb, ub, z)
+    lb, ub = broadcast_box(lb, ub, z)
     lo, up, box, free = _kinds(lb, ub)
     da = np.zeros_like(z)
     db = np.zeros_like(z)
@@ -200,21 +182,8 @@ def fb_jacobian_diagonals_arrays(z, f, lb, ub):
     return da, db
 
 
-def max_abs(x) -> float:
-    """||x||_inf of a vector (0 when empty; NaN when x holds a NaN), in one compiled pass
-    for a float vector: np.max(np.abs(x)) costs ~5 us of dispatch on a short one, and the
-    solver asks it several times per major iteration."""
-    if float_vector(x):
-        return float(max_abs_kernel(x, x, False))
-    x = np.asarray(x, dtype=float)
-    return float(np.max(np.abs(x))) if x.size else 0.0
 
 
-def max_abs_diff(x, y) -> float:
-    """||x - y||_inf of two vectors of one length (as :func:`max_abs`)."""
-    if float_vector(x) and float_vector(y) and x.shape == y.shape:
-        return float(max_abs_kernel(x, y, True))
-    return max_abs(np.asarray(x, dtype=float) - np.asarray(y, dtype=float))
 
 
 def _kernel_gradient_args(z, J, phi) -> bool:
@@ -229,7 +198,7 @@ def fb_gradient(z, f, J, lb, ub, phi=None):
     """grad Psi(z) = H^T Phi with H = diag(da) + diag(db) J."""
     if phi is None:
         phi = fb_phi(z, f, lb, ub)
-    vectors = _solver_vectors(z, f, lb, ub)
+    vectors = solver_vectors(z, f, lb, ub)
     if vectors and _kernel_gradient_args(z, J, phi):
         # the solver's own vectors and J (the descent test of every major iteration)
         g = np.empty(z.shape[0])
@@ -255,7 +224,7 @@ def fb_directional(z, f, J, lb, ub, phi, zc) -> float:
     compiled call for the solver's own vectors and J (the descent test of a major
     iteration: the gradient, the difference and the product were three calls and three
     arrays)."""
-    if (_solver_vectors(z, f, lb, ub) and _kernel_gradient_args(z, J, phi)
+    if (solver_vectors(z, f, lb, ub) and _kernel_gradient_args(z, J, phi)
             and float_vector(zc) and zc.shape == z.shape):
         w = np.empty((2, z.shape[0]))  # g and zc - z: one allocation, C rows
         return float(fb_directional_kernel(z, f, lb, ub, phi, J.indptr, J.indices, J.data,
@@ -263,9 +232,6 @@ def fb_directional(z, f, J, lb, ub, phi, zc) -> float:
     return float(fb_gradient(z, f, J, lb, ub, phi) @ (np.asarray(zc, dtype=float) - z))
 
 
-def project(x, lb, ub):
-    """pi(x): the projection of x on the box [lb, ub]."""
-    return np.minimum(np.maximum(x, lb), ub)
 
 
 def normal_map(x, f_at_pi, lb, ub):
@@ -324,7 +290,7 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5,
     """
     z = np.asarray(z, dtype=float)
     f = np.asarray(f, dtype=float)
-    lb, ub = _broadcast_box(lb, ub, z)
+    lb, ub = broadcast_box(lb, ub, z)
     if phi is None:
         phi = fb_phi(z, f, lb, ub)
     aphi = None  # |Phi|, made only where a sort needs it
@@ -343,7 +309,7 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5,
         nm = normal_map_at_arrays(z, f, lb, ub)[1]
         fb_inf, natural, nm_inf = (float(np.max(aphi)), float(np.max(mm)),
                                    float(np.max(np.abs(nm)))) if z.size else (0.0, 0.0, 0.0)
-        fb_norm, psi = _norm2(phi, fb_inf), fb_psi(phi)
+        fb_norm, psi = norm2(phi, fb_inf), fb_psi(phi)
     # the k largest came from one compiled pass when they are distinct (then the answer
     # is unique: the sorts below give it too); ties keep numpy's order
     if not distinct:
@@ -372,25 +338,8 @@ def residual_report(z, f, lb, ub, *, names=None, k_worst: int = 5,
     )
 
 
-def dot_norm(v) -> float:
-    """||v||_2 of a float vector as the square root of v . v, which is what np.linalg.norm
-    computes for a real vector (the same bits), without its dispatch (~4 us; the crash and
-    the homotopy's corrector ask several per step).  (:func:`_norm2` scales against
-    overflow instead.)"""
-    return math.sqrt(float(v.dot(v)))
 
 
-def _norm2(v, inf_norm=None) -> float:
-    """||v||_2 without underflow or overflow of the squares (``inf_norm``: ||v||_inf when
-    known)."""
-    if inf_norm is not None:
-        m = float(inf_norm)
-    else:
-        m = float(np.abs(v).max()) if v.size else 0.0
-    if m == 0.0 or not math.isfinite(m):
-        return m
-    s = v / m
-    return m * math.sqrt(float(np.dot(s, s)))  # (the correctly rounded root, as np.sqrt)
 
 
 def normal_map_at(z, f, lb, ub):
@@ -400,7 +349,7 @@ def normal_map_at(z, f, lb, ub):
     x_i = z_i + max(-F_i, 0), a fixed variable absorbs all of F_i."""
     if (isinstance(z, np.ndarray) and isinstance(f, np.ndarray) and z.ndim == 1
             and f.shape == z.shape and z.dtype == float and f.dtype == float):
-        lb, ub = _broadcast_box(lb, ub, z)
+        lb, ub = broadcast_box(lb, ub, z)
         x = np.empty_like(z)
         nm = np.empty_like(z)
         normal_map_kernel(z, f, lb, ub, x, nm)

@@ -46,6 +46,8 @@ PATH_NAMES: dict[str, str | None] = {
     "factor_reuse": None,  # PATH factors every basis afresh
     "lu_backend": "factorization_method",  # PATH's basis package (lusol, umfpack, ...)
     "lu_ordering": None,  # PATH's packages order by themselves
+    "engine": None,  # which implementation of our loops runs (compass_sparse.routes)
+    "path_basis": None,
 }
 
 
@@ -274,9 +276,27 @@ class Options(OptionsMixin):
         True, "row and column equilibration of J(x0) when its row or column norms spread "
         "over more than 1e2 (the tolerance still applies to the user's F)")
 
+    # --- routes (compass_sparse.routes: which implementation runs, chosen once per solve) --
+    engine: str = _opt(
+        "auto", "'auto': compiled loops where they apply -- the stabilized Newton method's "
+        "bookkeeping (up to n = 5000, on a problem the scaling pass left unscaled), the crash "
+        "(when every block is dense, n <= 200), the homotopy's path tracker (n <= 300) and a "
+        "small problem's path start and dense direct step in one call (n < 150); "
+        "'reference': their Python loops, which compute the same points bit for bit (the "
+        "tests hold the two against each other).  Result.routes records what ran",
+        choices=("auto", "reference"))
+    path_basis: str = _opt(
+        "auto", "the basis the pivotal paths run on: 'auto' (the compiled dense engine, a dense "
+        "LU with Forrest-Tomlin updates, up to n = 500; the sparse basis manager above), "
+        "'dense' (the Python pivot loop on the dense reference basis, an explicit inverse "
+        "with rank-one updates, up to n = 300; the sparse basis manager above) or 'sparse' "
+        "(the Python pivot loop on the sparse basis manager at every order); the three take "
+        "the same pivots up to rounding", choices=("auto", "dense", "sparse"))
+
     # --- output ---------------------------------------------------------------------
-    verbosity: int = _opt(0, "0 silent, 1 summary, 2 major-iteration log, 3 minor log",
-                          lo=0, hi=3)
+    verbosity: int = _opt(0, "0 silent, 1 summary, 2 major-iteration log, 3 minor log (one "
+                          "line per pivot, from the same pivots a silent solve makes: the "
+                          "log never changes which arithmetic runs)", lo=0, hi=3)
     progress: bool = _opt(False, "one-line progress display on stderr for solves longer "
                           "than a second, shown only when stderr is a terminal")
 
@@ -331,7 +351,7 @@ class Options(OptionsMixin):
     @classmethod
     def path_name(cls, name: str) -> str | None:
         """PATH 5.2's name of option ``name`` (None when PATH has no such option)."""
-        cls._check_names([name])
+        cls.check_names([name])
         return PATH_NAMES.get(name, name)
 
     @classmethod

@@ -21,6 +21,7 @@ __all__ = ["convergence", "performance_profile", "profile_curve"]
 def _pyplot():
     # matplotlib picks a non-interactive backend by itself when there is no display.
     try:
+        # (matplotlib: an optional extra)
         import matplotlib.pyplot as plt
     except ImportError as exc:  # pragma: no cover - the plot extra installs it
         raise ImportError("compass_sparse.plot needs matplotlib: "

@@ -1,137 +1,24 @@
-"""Status and result types.
-
-Status has two axes (as HiGHS and Pyomo do):
-
-* :class:`Status` — why the solve stopped.  An append-only IntEnum whose codes 1..10
-  coincide with PATH's ``MCP_Termination`` codes (1 Solved, 2 NoProgress,
-  3 MajorIterationLimit, 4 MinorIterationLimit, 5 TimeLimit, 6 UserInterrupt,
-  7 BoundError, 8 DomainError, 9 Infeasible, 10 Error); codes from 100 on are ours and
-  map to the PATH code given by :meth:`Status.path_code`.
-* :class:`PointStatus` — what the returned point is.
+"""The outcome of a solve: :class:`Result`.
 
 :class:`Result` uses scipy.optimize's field names (``x, fun, success, status, message,
 nit, nfev, njev``) and adds the residual report, counters and per-pass statistics.  It
 recomputes its own residual from F on request (:meth:`Result.check`), so a caller never
-has to trust the solver's bookkeeping.
+has to trust the solver's bookkeeping.  Its two status axes, :class:`~compass_sparse.Status`
+and :class:`~compass_sparse.PointStatus`, are defined in :mod:`compass_sparse.status`.
 """
 from __future__ import annotations
 
-import enum
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import sensitivity as _sensitivity
+from .exceptions import ShapeError
 from .merit import ResidualReport, natural_residual, residual_report
+from .problem.mcp import MCP, as_real
+from .status import PointStatus, Status
 
-__all__ = ["Status", "PointStatus", "PassStats", "Result", "IntermediateResult", "Iteration"]
-
-
-class Status(enum.IntEnum):
-    """Why the solve stopped.  Append-only: codes never change meaning."""
-
-    SOLVED = 1  #: both residuals <= convergence_tolerance (see compass_sparse.acceptance)
-    NO_PROGRESS = 2  #: restarts exhausted without reaching the tolerance
-    MAJOR_ITERATION_LIMIT = 3  #: major_iteration_limit reached (0: start point evaluated)
-    MINOR_ITERATION_LIMIT = 4  #: cumulative pivot limit reached
-    TIME_LIMIT = 5  #: time_limit reached
-    USER_INTERRUPT = 6  #: KeyboardInterrupt (Ctrl-C)
-    BOUND_ERROR = 7  #: inconsistent bounds (normally raised as BoundsError before solving)
-    DOMAIN_ERROR = 8  #: F/J undefined (NaN/Inf or exception) and no progress was possible
-    INFEASIBLE = 9  #: a linear problem proved to have no solution (ray termination)
-    ERROR = 10  #: internal failure (singular basis that could not be repaired, ...)
-    MEMORY_LIMIT = 11  #: a factorization was not started: its L + U would exceed the memory
-    CALLBACK_STOP = 100  #: the user's callback asked to stop (PATH code 6)
-    #: the residual is below the tolerance only because F is flat there (PATH code 2)
-    FLAT_RESIDUAL = 101
-    #: the iterates converged to a stationary point of the merit function that is not a
-    #: solution; the message names the rows that keep the merit up (PATH code 2)
-    STATIONARY_POINT = 102
-
-    def path_code(self) -> int:
-        """The PATH ``MCP_Termination`` code with the same meaning."""
-        return _PATH_CODE.get(self, int(self))
-
-    @property
-    def description(self) -> str:
-        return _STATUS_TEXT[self]
-
-
-_STATUS_TEXT = {
-    Status.SOLVED: "solution found",
-    Status.NO_PROGRESS: "no progress: restarts exhausted without reaching the tolerance",
-    Status.MAJOR_ITERATION_LIMIT: "major iteration limit reached",
-    Status.MINOR_ITERATION_LIMIT: "cumulative pivot (minor iteration) limit reached",
-    Status.TIME_LIMIT: "time limit reached",
-    Status.USER_INTERRUPT: "interrupted by the user",
-    Status.BOUND_ERROR: "inconsistent bounds",
-    Status.DOMAIN_ERROR: "F or J could not be evaluated near the iterates",
-    Status.INFEASIBLE: "the linear problem has no solution (ray termination)",
-    Status.ERROR: "internal error",
-    Status.CALLBACK_STOP: "stopped by the callback",
-    Status.FLAT_RESIDUAL: "residual small only because F is flat (not a solution)",
-    Status.STATIONARY_POINT: "stationary point of the merit function (not a solution)",
-    Status.MEMORY_LIMIT: "memory limit: the next factorization would not fit in memory",
-}
-
-_PATH_CODE = {Status.CALLBACK_STOP: 6, Status.FLAT_RESIDUAL: 2, Status.STATIONARY_POINT: 2,
-              Status.MEMORY_LIMIT: 10}
-
-
-class PointStatus(enum.IntEnum):
-    """What the returned point x is."""
-
-    SOLUTION = 1  #: meets the convergence tolerance
-    BEST_POINT = 2  #: the best point (lowest merit) found; not a solution
-    START_POINT = 3  #: the (projected) start point; nothing better was found
-    CERTIFICATE = 4  #: an LCP's ray (x is the ray's base; see Result.ray)
-
-
-@dataclass
-class IntermediateResult:
-    """What a callback receives after each major iteration (return True or raise
-    StopIteration to stop the solve)."""
-
-    x: np.ndarray
-    fun: np.ndarray
-    residual: float
-    nit: int
-    minor_iterations: int
-
-
-@dataclass(frozen=True)
-class Iteration:
-    """One major iteration as the log prints it (``Result.history`` keeps them all).
-
-    ``residual`` is ||Phi_FB||_2 of the iterate accepted in this major iteration, measured
-    on the problem the Newton method works on (after the preprocessor); ``step`` is the
-    log's two-letter type (the path's code and the step: e.g. ``SD``, ``SM``, ``RW``).
-    Iteration 0 is the start point (after the preprocessor, before the crash); a last
-    record with an empty type is the returned point when the solve stopped inside a major
-    iteration (a solution found during a search).  ``pivots`` are this iteration's,
-    ``prox`` the proximal perturbation for the next path, and ``time`` counts seconds from
-    the start of the stabilized Newton method (after the preprocessor).
-    """
-
-    nit: int
-    residual: float
-    step: str
-    pivots: int
-    prox: float
-    time: float
-
-
-@dataclass
-class PassStats:
-    """What one pass cost.  ``ran`` is False when the pass decided it was not needed."""
-
-    ran: bool = False
-    reason: str = ""
-    time: float = 0.0
-    iterations: int = 0
-    nfev: int = 0
-    njev: int = 0
-    pivots: int = 0
-    factorizations: int = 0
+__all__ = ["Result"]
 
 
 @dataclass
@@ -169,6 +56,10 @@ class Result:
     #: sparse LU of the basis: backend, ordering, symbolic estimates (est_nnz_lu, est_flops,
     #: est_bytes: the largest met), max_nnz_lu, times, and the process's peak RSS in bytes
     lu: dict = field(default_factory=dict)
+    #: which implementation of each pass ran (:mod:`compass_sparse.routes`): "kernels"
+    #: (compiled or interpreted), "path" (dense engine, dense basis or sparse basis),
+    #: "nms", "crash", "homotopy" (compiled or python), chosen once for the solve
+    routes: dict = field(default_factory=dict)
 
     @property
     def worst_rows(self):
@@ -177,20 +68,14 @@ class Result:
     def check(self, F, lb=None, ub=None, names=None) -> ResidualReport:
         """Recompute the residuals of ``x`` from F (a callable or an MCP) — independent of
         the solver's bookkeeping."""
-        from .problem import MCP
-
         if isinstance(F, MCP):
             f = F.F_uncounted(self.x)
             lb = F.lb if lb is None else lb
             ub = F.ub if ub is None else ub
             names = names or F.row_label
         else:
-            from .problem import as_real
-
             f = as_real(F(np.array(self.x, copy=True)), "F(x)")
             if f.size != self.x.size:
-                from .exceptions import ShapeError
-
                 raise ShapeError(f"F(x) returned {f.size} values at the result's point, "
                                  f"which has {self.x.size} variables")
             f = f.reshape(self.x.shape)
@@ -205,9 +90,7 @@ class Result:
     def sensitivity(self, problem, dF_dp, **kwargs):
         """dx/dp at this solution of ``problem`` (an MCP) for the parameter derivative
         ``dF_dp`` (n,) or (n, k): see :func:`compass_sparse.sensitivity.sensitivity`."""
-        from .sensitivity import sensitivity
-
-        return sensitivity(problem, self.x, dF_dp, **kwargs)
+        return _sensitivity.sensitivity(problem, self.x, dF_dp, **kwargs)
 
     def summary(self) -> str:
         lines = [

@@ -24,7 +24,7 @@ more than ``SPREAD_TRIGGER``.
 
 The solve's tolerance still refers to the user's problem: a point of the scaled problem
 is accepted only when z = C y meets the acceptance test on F itself
-(see :class:`compass_sparse.acceptance.Acceptance`), and the Result is reported on F.
+(see :class:`compass_sparse.nms.acceptance.Acceptance`), and the Result is reported on F.
 """
 from __future__ import annotations
 
@@ -33,14 +33,15 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ._csc import trusted_csc, without_duplicates
+from .linalg.csc import trusted_csc, without_duplicates
 from ._jit import njit
-from ._merit_kernels import csc_max_norm_spread, csc_scaled_abs_maxima
-from .evaluation import Evaluator
-from .problem import MCP
+from .linalg._csc_kernels import csc_max_norm_spread, csc_scaled_abs_maxima
+from .linalg._csc_kernels import csc_scale, positive_spread
+from .problem.evaluator import ScaledEvaluator
+from .problem.mcp import MCP
 
-__all__ = ["SPREAD_TRIGGER", "SWEEPS", "FACTOR_LIMIT", "Scaling", "equilibrate", "scale_problem",
-           "ScaledEvaluator"]
+__all__ = ["FACTOR_LIMIT", "SPREAD_TRIGGER", "SWEEPS", "Scaling", "equilibrate",
+           "scale_problem"]
 
 SPREAD_TRIGGER = 1e2
 """Apply the pass when the row or column max-norms of J(z0) spread over more than this."""
@@ -74,8 +75,6 @@ def scale_entries(J, row, col) -> sp.csc_matrix:
     """diag(row) J diag(col) as a new CSC matrix, entry by entry in one compiled pass
     ((a_ij row_i) col_j, the value diag(row) @ J @ diag(col) computes; the stored entries,
     explicit zeros included, are kept)."""
-    from ._merit_kernels import csc_scale
-
     J = J if sp.issparse(J) and J.format == "csc" else sp.csc_matrix(J)
     data = np.empty(J.data.shape)
     csc_scale(J.indptr, J.indices, J.data.astype(float, copy=False), row, col, data)
@@ -94,8 +93,6 @@ def _maxnorms(A: sp.csc_matrix, row=None, col=None):
 
 
 def _spread(v) -> float:
-    from ._merit_kernels import positive_spread
-
     return float(positive_spread(v))
 
 
@@ -163,54 +160,3 @@ def scale_problem(problem: MCP, s: Scaling) -> MCP:
     return out
 
 
-class ScaledEvaluator(Evaluator):
-    """G(y) = R F(C y) and R J(C y) C through the parent evaluator's counted calls."""
-
-    def __init__(self, parent: Evaluator, s: Scaling):
-        P = parent.pattern_ref
-        share = P is not None
-        super().__init__(None, parent.jac_mode, parent.n,
-                         pattern=None if share else parent.pattern,
-                         fd_step=parent.fd_step, ub=parent.ub / s.col,
-                         row_label=parent.row_label, var_label=parent.var_label,
-                         counters=parent.counters)
-        if share:
-            # R J C has J's pattern: the parent's pattern object itself (never changed in
-            # place: a pattern that grows is a new object) and its store of objects derived
-            # from the pattern alone (for_pattern), so that a loop of scaled solves of one
-            # model builds them once, not in every solve (the Newton linearizer's index
-            # arrays: 0.15 ms of a 5 ms solve at n = 102, measured).  What the store holds
-            # is built from the pattern alone (nms: the linearizer) or, on the user's
-            # problem only, from its declared-constant entries too (solve: the count of
-            # linear rows), which the scaling keeps constant: true of R J C as well.  (This
-            # evaluator has no constant mask of its own: nothing built from one may be
-            # asked through it.)
-            self._pattern = P
-            self._derived = parent._derived
-        self.parent = parent
-        self.scaling = s
-        self.pattern_declared = parent.pattern_declared
-
-    def _call_F(self, y):  # finite differences on G go through the parent's primitive
-        return self.scaling.row * self.parent._call_F(self.scaling.col * y)[0], None
-
-    def F(self, y, _k=None) -> np.ndarray:  # (no memo of its own: _k is not used)
-        return self.scaling.row * self.parent.F(self.scaling.col * y)
-
-    def J(self, y, f=None, _k=None) -> sp.csc_matrix:
-        if self.jac_mode is None:
-            return super().J(y, f, _k)
-        J = self.parent.J(self.scaling.col * y)
-        if self._pattern is not None and self._pattern is self.parent.pattern_ref:
-            # the parent's J is on the parent's pattern, which is this one (shared, see
-            # __init__), and R J C keeps J's index arrays: nothing to check
-            return self.scaling.scale_jacobian(J)
-        return self._fix_pattern(self.scaling.scale_jacobian(J))
-
-    def pin(self, y):
-        self.parent.pin(self.scaling.col * y)
-        super().pin(y)
-
-    def forget(self):
-        self.parent.forget()
-        super().forget()

@@ -23,7 +23,8 @@ the linearized MCP on the critical cone
     d_A = 0,   J_I. d + G_I e = 0,
     0 <= d_i  _|_  (J d + G e)_i >= 0   for i in D at a lower bound (<= 0, <= 0 at an upper one),
 
-which is a small box-constrained LCP that we solve with :func:`compass_sparse.solve_lcp`.
+which is a small box-constrained LCP that we solve by one pivotal path (the path of
+:func:`compass_sparse.solve_lcp`, :mod:`compass_sparse.path`).
 :func:`sensitivity` returns the one-sided derivatives d+ = z'(p; +e) and d- = -z'(p; -e) for
 each parameter and says whether they agree (then z is differentiable in that parameter even
 though the point is degenerate).  If the linearized MCP has no solution (no strong
@@ -51,9 +52,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 
 from .exceptions import CompassError, ShapeError
+from .options import Options
+from .path.linear_mcp import solve_linear_mcp
+from .path.outcome import LinearCode
+from .problem.mcp import MCP
+from .routes import basis_factory, path_route
 
 logger = logging.getLogger("compass_sparse")
 
@@ -68,6 +73,10 @@ __all__ = [
 
 ACTIVE_TOL = 1e-7
 """Default tolerance of the active-set identification (see the module docstring)."""
+
+LINEAR_TOLERANCE = 1e-13
+"""Tolerance of the linearized MCP of a degenerate point (its right-hand side scaled to
+unit size)."""
 
 
 class SingularSensitivityError(CompassError):
@@ -141,7 +150,10 @@ def _solve_inactive(J, idx, rhs):
         return np.zeros((0,) + rhs.shape[1:])
     A = sp.csc_matrix(J)[idx][:, idx].tocsc()
     try:
-        lu = spla.splu(A)
+        # (lazy: scipy.sparse.linalg adds ~0.15 s to the package's import)
+        from scipy.sparse.linalg import splu
+
+        lu = splu(A)
     except RuntimeError as exc:  # "Factor is exactly singular"
         raise SingularSensitivityError(
             f"the Jacobian on the {idx.size} inactive indices is singular ({exc}); "
@@ -154,8 +166,6 @@ def _solve_inactive(J, idx, rhs):
 
 
 def _problem_parts(problem, x):
-    from .problem import MCP
-
     if not isinstance(problem, MCP):
         raise TypeError("sensitivity needs the MCP the point solves (compass_sparse.MCP)")
     x = np.asarray(x, dtype=float)
@@ -206,10 +216,9 @@ def sensitivity(problem, x, dF_dp, *, active_tol: float = ACTIVE_TOL) -> Sensiti
 
 
 def _directional(J, g, inactive, degenerate, side, sign):
-    """z'(p; sign * e): the linearized MCP of the module docstring on I u D, by solve_lcp
-    (the right-hand side scaled to unit size so that the LCP tolerance is relative)."""
-    from .solve import solve_lcp
-
+    """z'(p; sign * e): the linearized MCP of the module docstring on I u D, by one pivotal
+    path (the right-hand side scaled to unit size so that the path's tolerances are
+    relative)."""
     n = g.size
     free = np.concatenate([inactive, degenerate])
     order = np.argsort(free)
@@ -225,13 +234,26 @@ def _directional(J, g, inactive, degenerate, side, sign):
     if scale == 0.0:
         return d, ""
     M = sp.csc_matrix(J)[free][:, free]
-    res = solve_lcp(M, q / scale, lo, hi, options={"convergence_tolerance": 1e-13})
-    if not res.success:
+    res = _linear_mcp(M, q / scale, lo, hi)
+    if res.code is not LinearCode.SOLVED:
         d[:] = np.nan
         return d, (f"the linearized MCP in direction {'+' if sign > 0 else '-'}e has no "
-                   f"solution found ({res.status.name}): no directional derivative")
-    d[free] = res.x * scale
+                   f"solution found ({res.code.name}): no directional derivative")
+    d[free] = res.z * scale
     return d, ""
+
+
+def _linear_mcp(M, q, lo, hi):
+    """The pivotal path of lo <= d <= hi _|_ M d + q from d = pi(0) (thesis §3.3), with
+    the Lemke ray start as its fallback, on the basis the routes give a problem of its
+    order: the method of :func:`compass_sparse.solve_lcp` without its crash and its
+    hand-over to the stabilized Newton method.  Under strong regularity the linearized
+    MCP has one solution, which the path reaches."""
+    opt = Options(convergence_tolerance=LINEAR_TOLERANCE)
+    n = q.size
+    basis = basis_factory(path_route(n, opt), opt)(M)
+    return solve_linear_mcp(M, q, lo, hi, basis, opt, np.zeros(n), keep_ray=True,
+                            minor_limit=max(10 * n, 1000))
 
 
 def tangent_predictor(problem, x, *, f=None, active_tol: float = ACTIVE_TOL):

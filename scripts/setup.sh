@@ -31,6 +31,6 @@ else
 fi
 # Check that the package and its SuiteSparse/METIS wheels import (numba kernels compile on
 # first use and are cached on disk).
-$PY -c "import compass_sparse, compass_sparse.basis, compass_sparse.basis.ordering, compass_sparse._path_kernels" || exit 1
+$PY -c "import compass_sparse, compass_sparse.basis, compass_sparse.basis.ordering, compass_sparse.path._kernels" || exit 1
 $PY -c "import kvxopt.umfpack, kvxopt.cholmod, kvxopt.amd, pymetis" || { log "SuiteSparse/METIS wheels not importable"; exit 1; }
 log "ready"

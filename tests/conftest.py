@@ -8,12 +8,16 @@ only reaches libraries already loaded, hence the imports first (numpy and scipy 
 bring their own OpenBLAS).
 """
 import os
+import sys
+from pathlib import Path
 
+# The shared test problems (known_problems.py) import by name from every folder of tests/.
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 # The kernels compile from their first call (no interpreted cold start: compass_sparse._jit),
 # so that the tests of the compiled kernels test compiled code; the cold start's own tests
-# run it in subprocesses without this variable (test_small_overhead.py).
+# run it in subprocesses without this variable (test_jit.py, routes/test_kernel_routes.py).
 os.environ.setdefault("COMPASS_SPARSE_JIT", "always")
 
 import numpy  # noqa: E402,F401

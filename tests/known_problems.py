@@ -33,6 +33,10 @@ Sources
 * Domain-restricted problems: F_i(x) = log(x_i) - c_i on x >= 0 (undefined at x_i = 0, where
   a Newton step from the start lands after projection); solution x_i = exp(c_i).  And
   F(x) = sqrt(x - 1) + x - 3 on x >= 0 (undefined for x < 1): solution x = 2.
+
+The homotopy's tests also share two problems given as (F, J, lb, ub, x0) tuples:
+:func:`stationary_quadratic`, whose merit function has a stationary point on the box that
+is not a solution, and :func:`diverging_free`, whose zero curves diverge.
 """
 from __future__ import annotations
 
@@ -323,3 +327,44 @@ ALL_SOLVABLE = {
     "nash5": nash_cournot_mss,
     "boxvi": separable_box_vi,
 }
+
+
+# ------------------------------------------------------------------ the homotopy's problems
+def quadratic(D, A, b):
+    """(F, J) of F(x) = D x^2 + A x + b (elementwise square), J in CSC form."""
+    D, A, b = (np.asarray(v, dtype=float) for v in (D, A, b))
+
+    def F(x):
+        return D * x * x + A @ x + b
+
+    def J(x):
+        return sp.csc_matrix(np.diag(2.0 * D * x) + A)
+
+    return F, J
+
+
+# A one-dimensional MCP on the box [-3.04, 3.18] with F(x) = 0.27 x^2 - 0.69 x - 5.68 < 0
+# on the whole box: its only solution is the upper bound.  The merit function has a
+# stationary point over the box at the lower bound (F decreases there, so the Newton
+# model pushes the wrong way and no descent direction stays in the box).
+STATIONARY = dict(D=[0.27], A=[[-0.69]], b=[-5.68], lb=[-3.04], ub=[3.18], x0=[-2.9])
+
+
+def stationary_quadratic():
+    """(F, J, lb, ub, x0) of :data:`STATIONARY`: solution 3.18, the upper bound."""
+    d = STATIONARY
+    F, J = quadratic(d["D"], d["A"], d["b"])
+    return F, J, np.array(d["lb"]), np.array(d["ub"]), np.array(d["x0"])
+
+
+def diverging_free(n=2):
+    """(F, J, lb, ub, x0) of F(x) = -x on free variables: the solution is 0, but the zero
+    curve of H = lam (-x) + (1 - lam)(x - a) is x = (1 - lam) a / (1 - 2 lam), unbounded at
+    lam = 1/2."""
+    def F(x):
+        return -x
+
+    def J(x):
+        return -sp.identity(x.size, format="csc")
+
+    return F, J, np.full(n, -np.inf), np.full(n, np.inf), np.ones(n)

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-import compass_sparse.solve as solve_module
+import compass_sparse.lcp as lcp_module
 from compass_sparse import MCP, MCPSolver, Options, Status, solve_lcp, solve_mcp
 from compass_sparse.exceptions import (CompassError, EvaluationError, OptionError,
                                        ProblemError, ShapeError)
@@ -135,7 +135,7 @@ def test_ctrl_c_during_solve_lcps_first_path_returns_a_result(monkeypatch):
     def interrupted(*a, **k):  # Ctrl-C while the first pivotal path runs
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(solve_module, "solve_linear_mcp", interrupted)
+    monkeypatch.setattr(lcp_module, "solve_linear_mcp", interrupted)
     # (no crash: it would solve this 2 x 2 LCP before the path starts)
     r = solve_lcp(M2, q2, options={"crash_method": "none"})
     assert r.status is Status.USER_INTERRUPT and r.x.shape == (2,)
@@ -183,10 +183,8 @@ def test_largest_factorization_update_limit_does_not_exhaust_memory(monkeypatch)
     assert r.status is Status.SOLVED
     assert r.residual.natural <= opt.convergence_tolerance
     # the sparse manager gets the same cap (asked of the factory, no 8 GB allocation here)
-    monkeypatch.setattr(solve_module, "DENSE_BASIS_MAX_N", 0)
-    import compass_sparse.dense_path as dense_path
+    from compass_sparse.routes import basis_factory
 
-    monkeypatch.setattr(dense_path, "DENSE_ENGINE_MAX_N", 0)
-    bm = solve_module._manager_factory(Options(factorization_update_limit=10 ** 6))(
+    bm = basis_factory("sparse basis", Options(factorization_update_limit=10 ** 6))(
         sp.identity(70, format="csc"))
     assert isinstance(bm, BasisManager) and bm.options.update_limit == 70

@@ -194,7 +194,7 @@ def test_time_limit_holds_when_solve_lcp_hands_over_to_the_general_method(clock)
     n = 3
     Mn = -sp.identity(n, format="csc")
     qn = -np.ones(n)
-    import compass_sparse.solve as solve_module
+    import compass_sparse.lcp as solve_module
 
     real = solve_module.MCP
 
@@ -227,7 +227,9 @@ def test_time_limit_holds_through_the_crash_factorizations(clock, monkeypatch):
     # shifts) without looking at the clock: with each factorization costing 0.3 s, a 0.5 s
     # limit ran to 1.8 s.  Now the deadline is checked before every factorization, which is
     # atomic: the overshoot is at most one of them (plus one evaluation).
-    import compass_sparse.crash as crash_module
+    import compass_sparse.crash.driver as crash_driver
+    import compass_sparse.crash.projected_newton as crash_python
+    import compass_sparse.crash.reduced as crash_module
     from compass_sparse.basis.backends import SingularFactorError
 
     FACTOR = 0.3
@@ -243,8 +245,9 @@ def test_time_limit_holds_through_the_crash_factorizations(clock, monkeypatch):
     # attempt at a time; blocks up to DENSE_SOLVE_MAX_N (milliseconds for all attempts)
     # are solved in one compiled call, small sparse ones by KLU.  This small problem
     # stands for a large one.
-    monkeypatch.setattr(crash_module, "DENSE_SOLVE_MAX_N", 0)
-    monkeypatch.setattr(crash_module, "_klu_suits", lambda J, lu: False)
+    for module in (crash_driver, crash_python, crash_module):
+        monkeypatch.setattr(module, "DENSE_SOLVE_MAX_N", 0)
+    monkeypatch.setattr(crash_module, "klu_suits", lambda J, lu: False)
     F = _costly(lambda x: x - 1.0 + 0.01 * (_B @ x), clock)
     J = lambda x: sp.csc_matrix(np.eye(N) + 0.01 * _B)  # noqa: E731
     start = clock.now
@@ -258,8 +261,8 @@ def test_time_limit_holds_through_the_crash_factorizations(clock, monkeypatch):
 def test_time_limit_holds_through_the_levenberg_marquardt_factorizations(clock, monkeypatch):
     # The LM step tried up to four Cholesky factorizations (growing mu) without looking
     # at the clock; each is atomic (12 s of H^T H on the dynamic CGE model at n = 3e4).
-    import compass_sparse.fallback as fallback_module
-    from compass_sparse.fallback import lm_step
+    import compass_sparse.nms.fallback as fallback_module
+    from compass_sparse.nms.fallback import lm_step
     from compass_sparse.options import Options
 
     FACTOR = 0.3

@@ -1,13 +1,17 @@
 """Merit functions and residuals: Fischer–Burmeister Phi, Psi and its gradient, the natural
 residual, the normal map and the residual report."""
+
 from decimal import Decimal, getcontext
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from hypothesis import given, settings, strategies as st
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import compass_sparse.generators as gen
+from compass_sparse import merit
+from compass_sparse.box import max_abs, max_abs_diff, project
 from compass_sparse.merit import (
     fb_directional,
     fb_gradient,
@@ -15,12 +19,9 @@ from compass_sparse.merit import (
     fb_phi,
     fb_psi,
     fischer,
-    max_abs,
-    max_abs_diff,
     min_map,
     natural_residual,
     normal_map,
-    project,
     residual_report,
 )
 
@@ -369,7 +370,7 @@ def test_max_abs_agrees_with_numpy_nan_and_empty_included(x):
 def test_csc_diagonal_kernel_agrees_with_scipy_duplicates_and_missing_entries():
     """The crash's compiled diagonal: scipy's A.diagonal() on canonical matrices, on
     duplicated entries (summed) and on missing diagonal entries (0)."""
-    from compass_sparse._merit_kernels import csc_diagonal
+    from compass_sparse.linalg._csc_kernels import csc_diagonal
 
     rng = np.random.default_rng(3)
     A = sp.random(30, 30, density=0.2, random_state=4, format="csc")
@@ -387,7 +388,7 @@ def test_residual_report_worst_rows_compiled_pass_is_numpys(seed):
     """The k worst rows found in one compiled pass are numpy's partition and sort when
     the k largest |Phi_i| are distinct; a tie (or a NaN, or k > n) is left to numpy, whose
     tie order the pass does not imitate: the report is the same either way."""
-    from compass_sparse._eval_kernels import top_abs_distinct
+    from compass_sparse._merit_kernels import top_abs_distinct
     from compass_sparse.merit import residual_report
 
     rng = np.random.default_rng(seed)
@@ -428,3 +429,164 @@ def test_residual_report_worst_rows_compiled_pass_is_numpys(seed):
         phi = np.abs(fb_phi(z, f, lb, ub))
         assert [w[0] for w in rep.worst] == [f"F[{i}]" for i in np.argsort(-phi,
                                                                            kind="stable")]
+
+
+def test_residual_report_of_a_small_problem_lists_every_row_ties_lower_first():
+    z = np.array([0.0, 1.0, 2.0, 3.0])
+    f = np.array([0.5, 0.0, -0.5, 0.0])
+    lb, ub = np.zeros(4), np.full(4, np.inf)
+    rep = residual_report(z, f, lb, ub)
+    aphi = np.abs(fb_phi(z, f, lb, ub))
+    order = sorted(range(4), key=lambda i: (-aphi[i], i))
+    assert aphi[1] == aphi[3] == 0.0  # a tie
+    assert [w[0] for w in rep.worst] == [f"F[{i}]" for i in order]
+    assert rep.worst_index == order[0]
+    # above k_worst rows the partition route lists the same k largest
+    big = residual_report(np.arange(9.0), np.linspace(-1, 1, 9), np.zeros(9),
+                          np.full(9, np.inf), k_worst=3)
+    assert len(big.worst) == 3
+    assert [w[1] for w in big.worst] == sorted(
+        np.abs(fb_phi(np.arange(9.0), np.linspace(-1, 1, 9), np.zeros(9),
+                      np.full(9, np.inf))), reverse=True)[:3]
+
+
+def _random_box(rng, n):
+    lb = np.where(rng.random(n) < 0.5, -np.inf, rng.standard_normal(n))
+    ub = np.where(rng.random(n) < 0.5, np.inf, np.nan_to_num(lb, neginf=0.0)
+                  + np.abs(rng.standard_normal(n)))
+    return lb, ub
+
+
+def _stress_point(seed, at_bounds=0.0):
+    """5000 entries over 600 orders of magnitude, every bound kind, infinite and NaN F
+    values; a fraction ``at_bounds`` of the points on a finite lower bound (half of them
+    with F = 0 there: the (0, 0) corner of the Fischer function)."""
+    rng = np.random.default_rng(seed)
+    n = 5000
+    z = rng.standard_normal(n) * 10.0 ** rng.integers(-300, 300, n)
+    f = rng.standard_normal(n) * 10.0 ** rng.integers(-300, 300, n)
+    lb, ub = _random_box(rng, n)
+    z = np.clip(z, lb, ub)
+    if at_bounds:
+        at = rng.random(n) < at_bounds
+        z[at] = np.where(np.isfinite(lb[at]), lb[at], z[at])
+        f[at & (rng.random(n) < 0.5)] = 0.0
+    f[:10] = [np.inf, -np.inf, np.nan, 0.0, -0.0, 1e308, -1e308, 5e-324, -5e-324, 0.0]
+    return z, f, lb, ub
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_fb_phi_kernel_matches_array_formula_bitwise_across_magnitudes(seed):
+    """Stress over 600 orders of magnitude, every bound kind, infinite and NaN entries."""
+    z, f, lb, ub = _stress_point(seed)
+    a = merit.fb_phi(z, f, lb, ub)
+    with np.errstate(all="ignore"):  # inf - inf and NaN arguments on purpose
+        b = merit.fb_phi_arrays(z, f, lb, ub)
+    assert np.array_equal(a, b, equal_nan=True)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_fb_diagonals_kernel_matches_array_formula_bitwise_across_magnitudes(seed):
+    """The same stress for the diagonals (da, db) of the generalized Jacobian, with
+    points at their bounds (the (0, 0) direction of the Fischer function)."""
+    z, f, lb, ub = _stress_point(seed, at_bounds=0.2)
+    da, db = merit.fb_jacobian_diagonals(z, f, lb, ub)
+    with np.errstate(all="ignore"):
+        ra, rb = merit.fb_jacobian_diagonals_arrays(z, f, lb, ub)
+    assert np.array_equal(da, ra, equal_nan=True)
+    assert np.array_equal(db, rb, equal_nan=True)
+    # each partial of phi lies in [-2, 0]; a box row chains two: |da| <= 2 + 2 * 2
+    assert (np.abs(da[np.isfinite(da)]) <= 6.0).all()
+    assert (np.abs(db[np.isfinite(db)]) <= 4.0).all()
+
+
+def test_fb_phi_scalar_bounds_still_broadcast():
+    z = np.array([0.0, 1.0, 2.0])
+    f = np.array([1.0, 0.0, -1.0])
+    assert np.array_equal(merit.fb_phi(z, f, 0.0, np.inf), merit.fb_phi_arrays(z, f, 0.0, np.inf))
+
+
+def test_fb_gradient_same_with_sparse_and_dense_jacobian():
+    rng = np.random.default_rng(3)
+    n = 12
+    z, f = rng.standard_normal(n), rng.standard_normal(n)
+    lb, ub = _random_box(rng, n)
+    z = np.clip(z, lb, ub)
+    J = sp.random(n, n, density=0.3, format="csc", random_state=3)
+    g1 = merit.fb_gradient(z, f, J, lb, ub)
+    g2 = merit.fb_gradient(z, f, sp.csr_matrix(J), lb, ub)
+    assert np.allclose(g1, g2, rtol=1e-13, atol=1e-14)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_normal_map_kernel_matches_array_formula_bitwise_across_magnitudes(seed):
+    """The compiled normal-map point and residual agree bit for bit (signed zeros
+    included) with the array formulas, with fixed variables and points at bounds."""
+    z, f, lb, ub = _stress_point(seed, at_bounds=0.3)
+    fixed = np.random.default_rng(seed).random(z.size) < 0.1
+    ub = ub.copy()
+    ub[fixed] = lb[fixed]
+    z = np.clip(z, lb, ub)
+    with np.errstate(all="ignore"):
+        got = merit.normal_map_at(z, f, lb, ub)
+        ref = merit.normal_map_at_arrays(z, f, lb, ub)
+    for a, b in zip(got, ref):
+        assert np.array_equal(a, b, equal_nan=True)
+        num = ~np.isnan(b)
+        assert np.array_equal(np.signbit(a[num]), np.signbit(b[num]))
+    # signed zeros at bounds: np.maximum(-0.0, 0.0) is 0.0, and z - w + v keeps the sign
+    z0 = np.array([-0.0, 0.0, -0.0, 0.0, -0.0])
+    f0 = np.array([-0.0, -0.0, 0.0, 0.0, -0.0])
+    l0, u0 = np.array([0.0, 0.0, -0.0, 0.0, -1.0]), np.array([np.inf, 1.0, 0.0, 0.0, -0.0])
+    for a, b in zip(merit.normal_map_at(z0, f0, l0, u0),
+                    merit.normal_map_at_arrays(z0, f0, l0, u0)):
+        assert np.array_equal(a, b) and np.array_equal(np.signbit(a), np.signbit(b))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_residual_report_maxima_match_array_formulas_across_magnitudes(seed):
+    """The compiled maxima of the residual report (||Phi||_inf, the natural residual, the
+    normal-map residual and every row's |min-map|) are those of the array formulas, NaN
+    and infinite entries included; the scaled 2-norm is unchanged."""
+    z, f, lb, ub = _stress_point(seed, at_bounds=0.3)
+    for sl in (slice(10, None), slice(None)):  # finite F values; with inf and NaN
+        zz, ff, ll, uu = z[sl], f[sl], lb[sl], ub[sl]
+        with np.errstate(all="ignore"):
+            rep = merit.residual_report(zz, ff, ll, uu)
+            phi = merit.fb_phi(zz, ff, ll, uu)
+            mm = np.abs(merit.min_map(zz, ff, ll, uu))
+            nm = merit.normal_map_at_arrays(zz, ff, ll, uu)[1]
+        np.testing.assert_array_equal(rep.fb_inf, np.max(np.abs(phi)))
+        np.testing.assert_array_equal(rep.natural, np.max(mm))
+        np.testing.assert_array_equal(rep.normal_map_inf, np.max(np.abs(nm)))
+        for name, a, m in rep.worst:  # rows named F[i]
+            i = int(name[2:-1])
+            np.testing.assert_array_equal([a, m], [abs(phi[i]), mm[i]])
+    rep = merit.residual_report(np.zeros(0), np.zeros(0), np.zeros(0), np.zeros(0))
+    assert (rep.fb_norm, rep.fb_inf, rep.natural, rep.worst) == (0.0, 0.0, 0.0, [])
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_fb_phi_fast_path_on_views_and_mixed_inputs_matches_the_array_formula(seed):
+    """fb_phi goes straight to the kernel for float vectors of one shape (the solver's own
+    points), strided views included; other inputs (scalar bounds, lists, integers) take
+    the general route.  Both give the array formula's values bit for bit, and fb_psi
+    (the array's own dot) equals 0.5 * np.dot(phi, phi)."""
+    from compass_sparse.merit import fb_phi, fb_phi_arrays, fb_psi
+
+    rng = np.random.default_rng(seed)
+    n = 40
+    big = rng.standard_normal((4, 2 * n)) * 10.0 ** rng.integers(-8, 8, (4, 2 * n))
+    z, f, lb, ub = (big[k, ::2] for k in range(4))  # strided views
+    lb = np.where(rng.random(n) < 0.3, -np.inf, lb)
+    ub = np.where(rng.random(n) < 0.3, np.inf, lb + np.abs(ub))
+    ref = fb_phi_arrays(z, f, lb, ub)
+    np.testing.assert_array_equal(fb_phi(z, f, lb, ub), ref)
+    np.testing.assert_array_equal(fb_phi(z.copy(), f.copy(), lb, ub), ref)
+    np.testing.assert_array_equal(fb_phi(list(z), f, lb, ub), ref)
+    zi = np.arange(n) - n // 2
+    np.testing.assert_array_equal(fb_phi(zi, f, 0.0, np.inf), fb_phi_arrays(zi, f, 0.0, np.inf))
+    phi = fb_phi(z, f, lb, ub)
+    assert fb_psi(phi) == 0.5 * float(np.dot(phi, phi))
+    assert fb_psi(list(phi)) == 0.5 * float(np.dot(phi, phi))
+

@@ -1,4 +1,5 @@
 """The scaling pass: row/column equilibration of J(x0) (compass_sparse.scaling)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -6,8 +7,16 @@ import pytest
 import scipy.sparse as sp
 
 from compass_sparse import Status, solve_mcp
-from compass_sparse.scaling import SPREAD_TRIGGER, equilibrate, scale_problem, spread
+from compass_sparse.linalg.csc import without_duplicates
 from compass_sparse.problem import MCP
+from compass_sparse.scaling import (
+    SPREAD_TRIGGER,
+    _maxnorms,
+    _spread,
+    equilibrate,
+    scale_problem,
+    spread,
+)
 
 
 def _monotone(n, seed):
@@ -79,7 +88,7 @@ def test_compiled_scaling_passes_match_the_array_formulas(n, density):
     """The compiled max-norms of R A C and the entrywise R J C agree bit for bit with the
     array formulas they replace ((|a| r) c and (a r) c; a NaN entry poisons its row and
     column maxima as np.maximum does)."""
-    from compass_sparse._merit_kernels import csc_scale, csc_scaled_abs_maxima
+    from compass_sparse.linalg._csc_kernels import csc_scale, csc_scaled_abs_maxima
 
     rng = np.random.default_rng(n)
     A = sp.csc_matrix(sp.random(n, n, density=density, format="csc", random_state=n)
@@ -129,7 +138,7 @@ def test_a_loop_of_scaled_solves_builds_the_newton_linearizer_once(monkeypatch):
     pattern-derived objects: R J C has J's pattern, so a loop of solves of one badly
     scaled model builds the linearizer's index arrays once (every solve did), with the
     same results."""
-    import compass_sparse.nms as nms
+    import compass_sparse.nms.newton as nms
 
     n = 20
     M, q = _monotone(n, 3)
@@ -137,8 +146,8 @@ def test_a_loop_of_scaled_solves_builds_the_newton_linearizer_once(monkeypatch):
     p = MCP(lambda z: S * (M @ z + q), lambda z: sp.csc_matrix(S[:, None] * M), 0.0, np.inf,
             np.zeros(n))
     built = []
-    real = nms._linearizer_for
-    monkeypatch.setattr(nms, "_linearizer_for", lambda J, P: built.append(1) or real(J, P))
+    real = nms.linearizer_for
+    monkeypatch.setattr(nms, "linearizer_for", lambda J, P: built.append(1) or real(J, P))
     # (no crash: it solves this model, and a solve that the crash ends needs no linearizer)
     opt = {"crash_method": "none"}
     first = solve_mcp(p, options=opt)
@@ -159,7 +168,7 @@ def test_compiled_ruiz_sweeps_match_the_array_formulas(seed):
     factors of the array formulas they replace (max-norms of R A C, then
     row /= sqrt(where(r > 0, r, 1)), the same for the columns), zero and NaN entries
     included."""
-    from compass_sparse._csc import without_duplicates
+    from compass_sparse.linalg.csc import without_duplicates
     from compass_sparse.scaling import SWEEPS, _maxnorms, _ruiz_sweeps
 
     rng = np.random.default_rng(seed)
@@ -272,3 +281,69 @@ def test_failure_message_names_rows_with_the_users_residuals_not_the_scaled_ones
     worst_name, worst_phi, _ = r.residual.worst[0]
     assert worst_name in named
     assert float(named[worst_name]) == pytest.approx(worst_phi, rel=1e-2)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_spread_in_one_kernel_equals_the_maxnorm_formula(seed):
+    rng = np.random.default_rng(seed)
+    n = 30
+    A = sp.random(n, n, density=0.2, random_state=seed, format="csc")
+    A.data *= 10.0 ** rng.integers(-200, 200, A.nnz)
+    A.data[:3] = [0.0, np.nan, -np.inf][: min(3, A.nnz)]  # explicit zero, NaN, inf
+    A = without_duplicates(A)
+    r, c = _maxnorms(A)
+    expected = max(_spread(r), _spread(c))
+    got = spread(A)
+    assert got == expected or (np.isnan(got) and np.isnan(expected))
+    assert spread(sp.csc_matrix((n, n))) == 1.0  # no positive entries
+
+
+def test_maxnorms_equal_scipy_row_and_column_max_of_scaled_matrix():
+    from compass_sparse import scaling
+
+    rng = np.random.default_rng(11)
+    for n in (1, 4, 25):
+        A = sp.random(n, n, density=0.3, random_state=rng, format="csc")
+        A.data *= 10.0 ** rng.uniform(-9, 9, A.nnz) * rng.choice([-1.0, 1.0], A.nnz)
+        row, col = 2.0 ** rng.integers(-6, 6, n), 2.0 ** rng.integers(-6, 6, n)
+        r, c = scaling._maxnorms(A, row, col)
+        B = abs(sp.diags(row) @ A @ sp.diags(col))
+        np.testing.assert_array_equal(r, B.max(axis=1).toarray().ravel())
+        np.testing.assert_array_equal(c, B.max(axis=0).toarray().ravel())
+
+
+def test_maxnorm_spread_sums_duplicate_entries_first():
+    from compass_sparse.scaling import spread
+
+    # two stored entries (1, 1) of 3 and -3 cancel: the matrix is diag(1, 0) plus a
+    # 1e-4 entry in row 1, column 0 -> row norms 1 and 1e-4
+    A = sp.csc_matrix((np.array([1.0, 1e-4, 3.0, -3.0]), np.array([0, 1, 1, 1]),
+                       np.array([0, 2, 4])), shape=(2, 2))
+    assert spread(A) == pytest.approx(1e4)
+
+
+def test_spread_of_positive_entries():
+    from compass_sparse import scaling
+
+    assert scaling._spread(np.array([0.0, 4.0, np.nan, 0.5, -3.0])) == 8.0
+    assert scaling._spread(np.array([0.0, -1.0])) == 1.0
+
+
+def test_scaled_solve_judges_its_result_on_the_user_problem_again():
+    """When the scaling pass changed the problem the solver works on, its verdict (taken
+    on the scaled problem) is not handed to the Result: the Result's verdict is a fresh
+    judgement of the returned point on the user's problem, and agrees with one."""
+    from compass_sparse import MCP, solve_mcp
+    from compass_sparse.nms.acceptance import judge
+
+    d = np.array([1e-5, 1.0, 1e5])
+    q = np.array([-1e-5, 2.0, -3e5])
+    F = lambda x: d * x + q  # noqa: E731
+    J = lambda x: sp.diags(d, format="csc")  # noqa: E731
+    res = solve_mcp(MCP(F, J, np.zeros(3), np.full(3, np.inf), np.ones(3)))
+    assert res.passes["scaling"].ran
+    assert res.success
+    v = judge(res.x, F(res.x), res.lb, res.ub, res.tolerance, jac=J)
+    assert v.solved
+    np.testing.assert_allclose(res.x, [1.0, 0.0, 3.0], atol=1e-6)
+

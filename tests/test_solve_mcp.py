@@ -4,10 +4,9 @@ Every success is checked independently: the natural residual
 ||z - clip(z - F(z), l, u)||_inf is recomputed from the problem's own formulas (never from
 the solver's report), and compared with the known solutions of tests/known_problems.py.
 """
+
 from __future__ import annotations
 
-import os
-import sys
 
 import numpy as np
 import pytest
@@ -19,8 +18,7 @@ from compass_sparse import (MCP, EvaluationError, IntermediateResult, MCPSolver,
 from compass_sparse.exceptions import ProblemError
 from compass_sparse.generators.sparse import draw_bounds
 
-sys.path.insert(0, os.path.dirname(__file__))
-import known_problems as kp  # noqa: E402
+import known_problems as kp
 
 TOL = 1e-6  # the default convergence tolerance, applied to the natural residual
 
@@ -607,7 +605,7 @@ def test_warm_basis_survives_presolve():
     """Result.basis is in the user's index space after presolve removed variables, and a
     re-solve from it (presolve runs again) needs no pivots; a basis of the wrong size is
     an input error, not a silent cold start."""
-    import compass_sparse.nms as nms_mod
+    import compass_sparse.nms.newton as nms_mod
     from compass_sparse import ShapeError
 
     n = 40
@@ -778,3 +776,26 @@ def test_solving_one_mcp_object_twice_counts_each_solve_alone():
         assert r.success and r.nfev == calls[0] == p.counters.nfev
         counts.append(r.nfev)
     assert counts[0] == counts[1]
+
+
+def test_start_point_at_a_solution_runs_no_pass():
+    """A solve started at a solution (a re-solve, a scenario that changed nothing) is
+    judged on the user's problem before any pass: the preprocessor, which would reduce
+    this CGE model (a fixed price and a column singleton), does not run, F and J are
+    evaluated once, and the Result is the start point with its verdict."""
+    from compass_sparse.generators.cge import size_for, static_cge
+
+    p = static_cge(**size_for(90)).with_shock(output_tax=0.25).problem
+    first = solve_mcp(p)
+    assert first.success and first.passes["presolve"].ran  # it reduces this model
+    again = solve_mcp(p.with_start(first.x))
+    assert again.success and again.message == "the start point is a solution"
+    assert again.nit == 0 and again.nfev == 1 and again.njev == 1
+    assert not again.passes["presolve"].ran
+    assert again.passes["presolve"].reason == "start point already solved"
+    np.testing.assert_array_equal(again.x, first.x)
+    f = p.F(again.x)
+    assert np.max(np.abs(again.x - np.clip(again.x - f, p.lb, p.ub))) <= 1e-6
+    # a start point that is not a solution still gets the preprocessor
+    moved = solve_mcp(p.with_start(first.x * 1.01))
+    assert moved.success and moved.passes["presolve"].ran

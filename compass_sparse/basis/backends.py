@@ -39,6 +39,7 @@ time left or would not fit in memory.
 
 from __future__ import annotations
 
+import hashlib
 import logging
 import os
 import time
@@ -47,7 +48,10 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ..exceptions import FactorBudgetError
+from ..exceptions import FactorBudgetError, OptionError
+from ..linalg._dense_kernels import dense_solve_or_none
+from ..linalg.blas import single_threaded_blas
+from ..linalg.direct import LU_ENVIRONMENT
 from .ordering import Ordering, OrderingCache
 
 log = logging.getLogger(__name__)
@@ -161,6 +165,7 @@ class FactorInfo:
 
 def umfpack_available() -> bool:
     try:
+        # (lazy: kvxopt loads SuiteSparse's libraries; imported where they are used)
         import kvxopt.umfpack  # noqa: F401
     except Exception:
         return False
@@ -169,6 +174,7 @@ def umfpack_available() -> bool:
 
 def metis_available() -> bool:
     try:
+        # (lazy: ~0.07 s of import, for large problems' orderings only)
         import pymetis  # noqa: F401
     except Exception:
         return False
@@ -231,6 +237,7 @@ class SuperLUBackend:
         ``K[o.rows][:, o.cols]`` under a symmetric ordering, K itself under COLAMD.
         ``strict`` = COLAMD and partial pivoting, for rank detection.  ``labels``: see
         :meth:`~compass_sparse.basis.ordering.OrderingCache.get`."""
+        # (lazy: scipy's linalg adds ~0.15 s to the package's import)
         from scipy.sparse.linalg import splu
 
         K = sp.csc_matrix(K)
@@ -307,8 +314,6 @@ def _structure_key(K) -> bytes:
     """Hash of the stored structure of a CSC matrix, stored zeros included: UMFPACK's
     symbolic analysis belongs to the exact structure (the ordering key,
     :func:`~compass_sparse.basis.ordering.pattern_key`, ignores stored zeros)."""
-    import hashlib
-
     h = hashlib.blake2b(digest_size=16)
     h.update(np.asarray(K.shape, dtype=_I).tobytes())
     h.update(np.ascontiguousarray(K.indptr, dtype=_I).tobytes())
@@ -317,6 +322,7 @@ def _structure_key(K) -> bytes:
 
 
 def _kvx_matrix(K):
+    # (lazy: kvxopt loads SuiteSparse's libraries; imported where they are used)
     from kvxopt import matrix, spmatrix
 
     cols = np.repeat(np.arange(K.shape[1], dtype=_I), np.diff(K.indptr))
@@ -346,6 +352,7 @@ class UmfpackBackend:
         self.symbolic_reused = 0
 
     def factor(self, K, strict=False) -> LUFactors:
+        # (lazy: kvxopt loads SuiteSparse's libraries; imported where they are used)
         from kvxopt import umfpack
 
         del strict   # kvxopt exposes no pivot tolerance: UMFPACK's defaults apply
@@ -427,17 +434,13 @@ def factor_backward_error(K, fac) -> float:
     return res / den if den > 0 else res
 
 
-_ENV = "COMPASS_SPARSE_LU"
-"""Environment override of the automatic choices, "backend" or "backend:ordering" (e.g.
-"superlu:metis", "umfpack"): lets the whole test suite run under every combination."""
-
 
 def resolve(backend="auto", ordering="auto"):
     """The (backend, ordering) pair an ``auto`` choice stands for: the environment
     variable ``COMPASS_SPARSE_LU`` first (applies only to the ``auto`` fields), then the
     defaults.  ``ordering`` "auto" under SuperLU is chosen per block by the ordering
     cache (see :mod:`compass_sparse.basis.ordering`)."""
-    env = os.environ.get(_ENV, "").strip()
+    env = os.environ.get(LU_ENVIRONMENT, "").strip()
     if env:
         b, _, o = env.partition(":")
         if backend == "auto" and b and not (b == "umfpack" and ordering != "auto"):
@@ -476,12 +479,9 @@ with a suspect solve)."""
 
 
 def _dense_solve(A, b):
-    """x with A x = b by LAPACK's LU (getrf + getrs, through the crash's compiled solve:
-    one dense solve in the package); raises :class:`SingularFactorError` on an exactly
+    """x with A x = b by LAPACK's LU (getrf + getrs, in one compiled call: the
+    package's one dense solve); raises :class:`SingularFactorError` on an exactly
     zero pivot."""
-    from .._blas import single_threaded_blas
-    from .._crash_kernels import dense_solve_or_none
-
     # Fortran order, as LAPACK factors it
     D = A.toarray(order="F") if sp.issparse(A) else np.array(A, dtype=np.float64, order="F")
     rhs = np.array(b, dtype=np.float64)
@@ -520,6 +520,7 @@ def solve_sparse(A, b, deadline=None, labels=None, keep=False, backend="auto",
     if isinstance(b_, SuperLUBackend):
         return b_.solve(A, b, labels=labels, keep=keep)
     f = b_.factor(sp.csc_matrix(A))     # UMFPACK: solve with its factors
+    # (lazy: scipy's linalg adds ~0.15 s to the package's import)
     from scipy.sparse.linalg import spsolve_triangular
 
     w = (f.row_scale * np.asarray(b, dtype=np.float64))[f.row_order]
@@ -533,8 +534,6 @@ def solve_sparse(A, b, deadline=None, labels=None, keep=False, backend="auto",
 
 def make_backend(name="auto", ordering="auto", diag_pivot_thresh=None, budget=None):
     """A backend for ``BasisOptions.backend`` / ``ordering`` (validated there)."""
-    from ..exceptions import OptionError
-
     forced = name != "auto"
     name, ordering = resolve(name, ordering)
     if name == "umfpack":
@@ -546,7 +545,7 @@ def make_backend(name="auto", ordering="auto", diag_pivot_thresh=None, budget=No
                               "needs backend='superlu'")
         return UmfpackBackend(budget)
     if name != "superlu":
-        raise OptionError(f"unknown LU backend {name!r} (from {_ENV}?)")
+        raise OptionError(f"unknown LU backend {name!r} (from {LU_ENVIRONMENT}?)")
     if ordering == "metis" and not metis_available():
         raise OptionError("ordering='metis' needs the package pymetis")
     if not forced and ordering == "auto":

@@ -45,17 +45,14 @@ Tolerances and triggers (defaults in :class:`~compass_sparse.basis.types.BasisOp
 ``rank_tolerance`` 1e-11 for the rank repair of a fresh factorization (see
 :mod:`compass_sparse.basis.repair`).
 
-Reused factors (``reuse_factors``).  Successive Newton steps factor bases with the same
-slot table whose M columns have moved a little.  After :meth:`set_matrix` with an unchanged
-pattern, :meth:`factor` with the slot table of the held factors keeps them: they are the
-LU of an older basis P, and each solve with the new B runs GMRES preconditioned by P
-(:mod:`compass_sparse.basis.krylov`).  A solve is accepted only when its true backward
-error is at most ``reuse_tolerance``; otherwise, and before any column replacement or
-BTRAN, the basis is factored afresh.  Should that fresh factorization find B singular (a
-rank repair changes the slot table the caller knows), :class:`FactorReuseFailed` is
-raised: the caller starts again with :meth:`factor`, which then factors afresh.  The same
-holds when a residual check's fresh factorization finds the basis singular
-(:class:`SolveRepairedBasis`, a subclass).
+Reused factors (``reuse_factors``): a basis may solve on the LU of an older one by GMRES
+(:mod:`compass_sparse.basis.reuse`).  Should the fresh factorization that a failed reused
+solve asks for find B singular (a rank repair changes the slot table the caller knows),
+:class:`FactorReuseFailed` is raised: the caller starts again with :meth:`factor`, which
+then factors afresh.  The same holds when a residual check's fresh factorization finds
+the basis singular (:class:`SolveRepairedBasis`, a subclass).  The factors themselves --
+L, U, the row etas and their solves -- are :mod:`compass_sparse.basis.factors`; the
+condition estimate and the explicit B are :mod:`compass_sparse.basis.debug`.
 """
 
 from __future__ import annotations
@@ -66,11 +63,13 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from .._blas import single_threaded_blas
 from ..exceptions import CompassError, ProblemError, ShapeError, SingularBasisError
 from . import _kernels as kern
-from .backends import BYTES_PER_ENTRY, FactorBudget, make_backend
+from . import debug, products
+from .backends import FactorBudget, make_backend
+from .factors import UpdatedFactors
 from .repair import select_regular_block
+from .reuse import FactorReuse
 from .types import (KIND_DENSE, KIND_M, KIND_UNIT, BasisOptions, BasisStats,
                     FactorReport, UpdateStatus)
 
@@ -143,11 +142,9 @@ class BasisManager:
         self._cache = None
         self._n_ftran = 0
         self._reusing = False   # the held factors belong to an older basis (GMRES solves)
-        self._held = None       # (kinds, indices, signs) of the basis of the held factors
-        self._reuse_aged = False
-        self._offered = None    # (labels, HeldLU) of a principal block of M, e.g. the crash's
-        self._psolve = self._solve_quiet   # the preconditioner of the solves when reusing
+        self.reuse = FactorReuse(self)  # the factors solved on when reusing
         self._prefetch = None   # (version, B^{-1} r) solved with an FTRAN on reused factors
+        self._lu = None         # the factors (UpdatedFactors), made by the first factor()
         self.stats = BasisStats()
         self.last_report = FactorReport()
         kern.warmup()
@@ -183,9 +180,14 @@ class BasisManager:
                     M.indptr.size == old.indptr.size and M.indices.size == old.indices.size
                     and np.array_equal(M.indptr, old.indptr)
                     and np.array_equal(M.indices, old.indices)):
-                self._held = None   # another pattern: the held factors are no preconditioner
+                self.reuse.held = None   # another pattern: held factors are no preconditioner
             self._Mc, self._absMc = M, abs(M)
         return self._Mc
+
+    @property
+    def matrix(self):
+        """M as canonical CSC (read only)."""
+        return self._M
 
     @property
     def _absM(self):
@@ -217,7 +219,7 @@ class BasisManager:
         self._prefetch = None
         if self._factored and not self._reusing and self.options.reuse_factors:
             # the factors stay valid for the basis they were computed for: keep what it was
-            self._held = (self._kinds.copy(), self._indices.copy(), self._signs.copy())
+            self.reuse.held = (self._kinds.copy(), self._indices.copy(), self._signs.copy())
         self._factored = False
         self._cache = None
         self._version += 1
@@ -240,9 +242,15 @@ class BasisManager:
         return self._factored
 
     @property
+    def factors(self):
+        """The :class:`~compass_sparse.basis.factors.UpdatedFactors` of the last
+        factorization (None before the first)."""
+        return self._lu
+
+    @property
     def num_updates(self) -> int:
         """Forrest-Tomlin updates since the last factorization."""
-        return self._k if self._factored else 0
+        return self._lu.k if self._factored else 0
 
     def slot_of_unit(self, row) -> int:
         return int(self._unit_slot[row])
@@ -304,7 +312,7 @@ class BasisManager:
         indices[~nd] = 0
         self._kinds, self._indices, self._signs = kinds.copy(), indices, signs.copy()
         self._prefetch = None
-        if self._can_reuse() or self._offer_fits():
+        if self.reuse.can_reuse(self._lu) or self.reuse.offer_fits():
             self._rebuild_maps()
             self._factored = True
             self._reusing = True
@@ -315,86 +323,15 @@ class BasisManager:
             return self.last_report
         return self._factorize()
 
-    def _can_reuse(self):
-        h = self._held
-        ok = (self.options.reuse_factors and h is not None and not self._reuse_aged
-              and self._nnz_base >= self.options.reuse_min_nnz
-              and np.array_equal(h[0], self._kinds) and np.array_equal(h[1], self._indices)
-              and np.array_equal(h[2], self._signs))
-        if ok:
-            self._psolve = self._solve_quiet
-        return ok
-
     @property
     def holds_offer(self) -> bool:
         """Whether offered factors (:meth:`offer_factors`) wait for the next factor()."""
-        return self._offered is not None
+        return self.reuse.offered is not None
 
     def offer_factors(self, labels, held):
-        """Offer the LU ``held`` (a :class:`~compass_sparse.basis.backends.HeldLU`) of a
-        matrix close to the principal block ``M[labels, labels]`` (increasing labels), e.g.
-        the crash's last reduced Jacobian: a later :meth:`factor` of a basis whose M
-        columns are exactly ``labels`` and whose unit columns cover the other rows solves
-        on it by GMRES instead of factoring (``reuse_factors``; the same fallbacks)."""
-        labels = np.asarray(labels, dtype=_I)
-        if not (self.options.reuse_factors and held is not None and held.n == labels.size
-                and labels.size and np.all(np.diff(labels) > 0) and labels[-1] < self.n):
-            return
-        est, nnz = held.ordering.nnz_lu, int(getattr(held.lu, "nnz", 0))
-        if nnz < self.options.reuse_min_nnz:
-            return      # a fresh factorization is cheaper than GMRES on these
-        if est > 0 and nnz > est:
-            # Pivoting left the diagonal the ordering counted on (the crash's points are
-            # far from the solution): each solve with these factors costs more than with
-            # a fresh factorization of the basis (2x fill measured on the static CGE model
-            # at n = 3e4, tax abolition; the solve took 16 s with them, 13 s without).
-            return
-        self._offered = (labels, held)
-
-    def _offer_fits(self):
-        if self._offered is None or self._reuse_aged or not self.options.reuse_factors:
-            return False
-        labels = self._offered[0]
-        k, i = self._kinds, self._indices
-        km, ku = k == KIND_M, k == KIND_UNIT
-        if not np.all(km | ku) or km.sum() != labels.size:
-            return False
-        if not np.array_equal(np.sort(i[km]), labels):
-            return False
-        cov = np.zeros(self.n, dtype=bool)
-        cov[i[ku]] = True
-        if cov.sum() != ku.sum() or cov[labels].any():
-            return False
-        self._psolve = self._offered_solve
-        # the factors in use are the offered ones: report their figures
-        held, st = self._offered[1], self.stats
-        o = held.ordering
-        st.backend, st.ordering = "superlu", o.method
-        st.est_nnz_lu = max(st.est_nnz_lu, o.nnz_lu)
-        st.est_flops = max(st.est_flops, o.flops)
-        if o.nnz_lu >= 0:
-            st.est_bytes = max(st.est_bytes, BYTES_PER_ENTRY * o.nnz_lu)
-        st.max_nnz_lu = max(st.max_nnz_lu, int(getattr(held.lu, "nnz", 0)))
-        return True
-
-    def _offered_solve(self, v):
-        """P^{-1} v for P the current basis with its M block on ``labels`` replaced by the
-        offered matrix: the M columns on the labelled rows first, then the unit columns
-        (they cover the other rows)."""
-        labels, held = self._offered
-        k, i, g = self._kinds, self._indices, self._signs
-        g = g if v.ndim == 1 else g[:, None]      # (v may hold several right-hand sides)
-        y = held.solve(v[labels])                 # (M_LL) y = v_L, y by label
-        x = np.empty(v.shape)
-        km = np.flatnonzero(k == KIND_M)
-        x[km] = y[np.searchsorted(labels, i[km])] / g[km]
-        ku = np.flatnonzero(k == KIND_UNIT)
-        if ku.size:
-            yfull = np.zeros(v.shape)
-            yfull[labels] = y
-            t = self._M @ yfull
-            x[ku] = (v[i[ku]] - t[i[ku]]) / g[ku]
-        return x
+        """Offer the LU ``held`` of a matrix close to the principal block ``M[labels,
+        labels]`` (see :meth:`compass_sparse.basis.reuse.FactorReuse.offer`)."""
+        self.reuse.offer(labels, held)
 
     @property
     def reusing(self) -> bool:
@@ -409,68 +346,11 @@ class BasisManager:
         if rep.rank_deficiency:
             raise FactorReuseFailed("the basis solved on reused factors is singular")
 
-    def _reuse_solve(self, rhs, more=()):
-        """x with B x = rhs by GMRES on the held factors, or None when it does not reach
-        ``reuse_tolerance`` (backward error) within ``reuse_iterations`` steps.  With
-        ``more`` (other right-hand sides), the list of the solutions of all, solved in
-        lockstep (one preconditioner solve of all per step)."""
-        from .krylov import preconditioned_gmres
-
-        o = self.options
-        nb = self._norm_inf_B()
-        cols = [rhs, *more]
-        bns = [float(np.abs(c).max()) if self.n else 0.0 for c in cols]
-
-        # GMRES's 2-norm target is a guide (||x|| is estimated by ||x0||, x0 = P^{-1} rhs;
-        # the 2-norm bounds the inf-norm); the check below decides.  Its vector operations
-        # are level-1 BLAS: threads only slow them (10x measured at n = 3e4, busy machine).
-        def target(bn):
-            return lambda x0: 0.5 * o.reuse_tolerance * (bn + nb * float(np.abs(x0).max()))
-
-        def berr(x, c):
-            if not np.all(np.isfinite(x)):
-                return np.inf, np.inf
-            res = float(np.abs(self.matvec(x) - cols[c]).max()) if self.n else 0.0
-            den = bns[c] + nb * (float(np.abs(x).max()) if self.n else 0.0)
-            return (res / den if den > 0 else res), den
-
-        st = self.stats
-        st.reuse_solves += len(cols)
-        with single_threaded_blas():
-            X, steps, _ = preconditioned_gmres(
-                self.matvec, self._psolve, cols[0] if not more else np.column_stack(cols),
-                target(bns[0]) if not more else [target(b) for b in bns],
-                o.reuse_iterations)
-            X = [X] if not more else [X[:, c] for c in range(len(cols))]
-            out = []
-            for c, x in enumerate(X):
-                err, den = berr(x, c)
-                if o.reuse_tolerance < err <= 1e3 * o.reuse_tolerance \
-                        and steps < o.reuse_iterations:
-                    # One restart: GMRES's own residual estimate may end just short of
-                    # the true backward error (2.9e-12 for 1e-12 measured at n = 1e5);
-                    # when it is that close, a correction continues from x with the
-                    # steps left instead of factoring afresh.
-                    dx, k, _ = preconditioned_gmres(self.matvec, self._psolve,
-                                                    cols[c] - self.matvec(x),
-                                                    0.1 * o.reuse_tolerance * den,
-                                                    o.reuse_iterations - steps)
-                    st.reuse_steps += k
-                    x = x + dx
-                    err, _ = berr(x, c)
-                log.debug("solve on reused factors: %d GMRES steps, backward error %.1e",
-                          steps, err)
-                out.append(x if err <= o.reuse_tolerance else None)
-        st.reuse_steps += steps
-        if steps > o.reuse_iterations // 2:
-            self._reuse_aged = True    # the next factor() call factors afresh
-        return out if more else out[0]
-
     def refactor(self) -> FactorReport:
         """Factorize the current slot table again (afresh, also when reusing)."""
         return self._factorize()
 
-    def _nonunit_columns(self, slots):
+    def nonunit_columns(self, slots):
         """CSC matrix (n x len(slots)) of the non-unit columns of ``slots``."""
         n = self.n
         kinds, idx, sg = self._kinds[slots], self._indices[slots], self._signs[slots]
@@ -523,7 +403,7 @@ class BasisManager:
         covered[idx[good_units]] = True
         R2 = np.flatnonzero(~covered)
         S2 = np.flatnonzero(~is_unit)
-        BS = self._nonunit_columns(S2)                       # n x |S2|
+        BS = self.nonunit_columns(S2)                       # n x |S2|
         K = sp.csc_matrix(BS[R2, :]) if S2.size else sp.csc_matrix((R2.size, 0))
         if S2.size:
             rows_k, cols_k, fac = select_regular_block(K, self._backend, o.rank_tolerance,
@@ -584,59 +464,19 @@ class BasisManager:
         # at n = 1e5)
         Lx, Li, Lp = kern.assemble_triangle(n, m1, *parts[0], True, *parts[2], rowpos)
         Ux, Ui, Up = kern.assemble_triangle(n, m1, *parts[1], False, *parts[2], rowpos)
-        cap_cols = n + o.update_limit + 2
-        self._Lp, self._Li, self._Lx = Lp, Li, Lx
-        nnzu = int(Up[n])
-        cap = max(2 * nnzu + 4 * n, 1024)
-        self._Ui = np.zeros(cap, dtype=_I)
-        self._Ux = np.zeros(cap)
-        self._Ui[:nnzu] = Ui
-        self._Ux[:nnzu] = Ux
-        self._Us = np.zeros(cap_cols, dtype=_I)
-        self._Ue = np.zeros(cap_cols, dtype=_I)
-        self._Us[:n] = Up[:-1]
-        self._Ue[:n] = Up[1:]
-        self._Us[n:] = nnzu
-        self._Ue[n:] = nnzu
-        self._Ufree = nnzu
-        # Row forms of L and U (for BTRAN and the update's U^{-T} e_p) are built on first
-        # use: a path without pivots never needs them (0.4 s each at n = 1e5).
-        self._row_forms = None
-        self._LU0 = (Lx, Li, Lp, Ux, Ui, Up)
-        self._dead = np.zeros(cap_cols, dtype=np.bool_)
-        self._Ud = np.ones(cap_cols)
-        self._Ud[:n] = Ud
-        rcap = max(4 * n, 1024)
-        self._Rs = np.zeros(cap_cols + 1, dtype=_I)
-        self._Ri = np.zeros(rcap, dtype=_I)
-        self._Rx = np.zeros(rcap)
-        self._Rpos = np.zeros(cap_cols, dtype=_I)
-        self._Rq = np.zeros(cap_cols, dtype=_I)
-        self._k = 0
-        self._m1 = m1
-        self._rowpos = rowpos
-        self._rscale = rscale
-        self._slot_at = np.concatenate((slot_at, np.full(cap_cols - n, -1, dtype=_I)))
-        self._pos_of_slot = np.empty(n, dtype=_I)
-        self._pos_of_slot[slot_at] = np.arange(n, dtype=_I)
-        self._nnzL = int(Lp[n])
-        self._nnzU = int(nnzu) + n
-        self._nnzR = 0
-        self._nnz_base = self._nnzL + self._nnzU
+        self._lu = UpdatedFactors(n, m1, rowpos, slot_at, Ud, rscale, (Lx, Li, Lp),
+                                  (Ux, Ui, Up), o.update_limit)
         self._rebuild_maps()
         self._factored = True
         self._reusing = False
-        self._held = None
-        self._offered = None
-        self._psolve = self._solve_quiet
-        self._reuse_aged = False
+        self.reuse.reset()
         self._threshold_pivoting = bool(mk) and self._backend.last.ordering in ("amd", "metis")
         self._residual_refactored = False
         self._cache = None
         self._version += 1
         st = self.stats
         st.factorizations += 1
-        st.nnz_L, st.nnz_U, st.nnz_eta = self._nnzL, self._nnzU, 0
+        st.nnz_L, st.nnz_U, st.nnz_eta = self._lu.nnzL, self._lu.nnzU, 0
         if mk:
             self._record_lu(self._backend.last)
         st.time_factor += time.perf_counter() - t0
@@ -656,46 +496,16 @@ class BasisManager:
         st.max_nnz_lu = max(st.max_nnz_lu, info.nnz_lu)
 
     # ------------------------------------------------------------------ solves
+    def fresh_factors(self):
+        """Factors of the current slot table itself (not reused ones of an older basis)."""
+        self._require()
+        if self._reusing:
+            self._leave_reuse()
+
     def _require(self):
         if not self._factored:
             raise CompassError("basis is not factorized: call factor() or refactor() "
                                "(after set_matrix/set_dense_column)")
-
-    def _work(self):
-        return np.zeros(self.n + self._k + 1)
-
-    def _scatter_rhs(self, w, rows, vals):
-        if self._rscale is not None:
-            vals = vals * self._rscale[rows]
-        w[self._rowpos[rows]] = vals
-
-    def _ftran_work(self, w, keep_spike):
-        """w holds S P a; returns (x over slots, spike or None)."""
-        kern.lsolve(self._Lp, self._Li, self._Lx, w, self._m1)
-        kern.apply_etas(self._Rs, self._Ri, self._Rx, self._Rpos, self._Rq, self._k, w)
-        N = self.n + self._k
-        spike = w[:N].copy() if keep_spike else None
-        kern.usolve(self._Us, self._Ue, self._Ui, self._Ux, self._Ud, w, N)
-        return w[self._pos_of_slot], spike
-
-    def _rows(self):
-        """(Lrp, Lri, Lrx, Urp, Urj, Urx): CSR arrays of L and of U as factored (built once
-        per factorization, on first use)."""
-        if self._row_forms is None:
-            n = self.n
-            Lx, Li, Lp, Ux, Ui, Up = self._LU0
-            out = []
-            for (x, i, p) in ((Lx, Li, Lp), (Ux, Ui, Up)):
-                R = sp.csc_matrix((x, i, p), shape=(n, n)).tocsr()
-                out += [R.indptr.astype(_I, copy=False), R.indices.astype(_I, copy=False),
-                        R.data]
-            self._row_forms = tuple(out)
-        return self._row_forms
-
-    def _utsolve(self, w, start, N):
-        _, _, _, Urp, Urj, Urx = self._rows()
-        kern.utsolve(Urp, Urj, Urx, self._dead, self.n, self._Us,
-                     self._Ue, self._Ui, self._Ux, self._Ud, w, start, N)
 
     def _column(self, kind, index, sign):
         if kind == KIND_M:
@@ -717,19 +527,19 @@ class BasisManager:
             if self._r is not None and self._prefetch is None:
                 # The path solves with its covering vector next (t enters): both in
                 # lockstep, sharing the preconditioner solves.
-                x, d = self._reuse_solve(rhs, (self._r,))
+                x, d = self.reuse.solve(rhs, (self._r,))
                 self._prefetch = (self._version, d)
             else:
-                x = self._reuse_solve(rhs)
+                x = self.reuse.solve(rhs)
             self.stats.time_solve += time.perf_counter() - t0
             self.stats.ftran_calls += 1
             if x is not None:
                 return x
             self._leave_reuse()
             t0 = time.perf_counter()
-        w = self._work()
-        self._scatter_rhs(w, np.arange(self.n), rhs)
-        x, _ = self._ftran_work(w, False)
+        w = self._lu.work()
+        self._lu.scatter_rhs(w, np.arange(self.n), rhs)
+        x, _ = self._lu.ftran_work(w, False)
         self.stats.time_solve += time.perf_counter() - t0
         self.stats.ftran_calls += 1
         x = self._maybe_check(x, rhs, None)
@@ -749,7 +559,7 @@ class BasisManager:
             rhs = np.zeros(self.n)
             rows, vals = self._column(kind, index, sign)
             np.add.at(rhs, rows, vals)
-            d = self._reuse_solve(rhs)
+            d = self.reuse.solve(rhs)
             if d is not None:  # (no spike: a replacement factors afresh first)
                 self.stats.time_solve += time.perf_counter() - t0
                 self.stats.ftran_calls += 1
@@ -762,9 +572,9 @@ class BasisManager:
 
     def _ftran_column(self, kind, index, sign):
         rows, vals = self._column(kind, index, sign)
-        w = self._work()
-        self._scatter_rhs(w, rows, vals)
-        d, spike = self._ftran_work(w, True)
+        w = self._lu.work()
+        self._lu.scatter_rhs(w, rows, vals)
+        d, spike = self._lu.ftran_work(w, True)
         self._cache = _SpikeCache((kind, index, sign), self._version, spike, d)
         return d
 
@@ -777,7 +587,7 @@ class BasisManager:
             raise ShapeError(f"c must have length {self.n}")
         if self._reusing:
             self._leave_reuse()
-        y = self._btran_work(c)
+        y = self._lu.btran_work(c)
         f = self.options.residual_check_frequency
         self.stats.btran_calls += 1
         if f and self.stats.btran_calls % f == 0 and self._threshold_pivoting:
@@ -786,80 +596,39 @@ class BasisManager:
             self.stats.residual_checks += 1
             err = self._backward_error_t(y, c)
             if np.isfinite(err) and err > _REFINE_ABOVE:
-                y2 = y + self._btran_work(c - self.rmatvec(y))
+                y2 = y + self._lu.btran_work(c - self.rmatvec(y))
                 if np.all(np.isfinite(y2)) and self._backward_error_t(y2, c) < err:
                     y = y2
         self.stats.time_solve += time.perf_counter() - t0
         return y
 
-    def _btran_work(self, c):
-        N = self.n + self._k
-        w = self._work()
-        w[self._pos_of_slot] = c
-        self._utsolve(w, 0, N)
-        kern.apply_etas_t(self._Rs, self._Ri, self._Rx, self._Rpos, self._Rq, self._k, w)
-        Lrp, Lri, Lrx = self._rows()[:3]
-        kern.ltsolve(Lrp, Lri, Lrx, w, self._m1)
-        y = w[self._rowpos]
-        if self._rscale is not None:
-            y = y * self._rscale
-        return y
-
     def rmatvec(self, y):
         """B^T @ y (indexed by slot) for y indexed by row."""
-        k, i, s = self._kinds, self._indices, self._signs
-        out = np.zeros(self.n)
-        m = k == KIND_M
-        out[m] = s[m] * (self._M.T @ y)[i[m]]
-        u = k == KIND_UNIT
-        out[u] = s[u] * y[i[u]]
-        d = k == KIND_DENSE
-        if np.any(d):
-            out[d] = s[d] * float(self._r @ y)
-        return out
+        return products.rmatvec(self._kinds, self._indices, self._signs, self._M, self._r, y)
 
     def _backward_error_t(self, y, c):
         res = np.abs(self.rmatvec(y) - c).max()
-        den = np.abs(c).max() + self._norm_inf_B() * np.abs(y).max()
+        den = np.abs(c).max() + self.norm_inf_B() * np.abs(y).max()
         return float(res / den) if den > 0 else float(res)
 
     # ---------------------------------------------------------- residual check
     def matvec(self, x):
         """B @ x for x indexed by slot (uses the current slot table)."""
-        n = self.n
-        k, i, s = self._kinds, self._indices, self._signs
-        m = k == KIND_M
-        y = self._M @ np.bincount(i[m], weights=s[m] * x[m], minlength=n)
-        u = k == KIND_UNIT
-        y += np.bincount(i[u], weights=s[u] * x[u], minlength=n)
-        for d in np.flatnonzero(k == KIND_DENSE):
-            y += self._r * (s[d] * x[d])
-        return y
+        return products.matvec(self._kinds, self._indices, self._signs, self._M, self._r, x)
 
-    def _norm_inf_B(self):
-        n = self.n
-        k, i, s = self._kinds, self._indices, self._signs
-        m = k == KIND_M
-        rs = self._absM @ np.bincount(i[m], weights=np.abs(s[m]), minlength=n)
-        u = k == KIND_UNIT
-        rs += np.bincount(i[u], weights=np.abs(s[u]), minlength=n)
-        for d in np.flatnonzero(k == KIND_DENSE):
-            rs += np.abs(self._r) * abs(s[d])
-        return float(rs.max()) if n else 0.0
+    def norm_inf_B(self):
+        """||B||_inf of the current slot table."""
+        return products.norm_inf(self._kinds, self._indices, self._signs, self._absM,
+                                 self._r)
 
     def backward_error(self, x, rhs):
         """||B x - rhs||_inf / (||rhs||_inf + ||B||_inf ||x||_inf)."""
-        res = self.matvec(x) - rhs
-        den = np.abs(rhs).max() + self._norm_inf_B() * np.abs(x).max()
-        num = np.abs(res).max()
-        if not np.isfinite(num):
-            return np.inf
-        return float(num / den) if den > 0 else float(num)
+        return products.backward_error(self.matvec(x) - rhs, rhs, x, self.norm_inf_B())
 
     def _maybe_check(self, x, rhs, col):
         f = self.options.residual_check_frequency
         self._n_ftran += 1
-        if not np.all(np.isfinite(x)) and self._k > 0:
+        if not np.all(np.isfinite(x)) and self._lu.k > 0:
             # a non-finite solution after updates: never hand it out
             return self._recover(x, rhs, col)
         if f == 0 or self._n_ftran % f:
@@ -881,9 +650,9 @@ class BasisManager:
         Threshold pivoting (symmetric orderings) may leave a backward error well above
         machine precision though below the residual tolerance; the check that measured
         it makes the correction cheap (one more solve)."""
-        w = self._work()
-        self._scatter_rhs(w, np.arange(self.n), rhs - self.matvec(x))
-        dx, _ = self._ftran_work(w, False)
+        w = self._lu.work()
+        self._lu.scatter_rhs(w, np.arange(self.n), rhs - self.matvec(x))
+        dx, _ = self._lu.ftran_work(w, False)
         x2 = x + dx
         if np.all(np.isfinite(x2)) and self.backward_error(x2, rhs) < err:
             x = x2
@@ -896,7 +665,7 @@ class BasisManager:
             rhs = np.zeros(self.n)
             rows, vals = self._column(*col)
             np.add.at(rhs, rows, vals)
-        if self._k > 0 or not self._residual_refactored:
+        if self._lu.k > 0 or not self._residual_refactored:
             # (a fresh factorization is retried once: it may have been damaged)
             self.stats.refactor_by_residual += 1
             rep = self._factorize()
@@ -908,14 +677,14 @@ class BasisManager:
         if col is not None:
             x = self._ftran_column(*col)
         else:
-            w = self._work()
-            self._scatter_rhs(w, np.arange(self.n), rhs)
-            x, _ = self._ftran_work(w, False)
+            w = self._lu.work()
+            self._lu.scatter_rhs(w, np.arange(self.n), rhs)
+            x, _ = self._lu.ftran_work(w, False)
         # one step of iterative refinement
         r = rhs - self.matvec(x)
-        w = self._work()
-        self._scatter_rhs(w, np.arange(self.n), r)
-        dx, _ = self._ftran_work(w, False)
+        w = self._lu.work()
+        self._lu.scatter_rhs(w, np.arange(self.n), r)
+        dx, _ = self._lu.ftran_work(w, False)
         x2 = x + dx
         if np.all(np.isfinite(x2)) and self.backward_error(x2, rhs) < self.backward_error(x, rhs):
             x = x2
@@ -950,84 +719,26 @@ class BasisManager:
         if c is None or c.key != key or c.version != self._version:
             self._ftran_column(kind, index, sign)
             c = self._cache
-        if self._k >= o.update_limit:
+        if self._lu.k >= o.update_limit:
             self.stats.refactor_by_count += 1
             return self._replace_by_refactor(slot, kind, index, sign)
-        n, k = self.n, self._k
-        N = n + k
-        p = int(self._pos_of_slot[slot])
-        s = c.spike
-        d = c.d
-        alpha = d[slot]
-        upp = self._Ud[p]
-        d1 = alpha * upp
-        snorm = np.abs(s).max() if s.size else 0.0
-        dnorm = np.abs(d).max()
-        ptol = o.pivot_tolerance
-        if (not np.isfinite(d1) or not np.isfinite(dnorm) or abs(d1) <= ptol * snorm
-                or abs(alpha) <= ptol * dnorm or d1 == 0.0):
+        outcome = self._lu.update(slot, c.spike, c.d, o.pivot_tolerance,
+                                  o.stability_tolerance, o.fill_factor)
+        if outcome == "refused":
             self.stats.refused_updates += 1
             return UpdateStatus.REFUSED
-        y = np.zeros(N)
-        y[p] = 1.0
-        self._utsolve(y, p, N)
-        d2 = upp * kern.dot_from(y, s, p)
-        if not np.isfinite(d2) or abs(d1 - d2) > o.stability_tolerance * abs(d1):
+        if outcome == "unstable":
             self.stats.refactor_by_stability += 1
             return self._replace_by_refactor(slot, kind, index, sign)
-        if abs(d2) <= ptol * snorm:
-            self.stats.refused_updates += 1
-            return UpdateStatus.REFUSED
-        eta_i = (p + 1 + np.flatnonzero(y[p + 1:])).astype(_I)
-        eta_x = -upp * y[eta_i]
-        col_i = np.flatnonzero(s).astype(_I)
-        col_i = col_i[col_i != p]
-        col_x = s[col_i]
-        old_len = int(self._Ue[p] - self._Us[p])
-        new_total = (self._nnzL + self._nnzU - old_len + col_i.size + self._nnzR
-                     + eta_i.size)
-        if new_total > o.fill_factor * self._nnz_base:
+        if outcome == "fill":
             self.stats.refactor_by_fill += 1
             return self._replace_by_refactor(slot, kind, index, sign)
-        # ---- commit: append the spike as column q, kill column p, store the eta
-        q = N
-        need = self._Ufree + col_i.size
-        if need > self._Ui.size:
-            newcap = max(2 * self._Ui.size, need + 1024)
-            self._Ui = np.concatenate((self._Ui, np.zeros(newcap - self._Ui.size, _I)))
-            self._Ux = np.concatenate((self._Ux, np.zeros(newcap - self._Ux.size)))
-        f = self._Ufree
-        self._Ui[f:f + col_i.size] = col_i
-        self._Ux[f:f + col_i.size] = col_x
-        self._Us[q], self._Ue[q] = f, f + col_i.size
-        self._Ufree = f + col_i.size
-        self._Ud[q] = d2
-        self._Ue[p] = self._Us[p]
-        self._Ud[p] = 1.0
-        self._dead[p] = True
-        r0 = self._Rs[k]
-        need = r0 + eta_i.size
-        if need > self._Ri.size:
-            newcap = max(2 * self._Ri.size, need + 1024)
-            self._Ri = np.concatenate((self._Ri, np.zeros(newcap - self._Ri.size, _I)))
-            self._Rx = np.concatenate((self._Rx, np.zeros(newcap - self._Rx.size)))
-        self._Ri[r0:need] = eta_i
-        self._Rx[r0:need] = eta_x
-        self._Rs[k + 1] = need
-        self._Rpos[k] = p
-        self._Rq[k] = q
-        self._k = k + 1
-        self._slot_at[p] = -1
-        self._slot_at[q] = slot
-        self._pos_of_slot[slot] = q
-        self._nnzU += col_i.size - old_len
-        self._nnzR += eta_i.size
         self._set_slot(slot, kind, index, sign)
         self._cache = None
         self._version += 1
         st = self.stats
         st.updates += 1
-        st.nnz_U, st.nnz_eta = self._nnzU, self._nnzR
+        st.nnz_U, st.nnz_eta = self._lu.nnzU, self._lu.nnzR
         return UpdateStatus.OK
 
     def _set_slot(self, slot, kind, index, sign):
@@ -1064,42 +775,25 @@ class BasisManager:
 
     # ----------------------------------------------------------- diagnostics
     def condest(self):
-        """Estimate of the 1-norm condition number of B (``scipy`` onenormest on B^{-1})."""
-        from scipy.sparse.linalg import LinearOperator, onenormest
-
-        self._require()
-        if self._reusing:
-            self._leave_reuse()
-        n = self.n
-        Binv = LinearOperator((n, n), matvec=lambda v: self._solve_quiet(v),
-                              rmatvec=lambda v: self._solve_quiet_t(v), dtype=float)
-        cols = np.abs(self._nonunit_columns(np.arange(n, dtype=_I))).sum(axis=0)
-        cols = np.asarray(cols).ravel()
-        cols[self._kinds == KIND_UNIT] = np.abs(self._signs[self._kinds == KIND_UNIT])
-        return float(cols.max() * onenormest(Binv)) if n else 0.0
+        """Estimate of the 1-norm condition number of B (:mod:`compass_sparse.basis.debug`)."""
+        return debug.condest(self)
 
     def condest_check(self, limit=1e12):
         """True when the condition estimate is below ``limit``."""
         return self.condest() < limit
 
-    def _solve_quiet(self, v):
-        if v.ndim == 2:   # several right-hand sides (lockstep GMRES): one at a time here
-            return np.column_stack([self._solve_quiet(v[:, c]) for c in range(v.shape[1])])
-        w = self._work()
-        self._scatter_rhs(w, np.arange(self.n), np.asarray(v, float).ravel())
-        return self._ftran_work(w, False)[0]
+    def dense_basis(self):
+        """The explicit dense B of the current slot table (tests and debugging only)."""
+        return debug.dense_basis(self)
 
-    def _solve_quiet_t(self, v):
+    def solve_quiet(self, v):
+        """B^{-1} v with the current factors, without counts or checks."""
+        return self._lu.solve(v)
+
+    def solve_quiet_t(self, v):
+        """B^{-T} v, without counts."""
         st = self.stats.btran_calls, self.stats.time_solve
         y = self.btran(np.asarray(v, float).ravel())
         self.stats.btran_calls, self.stats.time_solve = st
         return y
 
-    def dense_basis(self):
-        """The explicit dense B of the current slot table (tests and debugging only)."""
-        n = self.n
-        B = self._nonunit_columns(np.arange(n, dtype=_I)).toarray()
-        u = np.flatnonzero(self._kinds == KIND_UNIT)
-        B[:, u] = 0.0
-        B[self._indices[u], u] = self._signs[u]
-        return B

@@ -222,7 +222,7 @@ class BasisStats:
 
     def record_direct_lu(self, nnz_lu: int, seconds: float, method=("superlu", "colamd")):
         """Count a sparse LU made for the basis' path outside it (the direct Newton step,
-        :mod:`compass_sparse.direct_step`; ``method``: its (backend, ordering))."""
+        :mod:`compass_sparse.path.direct_step`; ``method``: its (backend, ordering))."""
         self.factorizations += 1
         self.time_factor += seconds
         self.max_nnz_lu = max(self.max_nnz_lu, int(nnz_lu))

@@ -87,6 +87,7 @@ def callables(d) -> dict:
 
 # --------------------------------------------------------------------------- #
 def pyomo_model(d):
+    # (Pyomo: an optional extra)
     import pyomo.environ as pe
     from pyomo.mpec import Complementarity, complements
 
@@ -127,6 +128,7 @@ def pyomo_model(d):
 
 
 def pyomo_solution(m) -> np.ndarray:
+    # (Pyomo: an optional extra)
     import pyomo.environ as pe
 
     vals = ([m.Y[s] for s in m.S] + [m.W] + [m.P[s] for s in m.S]
@@ -137,6 +139,7 @@ def pyomo_solution(m) -> np.ndarray:
 # --------------------------------------------------------------------------- #
 def gamspy_model(d):
     require_gams("build the GAMSPy model")
+    # (GAMSPy: an optional extra)
     import gamspy as gp
 
     S = d["S"]

@@ -91,6 +91,7 @@ def callables(d) -> dict:
 # --------------------------------------------------------------------------- #
 def pyomo_model(d):
     """The Pyomo ConcreteModel with one Complementarity per firm."""
+    # (Pyomo: an optional extra)
     import pyomo.environ as pe
     from pyomo.mpec import Complementarity, complements
 
@@ -118,6 +119,7 @@ def pyomo_model(d):
 
 
 def pyomo_solution(m) -> np.ndarray:
+    # (Pyomo: an optional extra)
     import pyomo.environ as pe
 
     return np.array([pe.value(m.q[i, f]) for i in m.M for f in m.F])
@@ -127,6 +129,7 @@ def pyomo_solution(m) -> np.ndarray:
 def gamspy_model(d):
     """(container, model, symbols) of the same model in GAMSPy."""
     require_gams("build the GAMSPy model")
+    # (GAMSPy: an optional extra)
     import gamspy as gp
 
     M = d["markets"]

@@ -97,6 +97,7 @@ def callables(d) -> dict:
 
 # --------------------------------------------------------------------------- #
 def pyomo_model(d):
+    # (Pyomo: an optional extra)
     import pyomo.environ as pe
     from pyomo.mpec import Complementarity, complements
 
@@ -129,6 +130,7 @@ def pyomo_model(d):
 
 
 def pyomo_solution(m) -> np.ndarray:
+    # (Pyomo: an optional extra)
     import pyomo.environ as pe
 
     return np.array([pe.value(m.x[a]) for a in m.A] + [pe.value(m.pi[i]) for i in m.N])
@@ -137,6 +139,7 @@ def pyomo_solution(m) -> np.ndarray:
 # --------------------------------------------------------------------------- #
 def gamspy_model(d):
     require_gams("build the GAMSPy model")
+    # (GAMSPy: an optional extra)
     import gamspy as gp
 
     N = d["nodes"]

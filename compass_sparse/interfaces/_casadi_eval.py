@@ -44,6 +44,7 @@ UNARY = ("exp", "log", "log10", "sqrt", "sin", "cos", "tan", "asin", "acos", "at
 
 def casadi_available() -> bool:
     try:
+        # (CasADi: an optional extra, with Pyomo)
         import casadi  # noqa: F401
     except Exception:
         return False
@@ -99,6 +100,7 @@ class CompiledFJ:
     """
 
     def __init__(self, rows, n: int, n_params: int, *, cse: bool = False):
+        # (CasADi: an optional extra, with Pyomo)
         import casadi as ca
 
         self.n = n = int(n)

@@ -99,6 +99,7 @@ def _sysdir() -> str | None:
     if env:
         return env
     try:
+        # (GAMSPy: an optional extra)
         import gamspy_base
     except Exception:
         return None

@@ -36,6 +36,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..exceptions import GamsLicenseError, ModelError
+from ..problem.mcp import MCP
+from ..solve import solve_mcp
 from .gams_state import gams_refusals, gams_state, refusal_from, require_gams
 
 logger = logging.getLogger("compass_sparse")
@@ -48,6 +50,7 @@ def gamspy_available() -> bool:
     if not gams_state().runs:
         return False
     try:
+        # (GAMSPy: an optional extra)
         import gams.core.gmo  # noqa: F401
         import gamspy  # noqa: F401
     except Exception:
@@ -96,6 +99,7 @@ class GamsMCP:
 
     def __init__(self, container, model):
         require_gams("generate the model")
+        # (GAMSPy: an optional extra)
         import gams.core.gmo as G
 
         self._G = G
@@ -215,8 +219,6 @@ class GamsMCP:
         return sp.csc_matrix((data, self._indices, self._indptr), shape=(self.n, self.n))
 
     def mcp(self, x0=None):
-        from .. import MCP
-
         return MCP(self.F, self.J, self.lb, self.ub, self.x0 if x0 is None else x0,
                    var_names=self.var_names, eqn_names=self.eqn_names,
                    constant_jac=self.constant)
@@ -224,6 +226,7 @@ class GamsMCP:
     # -- solution -----------------------------------------------------------------
     def write_back(self, x) -> None:
         """Levels and marginals into the GAMSPy symbols (releases the instance first)."""
+        # (pandas: an optional extra, with GAMSPy)
         import pandas as pd
 
         x = np.asarray(x, dtype=float)
@@ -289,8 +292,6 @@ def solve_gamspy(container, model, options=None, *, load: bool = True):
     Raises :class:`~compass_sparse.exceptions.GamsLicenseError` where GAMS refuses its
     licence; if that happens while the solution is written back, the solve's Result is not
     lost: it is the error's ``result``."""
-    from .. import solve_mcp
-
     require_gams("solve a GAMSPy model")
     gm = GamsMCP(container, model)
     try:

@@ -79,10 +79,12 @@ def path_available() -> bool:
     if not gams_state().runs:
         return False
     try:
+        # (GAMSPy: an optional extra)
         import gamspy  # noqa: F401
     except Exception:
         return False
     try:
+        # (GAMSPy: an optional extra)
         from gamspy import utils
 
         solvers = [s.upper() for s in utils.getInstalledSolvers()]
@@ -307,6 +309,7 @@ class PathSession:
             raise ValueError("n must be positive")
         self.quadratic = bool(quadratic)
         require_gams("run PATH")
+        # (GAMSPy: an optional extra)
         import gamspy as gp
 
         self._gp = gp
@@ -335,6 +338,7 @@ class PathSession:
 
     # ------------------------------------------------------------------ #
     def _set_records(self, A, b, lb, ub, x0, D):
+        # (pandas: an optional extra, with GAMSPy)
         import pandas as pd
 
         gp = self._gp
@@ -394,8 +398,23 @@ class PathSession:
         ``output``: optional text stream that additionally receives the log.
         """
         gp = self._gp
-        from gamspy.exceptions import GamspyException
+        b, lb, ub, x0v, Dv, fixed = self._checked_data(b, lb, ub, x0, D)
+        t0 = time.perf_counter()
+        with gams_refusals("run PATH"):
+            self._set_records(A, b, lb, ub, x0v, Dv)
+        build_time = time.perf_counter() - t0
 
+        solver_options = {"convergence_tolerance": float(convergence_tolerance)}
+        if options:
+            solver_options.update(options)
+        gopts = gp.Options(time_limit=float(time_limit)) if time_limit is not None else None
+        log, wall = self._run_path(solver_options, gopts)
+        if output is not None:
+            output.write(log)
+        return self._run_result(A, b, lb, ub, Dv, fixed, log, wall, build_time)
+
+    def _checked_data(self, b, lb, ub, x0, D):
+        """(b, lb, ub, x0, D, fixed) as vectors of the session's order, checked."""
         n = self.n
         b = _vec(b, n, "b")
         lb = _vec(lb, n, "lb", default=-np.inf)
@@ -419,16 +438,11 @@ class PathSession:
             Dv = None
         fixed = lb == ub
         x0v[fixed] = lb[fixed]
+        return b, lb, ub, x0v, Dv, fixed
 
-        t0 = time.perf_counter()
-        with gams_refusals("run PATH"):
-            self._set_records(A, b, lb, ub, x0v, Dv)
-        build_time = time.perf_counter() - t0
-
-        solver_options = {"convergence_tolerance": float(convergence_tolerance)}
-        if options:
-            solver_options.update(options)
-        gopts = gp.Options(time_limit=float(time_limit)) if time_limit is not None else None
+    def _run_path(self, solver_options, gopts):
+        """(log, wall time) of one PATH run on the session's model."""
+        from gamspy.exceptions import GamspyException  # (GAMSPy: an optional extra)
 
         buf = io.StringIO()
         # GAMSPy logs a warning for every non-normal solve status; PathRun carries the status.
@@ -448,11 +462,10 @@ class PathSession:
             ) from exc
         finally:
             model_logger.setLevel(old_level)
-        wall = time.perf_counter() - t1
-        log = buf.getvalue()
-        if output is not None:
-            output.write(log)
+        return buf.getvalue(), time.perf_counter() - t1
 
+    def _run_result(self, A, b, lb, ub, Dv, fixed, log, wall, build_time) -> PathRun:
+        """The PathRun of a run: x read back, F recomputed, the log parsed."""
         x = self._read_vector(self._z, "level", 0.0)
         x[fixed] = lb[fixed]
         f_rep = self._read_vector(self._z, "marginal", 0.0)

@@ -41,6 +41,7 @@ imported (``import compass_sparse.interfaces.pyomo``).  Pyomo and CasADi are opt
 from __future__ import annotations
 
 import logging
+import sys
 import time
 import weakref
 from dataclasses import dataclass
@@ -48,7 +49,13 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from .. import __version__
 from ..exceptions import ModelError
+from ..linalg.matching import matching
+from ..problem.mcp import MCP
+from ..solve import solve_mcp
+from ..status import Status
+from ._casadi_eval import UNARY, CompiledFJ
 
 logger = logging.getLogger("compass_sparse")
 
@@ -58,6 +65,7 @@ __all__ = ["CompassSparseSolver", "PyomoMCP", "compiled", "pyomo_available", "so
 def pyomo_available() -> bool:
     """True when Pyomo and CasADi (the evaluator) can be imported."""
     try:
+        # (Pyomo and CasADi: optional extras)
         import casadi  # noqa: F401
         import pyomo.environ
         import pyomo.mpec  # noqa: F401
@@ -77,10 +85,9 @@ class _Signatures:
     numbers become 'c' leaves.  Named expressions are inlined."""
 
     def __init__(self):
+        # (Pyomo: an optional extra)
         import pyomo.core.expr.numeric_expr as N
         from pyomo.core.expr.relational_expr import EqualityExpression, InequalityExpression
-
-        from ._casadi_eval import UNARY
 
         self._N = N
         self._unary = set(UNARY)
@@ -93,6 +100,7 @@ class _Signatures:
             (N.Expr_ifExpression, "if"), (InequalityExpression, "le"),
             (EqualityExpression, "eq"),
         ]
+        # (Pyomo: an optional extra)
         from pyomo.core.expr.numvalue import native_numeric_types, value
 
         self._native = native_numeric_types
@@ -194,12 +202,14 @@ class _Side:
 
 
 def _is_fixed_expr(e) -> bool:
+    # (Pyomo: an optional extra)
     from pyomo.core.expr.numvalue import native_numeric_types
 
     return e.__class__ in native_numeric_types or e.is_fixed()
 
 
 def _is_var(e) -> bool:
+    # (Pyomo: an optional extra)
     from pyomo.core.expr.numvalue import native_numeric_types
 
     return e.__class__ not in native_numeric_types and e.is_variable_type()
@@ -207,6 +217,7 @@ def _is_var(e) -> bool:
 
 def _side(e) -> _Side:
     """``lo <= body <= up`` form of one argument of complements(a, b) (as pyomo.mpec reads it)."""
+    # (Pyomo: an optional extra)
     from pyomo.core.expr.numvalue import native_numeric_types
     from pyomo.core.expr.relational_expr import (
         EqualityExpression,
@@ -246,6 +257,7 @@ def _side(e) -> _Side:
 def _single_variable(body):
     """(v, a, c) when body = a*v + c with constants a != 0 and c.  A plain variable may be
     fixed (its pair is dropped later); in a*v + c it must not be."""
+    # (Pyomo: an optional extra)
     from pyomo.core.expr.numvalue import native_numeric_types
 
     if body.__class__ in native_numeric_types:
@@ -254,6 +266,7 @@ def _single_variable(body):
         return body, 1.0, 0.0
     if not body.is_potentially_variable():
         return None
+    # (Pyomo: an optional extra)
     import pyomo.core.expr.numeric_expr as N
 
     if isinstance(body, N.MonomialTermExpression):
@@ -264,6 +277,7 @@ def _single_variable(body):
     # a*v + c has at most two terms; anything larger is an expression, not a variable side
     if not isinstance(body, (N.SumExpression, N.NegationExpression)) or body.nargs() > 2:
         return None
+    # (Pyomo: an optional extra)
     from pyomo.repn.standard_repn import generate_standard_repn
 
     repn = generate_standard_repn(body, compute_values=True, quadratic=False)
@@ -292,6 +306,7 @@ class _Pair:
 
 
 def _value(e):
+    # (Pyomo: an optional extra)
     from pyomo.core.expr.numvalue import value
 
     return None if e is None else float(value(e))
@@ -311,6 +326,7 @@ class PyomoMCP:
     """
 
     def __init__(self, model, *, cse: bool | None = None):
+        # (Pyomo: an optional extra)
         from pyomo.core import Block, Constraint
         from pyomo.mpec import Complementarity
 
@@ -354,6 +370,7 @@ class PyomoMCP:
     # -- structure ----------------------------------------------------------------
     @staticmethod
     def _structure(comps, cons):
+        # (Pyomo: an optional extra)
         from pyomo.core import Var
 
         fixed = []
@@ -363,6 +380,7 @@ class PyomoMCP:
                 frozenset(fixed))
 
     def stale(self) -> bool:
+        # (Pyomo: an optional extra)
         from pyomo.core import Block, Constraint
         from pyomo.mpec import Complementarity
 
@@ -458,8 +476,6 @@ class PyomoMCP:
         return self._sig(row)
 
     def _match_equations(self, eqs, eq_sigs, pairs, claimed):
-        from .._matching import matching
-
         free, free_index = [], {}
         seen_vars = set()
         for _, leaves in [p.signature for p in pairs] + eq_sigs:
@@ -513,8 +529,6 @@ class PyomoMCP:
 
     # -- compilation --------------------------------------------------------------
     def _compile(self):
-        from ._casadi_eval import CompiledFJ
-
         column = {id(p.var if p.var is not None else p): j for j, p in enumerate(self.pairs)}
         rows = []
         for p in self.pairs:
@@ -530,6 +544,7 @@ class PyomoMCP:
 
     # -- per-solve data -----------------------------------------------------------
     def parameter_values(self) -> np.ndarray:
+        # (Pyomo: an optional extra)
         from pyomo.core.expr.numvalue import value
 
         return np.array([float(value(d)) for d in self._data], dtype=float)
@@ -577,8 +592,6 @@ class PyomoMCP:
 
     def mcp(self, x0=None):
         """The MCP with the model's current data (no recompilation)."""
-        from .. import MCP
-
         self._fj.set_parameters(self.parameter_values())
         lb, ub = self.bounds()
         if x0 is None:
@@ -631,10 +644,9 @@ def solve_pyomo(model, options=None, *, load_solutions: bool = True, recompile: 
 # SolverFactory('compass_sparse')
 # --------------------------------------------------------------------------- #
 def _termination(status):
+    # (Pyomo: an optional extra)
     from pyomo.opt import SolverStatus
     from pyomo.opt import TerminationCondition as TC
-
-    from .. import Status
 
     table = {
         Status.SOLVED: (SolverStatus.ok, TC.optimal),
@@ -683,8 +695,6 @@ class CompassSparseSolver:
         return True
 
     def version(self):
-        from .. import __version__
-
         return tuple(int(t) for t in __version__.split(".")[:3])
 
     def warm_start_capable(self) -> bool:
@@ -698,6 +708,7 @@ class CompassSparseSolver:
 
     def solve(self, model, *, tee: bool = False, load_solutions: bool = True, options=None,
               timelimit=None, recompile: bool = False, **kwds):
+        # (Pyomo: an optional extra)
         from pyomo.opt import SolverResults
 
         opts = {str(k).lower(): v for k, v in self.options.items()}
@@ -714,8 +725,6 @@ class CompassSparseSolver:
         t0 = time.perf_counter()
         handler = None
         if tee:
-            import sys
-
             handler = logging.StreamHandler(sys.stdout)
             handler.setFormatter(logging.Formatter("%(message)s"))
             logger.addHandler(handler)
@@ -750,13 +759,12 @@ class CompassSparseSolver:
 
 
 def solve_mcp_from(pm: PyomoMCP, options):
-    from .. import solve_mcp
-
     return solve_mcp(pm.mcp(), options=options)
 
 
 def _register() -> None:
     try:
+        # (Pyomo: an optional extra)
         from pyomo.opt import SolverFactory
     except Exception:  # pragma: no cover - Pyomo absent: nothing to register
         return

@@ -29,7 +29,7 @@ class DeclarationError(ModelError):
     """A block, a variable or a datum is declared in a way that cannot define a model."""
 
 
-def _labels(index):
+def labels_of(index):
     if index is None:
         return None
     labels = [str(v) for v in index]
@@ -147,33 +147,33 @@ class _Block:
             self.nests[name] = (None, self._data(sigma, "elasticity of " + name), tree)
         for name, spec in (nests or {}).items():
             if name in self.nests:
-                raise DeclarationError(f"{self._where()}: nest {name!r} is declared twice")
+                raise DeclarationError(f"{self.location()}: nest {name!r} is declared twice")
             try:
                 parent, sigma = spec
             except (TypeError, ValueError):
-                raise DeclarationError(f"{self._where()}: nest {name!r} must be given as "
+                raise DeclarationError(f"{self.location()}: nest {name!r} must be given as "
                                        "(parent name, elasticity)") from None
             if parent not in self.nests:
-                raise DeclarationError(f"{self._where()}: nest {name!r} has unknown parent "
+                raise DeclarationError(f"{self.location()}: nest {name!r} has unknown parent "
                                        f"{parent!r} (declare parents first)")
             self.nests[name] = (parent, self._data(sigma, "elasticity of " + name),
                                 self.nests[parent][2])
         self.netputs = []
 
-    def _where(self):
+    def location(self):
         return f"{self.WHAT} block of {self.owner!r}"
 
     def _data(self, value, what, allow_variables=False):
         e = as_expr(value)
         if not allow_variables and e.has_variables():
-            raise DeclarationError(f"{self._where()}: the {what} cannot depend on variables")
+            raise DeclarationError(f"{self.location()}: the {what} cannot depend on variables")
         if e.size not in (1, self.n):
-            raise DeclarationError(f"{self._where()}: the {what} has {e.size} values; "
+            raise DeclarationError(f"{self.location()}: the {what} has {e.size} values; "
                                    f"expected 1 or {self.n} (one per element)")
         return e
 
     def _netput(self, tree, commodity, quantity, nest, price, taxes):
-        where = self._where()
+        where = self.location()
         c = _as_ref(self.model, commodity, "commodity", where)
         if nest is None:
             nest = next(k for k, v in self.nests.items() if v[0] is None and v[2] == tree)
@@ -308,7 +308,7 @@ class Demand(_Block):
     def endowment(self, commodity, quantity):
         """Endowment of ``commodity`` (negative for a net demand); it may depend on
         auxiliary variables, e.g. ``120 - 100 * U``."""
-        where = self._where()
+        where = self.location()
         c = _as_ref(self.model, commodity, "commodity", where)
         pairs = _pairing(self.n, c.size, quantity, where, c)
         q = _flat(_values(quantity), pairs, where, f"endowment of {c!r}", allow_variables=True)

@@ -104,11 +104,11 @@ class Equations:
         """Fill the nest prices of x bottom-up from the other variables (in place)."""
         st = self.st
         for _ in range(st.max_depth + 1):
-            lc = self._child_logs(x, self._leaf_prices(x, Context(x, self.params, False))[0])
+            lc = self._child_logs(x, self.leaf_prices(x, Context(x, self.params, False))[0])
             x[st.node_col] = np.exp(self._nest_prices(lc))
         return x
 
-    def _leaf_prices(self, x, ctx):
+    def leaf_prices(self, x, ctx):
         st = self.st
         t, tt = self._taxes(ctx)
         T = np.bincount(st.tax_leaf, weights=t, minlength=st.n_leaves) if t.size else 0.0
@@ -130,7 +130,7 @@ class Equations:
         st = self.st
         ctx = Context(x, self.params, deriv)
         F = np.zeros(self.n)
-        ell, (t, tt, mult, p) = self._leaf_prices(x, ctx)
+        ell, (t, tt, mult, p) = self.leaf_prices(x, ctx)
         lc = self._child_logs(x, ell)
         logp, w = self._nest_prices(lc, shares=True)
         P = np.exp(logp)

@@ -19,7 +19,7 @@ import numpy as np
 
 import compass_sparse as cs
 
-from .declare import DeclarationError, Demand, Parameter, Production, VarRef, VarSet, _labels
+from .declare import DeclarationError, Demand, Parameter, Production, VarRef, VarSet, labels_of
 from .equations import Equations
 from .expr import Context, as_expr
 from .report import BenchmarkCheck, Solution
@@ -56,7 +56,7 @@ class Model:
     def _declare(self, name, kind, index, start, lower, upper):
         if any(s.name == name for s in self.sets) or name in self.params:
             raise DeclarationError(f"the name {name!r} is already used in this model")
-        labels = _labels(index)
+        labels = labels_of(index)
         vs = VarSet(self, name, kind, labels, self.ncols)
         self.sets.append(vs)
         self.ncols += vs.n
@@ -94,7 +94,7 @@ class Model:
         constraints like a number."""
         if name in self.params or any(s.name == name for s in self.sets):
             raise DeclarationError(f"the name {name!r} is already used in this model")
-        p = Parameter(self, name, value, _labels(index))
+        p = Parameter(self, name, value, labels_of(index))
         self._param_objs[name] = p
         return p
 

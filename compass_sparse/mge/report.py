@@ -48,7 +48,7 @@ class _Point:
 
     def _leaf_quantities(self):
         ctx = Context(self.x, self.model.params, False)
-        ell, _ = self.eq._leaf_prices(self.x, ctx)
+        ell, _ = self.eq.leaf_prices(self.x, ctx)
         st = self.st
         pin = np.maximum(self.x[st.node_col], 1e-300)
         logx = (np.log(st.leaf_q) + st.leaf_a * np.log(np.maximum(ell, 1e-300))

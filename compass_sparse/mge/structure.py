@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from .declare import DeclarationError
-from .expr import concat, triplets
+from .expr import Context, concat, triplets
 
 SIGMA_INF = 1e4
 """Elasticity used for σ = inf (perfect substitutes) and τ = inf (perfect transformation)."""
@@ -69,7 +69,7 @@ class Structure:
                 if bad.size:
                     i = bad[0]
                     raise DeclarationError(
-                        f"{blk._where()[:-len(repr(blk.owner))]}{blk.owner.names[own[i]]}: "
+                        f"{blk.location()[:-len(repr(blk.owner))]}{blk.owner.names[own[i]]}: "
                         f"negative reference quantity {q[i]:g} of "
                         f"{np_['comm'].names[com[i]]} (a {np_['tree']}); a netput quantity "
                         "must be >= 0 (use an output for a negative input)")
@@ -158,7 +158,7 @@ class Structure:
                 pos = self.node_pos[sel]
                 s = np.broadcast_to(sigma.value(params), (blk.n,))[pos]
                 if np.any(s < 0) or np.any(np.isnan(s)):
-                    raise DeclarationError(f"{blk._where()}: elasticity of nest {name!r} "
+                    raise DeclarationError(f"{blk.location()}: elasticity of nest {name!r} "
                                            "must be >= 0")
                 s = np.minimum(s, SIGMA_INF)
                 rho[sel] = 1.0 + s if tr == "output" else 1.0 - s
@@ -345,7 +345,6 @@ def _lookup(ids, block, nest, pos):
 
 def structural_triplets(expr, x, params):
     """The (rows, cols) of an expression's Jacobian (values ignored)."""
-    from .expr import Context
     _, t = expr.evaluate(Context(x, params))
     r, c, _ = triplets(t)
     return r, c

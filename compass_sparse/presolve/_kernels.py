@@ -215,7 +215,10 @@ def simple_reductions_screen(er, ec, ev, const, col_ptr, row_ptr, row_order, lb,
     pairs, by the keys of :func:`duplicate_row_keys`, computed here too) count as "may
     act".  Column
     singletons are replayed exactly (their order, the marks their removals leave for the
-    passes after them in the round), since they are removed.  A 0 is therefore exact."""
+    passes after them in the round), since they are removed.  A 0 is therefore exact.
+
+    A compiled kernel whose length is the algorithm (every simple reduction's screen in
+    one pass over the rows): exempt from the package's limit of 100 lines per function."""
     n = f.shape[0]
     nnz = er.shape[0]
     gone_col = np.empty(n, dtype=np.bool_)

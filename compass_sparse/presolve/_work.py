@@ -30,7 +30,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._eval_kernels import csc_same_pattern
+from ..linalg._csc_kernels import csc_same_pattern
 from . import _kernels
 from ._kernels import recount as _recount
 from .postsolve import FixVariables, PostsolveStack, Record
@@ -75,7 +75,7 @@ def _index_arrays(J0):
     return out
 
 
-def _index(problem, J0):
+def pattern_index(problem, J0):
     """The index arrays of J0's structure (:func:`_index_arrays`), made once per Jacobian
     pattern when J0 is stored on the problem's pattern (a loop of solves of one model
     made them in every solve: an argsort and five array passes over the entries)."""
@@ -83,7 +83,10 @@ def _index(problem, J0):
     P = ev.pattern_ref if ev is not None else None
     if P is None or not csc_same_pattern(J0.indptr, J0.indices, P.indptr, P.indices):
         return _index_arrays(J0)
-    return ev.for_pattern("presolve_index", lambda: _index_arrays(P))
+    cache = ev.pattern_cache
+    if cache.presolve_index is None:
+        cache.presolve_index = _index_arrays(P)
+    return cache.presolve_index
 
 
 class Workspace:
@@ -105,7 +108,7 @@ class Workspace:
         self.opts = options
         self.n = n
         self.warnings = warnings
-        self.ec, self.er, self.col_ptr, self.row_order, self.row_ptr = _index(P, J0)
+        self.ec, self.er, self.col_ptr, self.row_order, self.row_ptr = pattern_index(P, J0)
         self.ev = J0.data.astype(float).copy()
         self.const = const_mask.copy()
         self.lb = P.lb.copy()

@@ -20,12 +20,12 @@ from typing import Callable
 
 import numpy as np
 
-from ..evaluation import all_finite
+from ..box import all_finite
 from ..merit import natural_residual
 from . import (column_singletons, duplicate_rows, empty_columns, empty_rows, fixed, forcing,
                range_fixing, singleton_rows)
 from ._kernels import simple_reductions_screen
-from ._work import InfeasibilityDiagnostic, PresolveInfeasible, Workspace, _index
+from ._work import InfeasibilityDiagnostic, PresolveInfeasible, Workspace, pattern_index
 from .linear import declared_constant_mask, empty_row_status, sample_evaluations
 from .options import PresolveOptions
 from .postsolve import PostsolveStack
@@ -268,8 +268,8 @@ def _simple_reductions_only(problem, opts, J0, const):
     f = np.asarray(problem.F(base), dtype=np.float64)
     if not all_finite(f):
         return None
-    ec, er, col_ptr, row_order, row_ptr = _index(problem, J0)
-    w1, w2 = duplicate_rows._weights(problem.n)
+    ec, er, col_ptr, row_order, row_ptr = pattern_index(problem, J0)
+    w1, w2 = duplicate_rows.hash_weights(problem.n)
     code, rounds, singletons = simple_reductions_screen(
         er, ec, J0.data[:er.size].astype(np.float64), const, col_ptr, row_ptr, row_order, lb,
         ub, base, f, float(opts.zero_tolerance), float(opts.feasibility_tolerance),
@@ -291,7 +291,7 @@ def _structural_report(problem) -> StructuralReport:
     variables: it is reused only by a problem with the same name lists (copies of one
     problem share them; two problems on one evaluator may not)."""
     keep = np.packbits(problem.lb < problem.ub).tobytes()
-    store = problem.evaluator.for_pattern("structural_reports", dict)
+    store = problem.evaluator.pattern_cache.structural_reports
     hit = store.get(keep)
     if hit is not None and hit[0] is problem.var_names and hit[1] is problem.eqn_names:
         return hit[2]

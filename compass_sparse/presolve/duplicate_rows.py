@@ -48,7 +48,7 @@ seed), drawn once per order (a generator and its two draws cost a small model's 
 much as the rest of it: 35 of 180 us at n = 102, measured)."""
 
 
-def _weights(n):
+def hash_weights(n):
     w = _WEIGHTS.get(n)
     if w is None:
         rng = np.random.default_rng(12345)
@@ -66,7 +66,7 @@ def run(ws) -> None:
     rows = linear_rows_with(ws.linear, ws.row_nnz, ws.touched_row, 1, n)
     if rows.size < 2:
         return
-    w1, w2 = _weights(n)
+    w1, w2 = hash_weights(n)
     cand = np.zeros(n, dtype=bool)
     cand[rows] = True
     h1 = np.zeros(n)

@@ -9,7 +9,7 @@ selection (``take``) of the original pattern entries, in canonical CSC order.  N
 original labels, so messages about the reduced problem name the user's rows and variables;
 declared-constant entries stay declared, so a second presolve sees the same linear
 structure.  Its evaluator is a restriction of the original problem's
-(:meth:`~compass_sparse.evaluation.Evaluator.restrict`): every call of the user's F is
+(:meth:`~compass_sparse.problem.evaluator.Evaluator.restrict`): every call of the user's F is
 counted once, in the original problem's counters.
 """
 from __future__ import annotations
@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from ..problem import MCP
+from ..problem.mcp import MCP
 
 __all__ = ["build_reduced"]
 

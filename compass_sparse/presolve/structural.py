@@ -15,8 +15,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .._matching import matching
-from ..direct_step import reduced_system
+from ..linalg.matching import matching
+from ..linalg.csc import reduced_system
 
 __all__ = ["StructuralReport", "structural_rank_check"]
 

@@ -201,7 +201,7 @@ class PointStatusTable(SphinxDirective):
 
 class StepCodeTable(SphinxDirective):
     def run(self):
-        from compass_sparse.path import LinearCode
+        from compass_sparse.path.outcome import LinearCode
 
         words = {
             "SOLVED": "the path reached the Newton point of the linearization",

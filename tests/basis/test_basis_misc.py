@@ -9,6 +9,8 @@ from compass_sparse.basis import (KIND_DENSE, KIND_M, KIND_UNIT, BasisManager,
                                   BasisOptions, BasisStats, FactorReport, UpdateStatus)
 from compass_sparse.exceptions import CompassError, OptionError, ProblemError, ShapeError
 
+pytestmark = pytest.mark.usefixtures("lu_choice")
+
 TOL = 1e-9
 
 

@@ -5,9 +5,11 @@ import pytest
 from hypothesis import given, settings, HealthCheck
 from hypothesis import strategies as st
 
-from basis_helpers import (check_solves, column_vec, dense_B, dominant_dense_column, dominant_matrix,
-                           family_move, family_start, rel_err)
+from basis_helpers import (check_solves, column_vec, dense_B, dominant_dense_column,
+                           dominant_matrix, family_move, family_start, rel_err)
 from compass_sparse.basis import (KIND_DENSE, BasisManager, BasisOptions, UpdateStatus)
+
+pytestmark = pytest.mark.usefixtures("lu_choice")
 
 TOL = 1e-9
 

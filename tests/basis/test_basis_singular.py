@@ -4,10 +4,12 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from basis_helpers import (check_solves, column_vec, dense_B, dominant_dense_column,
+from basis_helpers import (check_solves, dense_B, dominant_dense_column,
                            dominant_matrix, family_start)
 from compass_sparse.basis import (KIND_DENSE, KIND_M, KIND_UNIT, BasisManager,
                                   BasisOptions, SolveRepairedBasis, UpdateStatus)
+
+pytestmark = pytest.mark.usefixtures("lu_choice")
 
 TOL = 1e-9
 

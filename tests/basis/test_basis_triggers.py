@@ -1,10 +1,13 @@
 """Each refactorization trigger fires in a constructed scenario; solves agree after."""
 
 import numpy as np
+import pytest
 
 from basis_helpers import (check_solves, dominant_dense_column, dominant_matrix,
                            family_move, family_start)
 from compass_sparse.basis import BasisManager, BasisOptions, UpdateStatus
+
+pytestmark = pytest.mark.usefixtures("lu_choice")
 
 TOL = 1e-9
 
@@ -63,7 +66,7 @@ def test_stability_trigger_on_damaged_factor():
         s, col = family_move(bm, rng, 50, r_index=0)
         bm.ftran_column(*col)
         N = bm.n + bm.num_updates
-        bm._Ud[:N] *= 1.0 + 1e-6 * rng.standard_normal(N)   # damage the factor
+        bm.factors.Ud[:N] *= 1.0 + 1e-6 * rng.standard_normal(N)   # damage the factor
         st = bm.replace(s, *col)
         assert st == UpdateStatus.REFACTORED
         fired += 1
@@ -86,8 +89,8 @@ def test_residual_trigger_on_damaged_factor():
         s, col = family_move(bm, rng, 50, r_index=0)
         bm.replace(s, *col)
     assert bm.num_updates > 0
-    bm._Lx *= 1.01          # damage L: solves become wrong
-    bm._Ud[: bm.n] *= 1.01  # (also when L is empty)
+    bm.factors.Lx *= 1.01          # damage L: solves become wrong
+    bm.factors.Ud[: bm.n] *= 1.01  # (also when L is empty)
     before = bm.stats.refactor_by_residual
     check_solves(bm, M, r, rng, TOL)   # the check catches it and refactors
     assert bm.stats.refactor_by_residual == before + 1
@@ -96,7 +99,7 @@ def test_residual_trigger_on_damaged_factor():
 
 def test_residual_check_fresh_factor_damage():
     bm, M, r, rng = setup(30, 7, residual_check_frequency=1)
-    bm._Ud[: bm.n] *= 1.001
+    bm.factors.Ud[: bm.n] *= 1.001
     check_solves(bm, M, r, rng, TOL)
     assert bm.stats.refactor_by_residual == 1
 
@@ -105,7 +108,7 @@ def test_ftran_column_checked_as_well():
     bm, M, r, rng = setup(30, 8, residual_check_frequency=1, stability_tolerance=1.0)
     s, col = family_move(bm, rng, 30, r_index=0)
     bm.replace(s, *col)
-    bm._Ud[: bm.n] *= 1.01
+    bm.factors.Ud[: bm.n] *= 1.01
     s, col = family_move(bm, rng, 30, r_index=0)
     bm.ftran_column(*col)
     assert bm.stats.refactor_by_residual == 1

@@ -12,6 +12,8 @@ from compass_sparse.basis import (KIND_DENSE, KIND_M, BasisManager, BasisOptions
                                   UpdateStatus)
 from compass_sparse.basis.krylov import preconditioned_gmres
 
+pytestmark = pytest.mark.usefixtures("lu_choice")
+
 
 def _moved(M, rng, size):
     """M with every stored value moved by a relative amount up to ``size`` (same pattern)."""

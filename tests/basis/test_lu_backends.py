@@ -12,6 +12,8 @@ from compass_sparse.basis.backends import (FactorBudget, FactorBudgetError, Supe
                                            UmfpackBackend, make_backend)
 from compass_sparse.exceptions import OptionError
 
+pytestmark = pytest.mark.usefixtures("lu_choice")
+
 
 def badly_scaled_sparse(n, rng, density=0.08):
     """Random sparse regular matrix whose rows span 1e-4 .. 1e4 (row scaling matters)."""
@@ -273,7 +275,8 @@ def test_umfpack_element_growth_on_banded_p_matrix_basis_does_not_end_path_with_
     from compass_sparse import Options
     from compass_sparse.basis.backends import UMFPACK_CHECK_TOL, factor_backward_error
     from compass_sparse.basis.dense import DenseBasis
-    from compass_sparse.path import LinearCode, PivotalPath
+    from compass_sparse.path.outcome import LinearCode
+    from compass_sparse.path.pivotal import PivotalPath
 
     monkeypatch.setenv("COMPASS_SPARSE_LU", "umfpack")
     blocks = []

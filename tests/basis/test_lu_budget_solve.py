@@ -7,7 +7,9 @@ import pytest
 import compass_sparse as cs
 from compass_sparse.basis import backends
 from compass_sparse.generators import structured_quadratic
-from compass_sparse.result import Status
+from compass_sparse.status import Status
+
+pytestmark = pytest.mark.usefixtures("lu_choice")
 
 
 @pytest.fixture

@@ -9,6 +9,8 @@ from scipy.sparse.linalg import splu
 from compass_sparse.basis import ordering as ordmod
 from compass_sparse.basis.backends import _permute, solve_sparse
 
+pytestmark = pytest.mark.usefixtures("lu_choice")
+
 
 def _grid_with_shuffled_rows(k, seed):
     """A 2-D grid Laplacian-like matrix (nested dissection pays) with some rows swapped

@@ -1,0 +1,135 @@
+"""Compiled inner loops of the pivotal path: the two-pass ratio test and the projection
+of basic values onto their bounds, with each slot's bounds derived from its variable kind
+(z: [l, u]; w, v: [0, inf); fixed-variable slack: free; t: [t_lower, 1]; artificial:
+towards 0 from the side it is on); and the linearization of a major iteration
+(:func:`newton_linearization`, :mod:`compass_sparse.path.linearize`).
+
+t's lower bound is the caller's (compass_sparse.path explains it): 0, or -inf while a path
+from the current point that has not been above t = 0 is allowed below it.
+
+Ties: t leaving at either bound wins every tie (at 1 the linear problem is solved, at its
+lower bound the path ends), then artificials, then the largest |rate|.
+"""
+import numpy as np
+
+from .._jit import njit
+from ..linalg._csc_kernels import csc_matvec
+
+VAR_Z, VAR_W, VAR_V, VAR_A, VAR_T, VAR_S = 0, 1, 2, 3, 4, 5
+
+T_PROGRESS = 1e-9
+"""A path has been above t = 0 once t exceeded this: smaller values are the rounding of
+zero steps at a degenerate start vertex, not progress."""
+
+BELOW_ZERO_PIVOTS = 8
+"""A path whose bound t >= 0 was lifted (t blocked at 0 before the path had been above 0)
+ends ("t not above 0") when it has not got above t = 0 within this many pivots from
+then.  Leaving a degenerate start vertex through t < 0 takes a few pivots (PATH's path
+on thesis family 2, n = 10, seed 1: 7 in all), and on the thesis families nearly all
+lifted paths that do not come back within 8 never do (without a limit they ran on to the
+cycle limit); 20 saved two more restarts there but cost 12 more pivots on each of ~480
+failing paths (benchmarks/small.md, "Degenerate ties at the start vertex")."""
+
+ARTIFICIAL_ZERO = 1e-12
+"""An artificial within this of 0 (absolute) is at 0 and on its nonnegative side: it is
+placed at exactly 0, and rounding of either sign must not decide which way it may move
+(the two path implementations, whose rounding differs, would take different pivots)."""
+
+
+@njit(cache=True, inline="always")
+def _slot_bounds(kind, idx, val, lb, ub, t_lower):
+    if kind == VAR_Z:
+        return lb[idx], ub[idx]
+    if kind == VAR_S:
+        return -np.inf, np.inf
+    if kind == VAR_T:
+        return t_lower, 1.0
+    if kind == VAR_A:
+        if val >= -ARTIFICIAL_ZERO:
+            return 0.0, np.inf
+        return -np.inf, 0.0
+    return 0.0, np.inf
+
+
+@njit(cache=True, inline="always")
+def _room(kind, idx, val, r, lb, ub, t_lower):
+    """(room to the bound the slot moves towards at rate r, that bound)."""
+    lo, hi = _slot_bounds(kind, idx, val, lb, ub, t_lower)
+    if r > 0.0:
+        return max(hi - val, 0.0), hi
+    return max(val - lo, 0.0), lo
+
+
+@njit(cache=True)
+def ratio_test(sk, si, xb, rate, lb, ub, piv_tol, tol, t_lower):
+    """Harris two-pass ratio test.  Returns (slot, theta, leaves_at_upper) or (-1, inf, 0).
+
+    Pass 1: theta1 = min over blocking slots of (room + tol*max(1,|bound|)) / |rate|.
+    Pass 2: among slots with room/|rate| <= theta1 pick t at a bound (priority 2), then
+    artificials (priority 1), then the largest |rate|."""
+    n = sk.shape[0]
+    theta1 = np.inf
+    for k in range(n):
+        r = rate[k]
+        if -piv_tol <= r <= piv_tol:
+            continue
+        room, bnd = _room(sk[k], si[k], xb[k], r, lb, ub, t_lower)
+        if np.isfinite(bnd):
+            theta1 = min(theta1, (room + tol * max(1.0, abs(bnd))) / abs(r))
+    if not np.isfinite(theta1):
+        return -1, np.inf, 0
+    best = -1
+    best_pri = -1
+    best_piv = -1.0
+    best_ratio = np.inf
+    best_up = 0
+    for k in range(n):
+        r = rate[k]
+        if -piv_tol <= r <= piv_tol:
+            continue
+        room, bnd = _room(sk[k], si[k], xb[k], r, lb, ub, t_lower)
+        if not np.isfinite(bnd) or room / abs(r) > theta1:
+            continue
+        kind = sk[k]
+        pri = 2 if kind == VAR_T else (1 if kind == VAR_A else 0)
+        if pri > best_pri or (pri == best_pri and abs(r) > best_piv):
+            best, best_pri, best_piv = k, pri, abs(r)
+            best_ratio = room / abs(r)
+            best_up = 1 if r > 0.0 else 0
+    return best, best_ratio, best_up
+
+
+@njit(cache=True)
+def project_slots(sk, si, xb, lb, ub, t_lower):
+    """Clip basic values to their bounds (rounding: thesis §4.2.2)."""
+    for k in range(sk.shape[0]):
+        lo, hi = _slot_bounds(sk[k], si[k], xb[k], lb, ub, t_lower)
+        v = xb[k]
+        if v < lo:
+            xb[k] = lo
+        elif v > hi:
+            xb[k] = hi
+
+
+@njit(cache=True)
+def newton_linearization(jdata, pos_j, scatter, pos_d, eps, indptr, indices, z, f, x,
+                         mdata, q, r):
+    """The linear MCP of a major iteration in one pass (nms.Linearizer.linearize):
+    mdata = the entries of M = J + eps I on M's pattern (``scatter``: J's entry k at
+    position pos_j[k], the others 0; else J's entries in M's order), q = f - M z (M z
+    summed column by column, as :func:`csc_matvec`) and r = f + x - z: the bits of the
+    array formulas."""
+    if scatter:
+        mdata[:] = 0.0
+        for k in range(jdata.shape[0]):
+            mdata[pos_j[k]] = jdata[k]
+    else:
+        for k in range(jdata.shape[0]):
+            mdata[k] = jdata[k]
+    if eps != 0.0:
+        for k in range(pos_d.shape[0]):
+            mdata[pos_d[k]] += eps
+    csc_matvec(indptr, indices, mdata, z, q)
+    for i in range(q.shape[0]):
+        q[i] = f[i] - q[i]
+        r[i] = f[i] + x[i] - z[i]

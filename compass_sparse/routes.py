@@ -1,0 +1,142 @@
+"""Routes: which implementation of each pass runs, chosen once per solve.
+
+Several pieces of the method have two implementations that compute the same thing: a
+compiled loop and its Python reference (the stabilized Newton method's bookkeeping, the
+crash, the homotopy's path tracker), and the bases a pivotal path can run on (the compiled
+dense engine, the dense reference basis, the sparse basis manager).  Which one runs is
+decided here and only here, from the problem's size and the options -- never from the
+log level and never from the clock -- and recorded in ``Result.routes``:
+
+``kernels``   "compiled", or "interpreted" for the first small solves of a process before
+              numba is loaded (the cold start: :func:`kernel_route`, decided when the solve
+              starts and held to its end);
+``path``      "dense engine" (n <= ``DENSE_ENGINE_MAX_N``, option ``path_basis = "auto"``),
+              "dense basis" (``path_basis = "dense"``, n <= ``DENSE_BASIS_MAX_N``) or
+              "sparse basis" (every other case);
+``nms``       "compiled" (``engine = "auto"``, compiled kernels, the problem left unscaled
+              by the scaling pass, n <= ``COMPILED_NMS_MAX_N``) or "python";
+``crash``     "compiled" (``engine = "auto"``, every block dense: n <= ``DENSE_SOLVE_MAX_N``)
+              or "python";
+``homotopy``  "compiled" (``engine = "auto"``, compiled kernels, n <= ``HOMOTOPY_DENSE_MAX_N``,
+              and numba binds LAPACK's getrf) or "python".
+
+``engine = "reference"`` also has a small problem's path (n < ``DIRECT_MIN_N``, on the
+dense engine) compute its start and its dense direct step in Python, where the automatic
+route makes them in one compiled call with the linearization
+(:meth:`compass_sparse.nms.newton.NewtonStep.dense_lane`).
+
+The compiled loops and their Python references give the same points bit for bit (the
+tests hold them against each other in tests/routes/); the three bases take the same
+pivots up to rounding.  Verbosity only decides what is written
+to the log: the compiled engines report their pivots and major iterations to it from
+record buffers they fill (see :mod:`compass_sparse.path.dense_engine` and
+:mod:`compass_sparse.nms`), so a solve logs what a silent solve computes.
+
+To add a route: give the pass both implementations behind one entry point that takes the
+choice as an argument, add the field and its rule to :class:`Routes` and
+:func:`choose_routes`, and a test that runs both on the same problems.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+from . import _jit
+from .basis.backends import DENSE_SOLVE_MAX_N
+from .basis.dense import DenseBasis
+from .basis.manager import BasisManager
+from .basis.types import BasisOptions
+from .homotopy.tracker import compiled_tracker_available
+from .options import HOMOTOPY_DENSE_MAX_N, Options
+from .path.dense_engine import DensePathEngine
+
+__all__ = ["COMPILED_NMS_MAX_N", "DENSE_BASIS_MAX_N", "DENSE_ENGINE_MAX_N",
+           "UPDATE_LIMIT_FLOOR", "Routes", "basis_factory", "choose_routes", "kernel_route"]
+
+DENSE_ENGINE_MAX_N = 500
+"""Largest n whose paths run on the compiled dense engine (above: the sparse manager)."""
+
+DENSE_BASIS_MAX_N = 300
+"""Largest n whose paths run on the dense reference basis with ``path_basis = "dense"``."""
+
+COMPILED_NMS_MAX_N = 5000
+"""Largest order whose major iterations run in compiled calls.  Their work area holds 28
+vectors of length n (224 MB at n = 1e6), and above a few thousand variables the ~50 us of
+Python a major iteration saves is a vanishing share of its factorizations."""
+
+UPDATE_LIMIT_FLOOR = 50
+"""factorization_update_limit is capped at max(n, this) (the bases preallocate the updates)."""
+
+
+@dataclass(frozen=True)
+class Routes:
+    """The routes of one solve (see the module docstring for each field's values)."""
+
+    kernels: str = "compiled"
+    path: str = "dense engine"
+    nms: str = "compiled"
+    crash: str = "compiled"
+    homotopy: str = "compiled"
+
+    def as_dict(self) -> dict:
+        return asdict(self)
+
+
+class kernel_route:
+    """The solve's kernel route (:mod:`compass_sparse._jit`, "Cold start"), entered when a
+    solve starts and left when it ends: ``with kernel_route(n) as kernels`` gives
+    "interpreted" or "compiled".  A solve inside a solve keeps the outer one's route."""
+
+    def __init__(self, n: int):
+        self._mode = _jit.kernels_interpreted(
+            n <= _jit.INTERPRET_MAX_N and _jit.may_interpret())
+
+    def __enter__(self) -> str:
+        return "interpreted" if self._mode.__enter__().interpreted else "compiled"
+
+    def __exit__(self, *exc):
+        return self._mode.__exit__(*exc)
+
+
+def path_route(n: int, options: Options) -> str:
+    """The basis of the pivotal paths of a problem of order n."""
+    if options.path_basis == "auto" and n <= DENSE_ENGINE_MAX_N:
+        return "dense engine"
+    if options.path_basis == "dense" and n <= DENSE_BASIS_MAX_N:
+        return "dense basis"
+    return "sparse basis"
+
+
+def choose_routes(n: int, options: Options, *, kernels: str = "compiled",
+                  scaled: bool = False) -> Routes:
+    """The routes of a solve of a problem of order n (after the preprocessor); ``scaled``:
+    the scaling pass scaled it (the compiled major iterations judge points unscaled)."""
+    compiled = options.engine == "auto"
+    running = compiled and kernels == "compiled"
+    return Routes(
+        kernels=kernels,
+        path=path_route(n, options),
+        nms="compiled" if running and not scaled and 0 < n <= COMPILED_NMS_MAX_N else "python",
+        crash="compiled" if compiled and 0 < n <= DENSE_SOLVE_MAX_N else "python",
+        homotopy="compiled" if (running and n <= HOMOTOPY_DENSE_MAX_N
+                                and compiled_tracker_available()) else "python")
+
+
+def basis_factory(route: str, options: Options, deadline=None):
+    """``make(M)``: the basis of the pivotal paths of a linear MCP with matrix M on the path
+    route ``route``; the sparse manager gets the solve's deadline, so that a factorization
+    that cannot finish in time is not started (TIME_LIMIT)."""
+    def make(M):
+        n = M.shape[0]
+        # Both bases preallocate room for their updates; past max(n, 50) updates applying
+        # them costs more than a fresh factorization, so a larger limit is capped there.
+        limit = min(options.factorization_update_limit, max(n, UPDATE_LIMIT_FLOOR))
+        if route == "dense engine":
+            return DensePathEngine(M, options, update_limit=limit)
+        if route == "dense basis":
+            return DenseBasis(M)
+        return BasisManager(M, options=BasisOptions(update_limit=limit, deadline=deadline,
+                                                    backend=options.lu_backend,
+                                                    ordering=options.lu_ordering,
+                                                    reuse_factors=options.factor_reuse))
+
+    return make

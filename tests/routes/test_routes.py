@@ -1,0 +1,65 @@
+"""The routes of a solve (compass_sparse.routes): chosen once, from the problem's size and
+the options, never from the log level; recorded in Result.routes; the options engine and
+path_basis force the reference routes."""
+from __future__ import annotations
+
+import pytest
+
+import compass_sparse as cs
+import compass_sparse.generators as gen
+from compass_sparse.exceptions import OptionError
+from compass_sparse.options import HOMOTOPY_DENSE_MAX_N, Options
+from compass_sparse.routes import (COMPILED_NMS_MAX_N, DENSE_BASIS_MAX_N, DENSE_ENGINE_MAX_N,
+                                   Routes, choose_routes)
+
+FIELDS = ("kernels", "path", "nms", "crash", "homotopy")
+
+
+def test_every_solve_records_its_routes():
+    r = cs.solve_mcp(gen.thesis_family(10, 2, 4).problem)
+    assert tuple(r.routes) == FIELDS
+    assert r.routes["kernels"] in ("compiled", "interpreted")
+
+
+@pytest.mark.parametrize("verbosity", [0, 1, 2, 3])
+def test_the_log_level_does_not_choose_a_route(verbosity):
+    opt = Options(verbosity=verbosity)
+    for n in (5, 250, 400, 600, 6000):
+        assert choose_routes(n, opt) == choose_routes(n, Options())
+
+
+def test_auto_routes_by_size():
+    opt = Options()
+    assert choose_routes(DENSE_ENGINE_MAX_N, opt).path == "dense engine"
+    assert choose_routes(DENSE_ENGINE_MAX_N + 1, opt).path == "sparse basis"
+    assert choose_routes(COMPILED_NMS_MAX_N, opt).nms == "compiled"
+    assert choose_routes(COMPILED_NMS_MAX_N + 1, opt).nms == "python"
+    assert choose_routes(HOMOTOPY_DENSE_MAX_N + 1, opt).homotopy == "python"
+    # the compiled major iterations judge points unscaled
+    assert choose_routes(10, opt, scaled=True).nms == "python"
+    # interpreted kernels run the Python loops (the same arithmetic, no compilation)
+    assert choose_routes(10, opt, kernels="interpreted") == Routes(
+        kernels="interpreted", nms="python", crash="compiled", homotopy="python")
+
+
+def test_engine_reference_forces_every_python_loop():
+    routes = choose_routes(10, Options(engine="reference"))
+    assert (routes.nms, routes.crash, routes.homotopy) == ("python",) * 3
+    r = cs.solve_mcp(gen.thesis_family(10, 2, 4).problem, options={"engine": "reference"})
+    assert r.success and (r.routes["nms"], r.routes["crash"], r.routes["homotopy"]) == \
+        ("python",) * 3
+
+
+def test_path_basis_forces_the_reference_bases():
+    assert choose_routes(50, Options(path_basis="dense")).path == "dense basis"
+    assert choose_routes(DENSE_BASIS_MAX_N + 1, Options(path_basis="dense")).path == \
+        "sparse basis"
+    assert choose_routes(50, Options(path_basis="sparse")).path == "sparse basis"
+    r = cs.solve_mcp(gen.thesis_family(10, 2, 4).problem, options={"path_basis": "sparse"})
+    assert r.success and r.routes["path"] == "sparse basis"
+
+
+@pytest.mark.parametrize("field,value", [("engine", "fast"), ("path_basis", "lu")])
+def test_route_options_are_checked(field, value):
+    with pytest.raises(OptionError, match=field):
+        Options(**{field: value})
