@@ -235,7 +235,8 @@ class NMSState:
     ckpt_newton: object = None  #: the path computed at the checkpoint, when it was
     n_d: int = 0  #: consecutive d-steps
     watchdogs: int = 0  #: watchdog returns since the last checkpoint
-    stall: int = 0  #: major iterations without a 0.1% better best merit
+    stall: int = 0  #: major iterations without progress (see :func:`progress_made`)
+    progress: bool = False  #: this major iteration set a checkpoint below its reference
 
     def checkpoint(self, pt: Point, x):
         """pt becomes the current point and a checkpoint, its merit enters the memory."""
@@ -276,6 +277,20 @@ def classify_step(psi, R, large, dist, delta, d_allowed, sigma, descent_ok):
     if descent_ok():
         return "M"
     return None
+
+
+STALL_RTOL = nk.STALL_RTOL
+"""A major iteration makes progress when it lowers the best merit, or sets a checkpoint
+below the reference value in force, by this fraction."""
+
+
+def below_reference(psi, R):
+    """Whether a new checkpoint of merit psi is progress against the reference value R.
+    The stall rule counts from the reference value, as PATH's restart rule does: a
+    non-monotone excursion (d-steps above the best merit) that comes back below R is the
+    stabilization working, not a lack of progress; only iterations that neither beat the
+    best merit nor make such a checkpoint count towards a restart."""
+    return psi < R * (1.0 - STALL_RTOL)
 
 
 class NMSSolver:
@@ -534,9 +549,10 @@ class NMSSolver:
     # ------------------------------------------------------------------ one run
     def _run(self, start, opt, stall_limit=None):
         """Crash + NMS from ``start`` (a point of the box, or an evaluated Point) with
-        options opt.  Returns when stuck (for a restart or the homotopy): when the best
-        merit has not improved in ``stall_limit`` major iterations (default
-        opt.restart_stationary_limit)."""
+        options opt.  Returns when stuck (for a restart or the homotopy): when in
+        ``stall_limit`` major iterations (default opt.restart_stationary_limit) the best
+        merit has not improved and no checkpoint has beaten its reference value (see
+        :func:`below_reference`)."""
         if stall_limit is None:
             stall_limit = opt.restart_stationary_limit
         lb, ub = self.lb, self.ub
@@ -596,6 +612,7 @@ class NMSSolver:
             self._progress(st.cur)
             res, J, code = self._newton_point(st.cur, st.x, st.eps, opt)
             self.nit += 1
+            st.progress = False
             if res is None:  # J could not be evaluated at z_k
                 fb, letter = self._fallback(opt)
                 if fb is None:
@@ -628,6 +645,7 @@ class NMSSolver:
                 xN = res.x if cand.z is res.z else normal_map_at(cand.z, cand.f, lb, ub)[0]
                 st.cur, st.x = cand, xN
                 if step in ("M", "O") or cand.psi < min(st.memory):
+                    st.progress = below_reference(cand.psi, R)
                     st.checkpoint(cand, xN)
                     st.watchdogs = 0
                 st.eps *= opt.proximal_shrink_factor
@@ -648,6 +666,7 @@ class NMSSolver:
                     R = reference_value(st.memory, c.psi, c.fbn, st.fbn_start)[0]
                     found = self._watchdog_search(st.ckpt, newton, R, opt)
                 if found is not None:
+                    st.progress = below_reference(found[0].psi, R)
                     st.checkpoint(*found)
                     st.n_d = 0
                     self._log(res.code, "W", st.cur, st.eps, res)
@@ -660,9 +679,12 @@ class NMSSolver:
                     st.n_d = 0
                     st.watchdogs = 0
                     self._log(res.code, letter, st.cur, st.eps, res)
-            # Stationarity: restart when the best merit has not improved for a while.
-            if self.best.psi < st.best_seen * (1.0 - 1e-3):
+            # Stationarity: restart when neither the best merit nor the reference value
+            # has been beaten for a while (below_reference).
+            if self.best.psi < st.best_seen * (1.0 - STALL_RTOL):
                 st.best_seen = self.best.psi
+                st.stall = 0
+            elif st.progress:
                 st.stall = 0
             else:
                 st.stall += 1
