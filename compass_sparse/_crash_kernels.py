@@ -184,7 +184,7 @@ NEED_J, NEED_F, DONE = 1, 2, 3
 NOTHING, J_GIVEN, J_FAILED, F_GIVEN, F_FAILED, STOP = 0, 1, 2, 3, 4, 5
 # Stop reasons (crash.py's texts, in this order)
 (R_ITERATION_LIMIT, R_CONVERGED, R_DOMAIN_J, R_NO_CHANGE, R_SINGULAR, R_NO_PROGRESS,
- R_TIME) = range(7)
+ R_TIME, R_CLIMBED) = range(8)
 # Rows of the work area W ((CW_ROWS, n)): the current point z, F(z) and its normal-map
 # point x, the step d, the trial point and its normal-map values, the best point, the box
 # and the line search's segment and Phi.
@@ -378,6 +378,8 @@ def crash_dense(sf, si, W, prev_free, ft, indptr, indices, data, arg):
                     W[CW_BZ, i] = W[CW_Z, i]
                     W[CW_BF, i] = W[CW_F, i]
                     W[CW_BX, i] = W[CW_X, i]
+            elif si[CI_K_BEST] == 0:  # above the start, no step below it (crash.CLIMBED)
+                return _crash_done(sf, si, W, R_CLIMBED, False)
             return _crash_top(sf, si, W, prev_free, indptr, indices, data, False)
     sf[CF_ALPHA] = alpha * 0.5
     return _crash_trial(sf, si, W)

@@ -5,7 +5,7 @@ import numpy as np
 import scipy.sparse as sp
 
 import compass_sparse as cs
-from compass_sparse.crash import crash
+from compass_sparse.crash import CLIMBED, crash
 from compass_sparse.merit import normal_map_at
 
 
@@ -31,6 +31,20 @@ def test_crash_returns_its_best_iterate_when_a_nonmonotone_step_climbs():
     assert _norm_nm(p, cr.z) <= min([_norm_nm(p, z0)] + [row[3] for row in cr.log])
     np.testing.assert_array_equal(cr.z, z0)
     np.testing.assert_allclose(cr.f, p.F(cr.z))
+
+
+def test_crash_that_climbs_above_its_start_stops_there():
+    """Regression: a crash whose steps stayed above its start (accepted by the
+    non-monotone search) went on until the active set settled and then handed on its
+    start, its work dropped (traffic equilibrium n = 912: six steps 21.1 -> 31.3 -> ...
+    -> 36.8, 37 of 76 factorizations).  It now stops after the first such step."""
+    n = 3
+    p = cs.MCP(lambda x: np.arctan(x), lambda x: sp.diags(1.0 / (1.0 + x * x), format="csc"),
+               -np.inf, np.inf, np.full(n, 1.5))
+    cr = crash(p.evaluator, p.x0, p.lb, p.ub, cs.Options(crash_nbchange_limit=0))
+    assert cr.stop_reason == CLIMBED
+    assert cr.iterations == 1 and cr.log[0][3] > _norm_nm(p, p.x0)
+    np.testing.assert_array_equal(cr.z, p.x0)  # the start handed on
 
 
 def test_crash_perturbs_a_structurally_singular_reduced_jacobian_without_factoring_it():
@@ -469,8 +483,10 @@ def _domain_problems():
         return J(x)
 
     x0 = np.zeros(3)
+    # (the second's cubic term is small enough that the first step goes below the start:
+    # a crash that climbed would stop before it asks for J there; crash.CLIMBED)
     return [cs.MCP(F, J, -np.inf, np.inf, x0),
-            cs.MCP(lambda x: A @ x + b + 0.1 * x ** 3, J_fails, -np.inf, np.inf, x0)]
+            cs.MCP(lambda x: A @ x + b + 0.01 * x ** 3, J_fails, -np.inf, np.inf, x0)]
 
 
 def test_compiled_crash_gives_the_python_routes_points_bit_for_bit(monkeypatch):
@@ -512,7 +528,7 @@ def test_compiled_crash_gives_the_python_routes_points_bit_for_bit(monkeypatch):
                 reasons.add(cr.stop_reason)
     assert len(used) > 500
     assert {"converged", "no basis change", "no progress", "iteration limit",
-            "domain error in J"} <= reasons
+            "domain error in J", C.CLIMBED} <= reasons
 
 
 def test_compiled_crash_stops_at_the_time_limit_as_the_python_route():

@@ -144,3 +144,15 @@ def test_non_monotone_excursion_is_not_a_stall_on_traffic(solved8, solved24):
         assert res.status is Status.SOLVED
         assert res.restarts == 0
         assert res.minor_iterations <= most, res.minor_iterations
+
+
+def test_crash_that_climbs_is_stopped_early_on_traffic(solved8):
+    """Regression: the crash climbed 21.1 -> 31.3 -> ... -> 36.8 in six steps, handed on
+    its start (its best point) and so was dropped, but cost 37 of the solve's 76
+    factorizations.  It now stops at its first step above the start."""
+    _, res = solved8
+    crash = res.passes["crash"]
+    assert crash.reason == "climbed above its start"
+    assert res.crash_iterations == 1
+    assert crash.factorizations < 10 and res.factorizations <= 40, (
+        crash.factorizations, res.factorizations)
