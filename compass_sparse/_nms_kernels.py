@@ -75,8 +75,8 @@ S_SIZE = 23
 (I_PHASE, I_ND, I_WATCHDOGS, I_STALL, I_NMEM, I_MEMSIZE, I_MONOTONE, I_MSTEP_FREQ,
  I_MAX_WATCHDOGS, I_STALL_LIMIT, I_NEWTON_SET, I_NEWTON_OK, I_CUR_IS_CKPT, I_LINE, I_LOG,
  I_USABLE, I_RES_SOLVED, I_RES_MOVED, I_BEST_NEW, I_HAS_WARM, I_BASIS_NEW, I_DIRECT,
- I_NF, I_SCATTER, I_GUESSED, I_PROGRESS) = range(26)
-I_SIZE = 26
+ I_NF, I_SCATTER, I_GUESSED, I_PROGRESS, I_REFERENCE_RULE) = range(27)
+I_SIZE = 27
 # rows of the int8 array B: the warm basis (the last path's), the start basis, its slack
 B_WARM, B_BASIC, B_SLACK = range(3)
 # phases: what the next call receives
@@ -200,9 +200,9 @@ def _descent_ok(sf, W, R, indptr, indices, data):
 @njit(cache=True)
 def _end_major(sf, si):
     """The stall rule at the end of a major iteration (nms.NMSSolver._run's): progress is
-    a 0.1% better best merit, or a checkpoint 0.1% below its reference value
-    (si[I_PROGRESS], nms.below_reference)."""
-    progress = si[I_PROGRESS] != 0
+    a 0.1% better best merit, or, where si[I_REFERENCE_RULE] (the restart rule), a
+    checkpoint 0.1% below its reference value (si[I_PROGRESS], nms.below_reference)."""
+    progress = si[I_PROGRESS] != 0 and si[I_REFERENCE_RULE] != 0
     si[I_PROGRESS] = 0
     if sf[S_BPSI] < sf[S_BEST_SEEN] * (1.0 - STALL_RTOL):
         sf[S_BEST_SEEN] = sf[S_BPSI]
