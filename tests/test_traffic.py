@@ -146,13 +146,13 @@ def test_non_monotone_excursion_is_not_a_stall_on_traffic(solved8, solved24):
         assert res.minor_iterations <= most, res.minor_iterations
 
 
-def test_crash_that_climbs_is_stopped_early_on_traffic(solved8):
+def test_crash_that_raises_the_merit_is_stopped_early_on_traffic(solved8):
     """Regression: the crash climbed 21.1 -> 31.3 -> ... -> 36.8 in six steps, handed on
     its start (its best point) and so was dropped, but cost 37 of the solve's 76
-    factorizations.  It now stops at its first step above the start."""
+    factorizations.  It now stops before its first step, which raises ||Phi||."""
     _, res = solved8
     crash = res.passes["crash"]
-    assert crash.reason == "climbed above its start"
-    assert res.crash_iterations == 1
+    assert crash.reason == "raised the merit"
+    assert res.crash_iterations == 0
     assert crash.factorizations < 10 and res.factorizations <= 40, (
         crash.factorizations, res.factorizations)
