@@ -215,11 +215,13 @@ def main(argv=None):
     ap.add_argument("--repeats", type=int, default=None, help="timed solves (default 3; 1 quick)")
     ap.add_argument("--time-limit", type=float, default=300.0, help="per solve (s)")
     ap.add_argument("--suffix", default="", help="CSV name: pivots[_SUFFIX].csv")
+    ap.add_argument("--revision", default=None,
+                    help="the revision to record when the tree is an export without git")
     args = ap.parse_args(argv)
     names = args.problems or (QUICK if args.quick else list(CASES))
     repeats = args.repeats or (1 if args.quick else 3)
     command = "python " + " ".join([sys.argv[0]] + (argv if argv is not None else sys.argv[1:]))
-    info = dict(command=command, revision=git_revision(), date=time.strftime("%Y-%m-%d %H:%M"),
+    info = dict(command=command, revision=args.revision or git_revision(), date=time.strftime("%Y-%m-%d %H:%M"),
                 machine=f"{platform.machine()}, {os.cpu_count()} cores, {platform.python_version()}",
                 numpy=np.__version__)
     print(f"# {info['command']}\n# revision {info['revision']}  {info['date']}  {info['machine']}",
