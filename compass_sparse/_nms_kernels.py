@@ -49,6 +49,7 @@ from ._merit_kernels import (fb_directional_kernel, fb_phi_kernel, max_abs_kerne
 from .direct_step import dense_newton_direct
 
 STALL_RTOL = 1e-3  # nms.STALL_RTOL (the stall rule's relative progress)
+REFERENCE_WINDOW = 5  # nms.REFERENCE_WINDOW
 
 # requests (returns)
 NEED_NEWTON, NEED_F_CAND, NEED_F_TRIAL, JUDGE, NEED_FALLBACK, TIME_UP, STALLED, NEED_PATH = \
@@ -75,8 +76,8 @@ S_SIZE = 23
 (I_PHASE, I_ND, I_WATCHDOGS, I_STALL, I_NMEM, I_MEMSIZE, I_MONOTONE, I_MSTEP_FREQ,
  I_MAX_WATCHDOGS, I_STALL_LIMIT, I_NEWTON_SET, I_NEWTON_OK, I_CUR_IS_CKPT, I_LINE, I_LOG,
  I_USABLE, I_RES_SOLVED, I_RES_MOVED, I_BEST_NEW, I_HAS_WARM, I_BASIS_NEW, I_DIRECT,
- I_NF, I_SCATTER, I_GUESSED, I_PROGRESS, I_REFERENCE_RULE) = range(27)
-I_SIZE = 27
+ I_NF, I_SCATTER, I_GUESSED, I_PROGRESS, I_REFERENCE_RULE, I_SINCE_BEST) = range(28)
+I_SIZE = 28
 # rows of the int8 array B: the warm basis (the last path's), the start basis, its slack
 B_WARM, B_BASIC, B_SLACK = range(3)
 # phases: what the next call receives
@@ -201,15 +202,19 @@ def _descent_ok(sf, W, R, indptr, indices, data):
 def _end_major(sf, si):
     """The stall rule at the end of a major iteration (nms.NMSSolver._run's): progress is
     a 0.1% better best merit, or, where si[I_REFERENCE_RULE] (the restart rule), a
-    checkpoint 0.1% below its reference value (si[I_PROGRESS], nms.below_reference)."""
+    checkpoint 0.1% below its reference value (si[I_PROGRESS], nms.below_reference) within
+    REFERENCE_WINDOW major iterations of the best merit's last improvement."""
     progress = si[I_PROGRESS] != 0 and si[I_REFERENCE_RULE] != 0
     si[I_PROGRESS] = 0
     if sf[S_BPSI] < sf[S_BEST_SEEN] * (1.0 - STALL_RTOL):
         sf[S_BEST_SEEN] = sf[S_BPSI]
         si[I_STALL] = 0
-    elif progress:
+        si[I_SINCE_BEST] = 0
+    elif progress and si[I_SINCE_BEST] + 1 < REFERENCE_WINDOW:
+        si[I_SINCE_BEST] += 1
         si[I_STALL] = 0
     else:
+        si[I_SINCE_BEST] += 1
         si[I_STALL] += 1
         if si[I_STALL] >= si[I_STALL_LIMIT]:
             return STALLED

@@ -237,6 +237,7 @@ class NMSState:
     watchdogs: int = 0  #: watchdog returns since the last checkpoint
     stall: int = 0  #: major iterations without progress (see REFERENCE_PROGRESS)
     progress: bool = False  #: this major iteration set a checkpoint below its reference
+    since_best: int = 0  #: major iterations since the best merit last improved by 0.1%
 
     def checkpoint(self, pt: Point, x):
         """pt becomes the current point and a checkpoint, its merit enters the memory."""
@@ -294,6 +295,18 @@ working: counting it as "no progress" restarted the traffic equilibrium (n = 912
 (homotopy_stationary_limit) still watches the best merit alone: on the thesis families
 (n <= 200, where the homotopy comes first) counting checkpoints there delayed it, every
 instance still solved but with 6x the pivots on the 271 instances it changed."""
+
+
+REFERENCE_WINDOW = nk.REFERENCE_WINDOW
+"""... but only within this many major iterations (5) of the best merit's last 0.1%
+improvement.  Without the window a run that oscillates, with checkpoints below a reference
+value that the oscillation itself keeps high, makes such "progress" forever: F = (x_p^2 +
+1, ...) (a stationary point of the merit, no zero; merit 1.0 <-> 2-5 every other
+iteration) ran to the major iteration limit (500) where it had stalled after 3 major
+iterations per restart; with a window of 10 it still used up the 500 before its 50
+restarts (STATIONARY_POINT at 734f4f3 after 159).  The traffic excursion needs 4 (n =
+2452: a watchdog return, a d-step, then a checkpoint below R, 4 major iterations after the
+best merit's last improvement)."""
 
 
 def below_reference(psi, R):
@@ -693,14 +706,18 @@ class NMSSolver:
                     st.n_d = 0
                     st.watchdogs = 0
                     self._log(res.code, letter, st.cur, st.eps, res)
-            # Stationarity: restart when neither the best merit nor the reference value
-            # has been beaten for a while (below_reference).
+            # Stationarity: restart when neither the best merit nor (for a while after
+            # the best merit's last improvement) the reference value has been beaten.
             if self.best.psi < st.best_seen * (1.0 - STALL_RTOL):
                 st.best_seen = self.best.psi
                 st.stall = 0
-            elif st.progress and reference_progress:
+                st.since_best = 0
+            elif (st.progress and reference_progress
+                  and st.since_best + 1 < REFERENCE_WINDOW):
+                st.since_best += 1
                 st.stall = 0
             else:
+                st.since_best += 1
                 st.stall += 1
                 if st.stall >= stall_limit:
                     return f"no progress in {st.stall} major iterations"
