@@ -212,10 +212,12 @@ class Options(OptionsMixin):
         "crash + NMS from a random point of the box and a perturbed restart near the best "
         "point", lo=0)
     restart_stationary_limit: int = _opt(
-        3, "restart when the best merit has not improved by 0.1% in this many major "
-        "iterations (PATH: 10; 3 measured best on the thesis families: same successes, "
-        "restarts 3-8x cheaper; waiting 10 in the first four runs solved a few more "
-        "instances but tripled the median time of a success)", lo=1)
+        3, "restart when in this many major iterations the best merit has not improved by "
+        "0.1% and no checkpoint has fallen 0.1% below its reference value (the latter counts "
+        "within 5 major iterations of the best merit's last improvement: an accepted "
+        "non-monotone excursion is not a stall).  PATH: 10; 3 measured best on the thesis "
+        "families: same successes, restarts 3-8x cheaper; waiting 10 in the first four runs "
+        "solved a few more instances but tripled the median time of a success", lo=1)
     seed: int = _opt(0, "seed of the random restart points", lo=0)
 
     # --- homotopy fallback (Billups & Watson 2002; module compass_sparse.homotopy) --------

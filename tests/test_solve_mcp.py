@@ -518,12 +518,15 @@ def test_thesis_family_one_n10():
 
 
 def test_problem_that_needs_a_restart():
-    """Thesis family 1, n = 10, seed 10: the first run stalls at a local minimizer of the
+    """Thesis family 1, n = 10, seed 57: the first run stalls at a local minimizer of the
     merit function; a restart (PATH's configurations, then multi-start) solves it.  The
-    homotopy fallback is off: it would solve the instance without restarts."""
+    homotopy fallback is off: it would solve the instance without restarts.  (Seed 10
+    served here until the restart rule counted from the reference value: its first run
+    was cut short in a non-monotone excursion and now goes on to the solution, 15 major
+    iterations without a restart.)"""
     from compass_sparse.generators import thesis_family
 
-    g = thesis_family(10, family=1, seed=10)
+    g = thesis_family(10, family=1, seed=57)
     stuck = solve_mcp(g.problem, options={"restart_limit": 0, "homotopy": "off"})
     assert not stuck.success and stuck.status is Status.NO_PROGRESS
     assert stuck.point_status is not PointStatus.SOLUTION

@@ -16,7 +16,8 @@ alpha with
 where x(alpha) is the point with pi(x) = z(alpha) of least normal-map norm: the normal cone
 at z(alpha) absorbs the part of F that points out of the box (thesis (2.5.5)-(2.5.9)).
 The crash stops when the active set stops changing (``crash_nbchange_limit``), the
-decrease is below sigma, alpha < ``crash_stepsize_minimum``, or after
+decrease is below sigma, alpha < ``crash_stepsize_minimum``, a step would raise ||Phi||
+above its start's (:data:`~compass_sparse.crash.outcome.RAISED`), or after
 ``crash_iteration_limit`` steps; it is skipped below ``crash_minimum_dimension``.
 One factorization of J_II and one Jacobian per iteration: it is a Newton method on the
 current face, which is why it finds the active set of well-behaved large problems in a

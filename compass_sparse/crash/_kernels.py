@@ -174,7 +174,7 @@ NEED_J, NEED_F, DONE = 1, 2, 3
 NOTHING, J_GIVEN, J_FAILED, F_GIVEN, F_FAILED, STOP = 0, 1, 2, 3, 4, 5
 # Stop reasons (the texts of crash.compiled._REASONS, in this order)
 (R_ITERATION_LIMIT, R_CONVERGED, R_DOMAIN_J, R_NO_CHANGE, R_SINGULAR, R_NO_PROGRESS,
- R_TIME) = range(7)
+ R_TIME, R_RAISED) = range(8)
 # Rows of the work area W ((CW_ROWS, n)): the current point z, F(z) and its normal-map
 # point x, the step d, the trial point and its normal-map values, the best point, the box
 # and the line search's segment and Phi.
@@ -183,7 +183,7 @@ NOTHING, J_GIVEN, J_FAILED, F_GIVEN, F_FAILED, STOP = 0, 1, 2, 3, 4, 5
 CW_ROWS = 14
 # Scalars: sf (floats), si (ints); the options first, set by the caller.
 (CF_SIGMA, CF_MIN_STEP, CF_TOL, CF_EPS_SCALE, CF_STEP_LIMIT, CF_START_FACTOR, CF_NM,
- CF_BEST, CF_ALPHA, CF_FB, CF_NMT, CF_REC) = range(12)
+ CF_BEST, CF_ALPHA, CF_FB, CF_NMT, CF_FB0, CF_REC) = range(13)
 CRASH_RECENT = 4  # (crash.CRASH_MEMORY: sf[CF_REC:CF_REC + 4] holds the recent norms)
 CF_SIZE = CF_REC + CRASH_RECENT
 (CI_PHASE, CI_LIMIT, CI_NBCHANGE, CI_PERTURB, CI_ATTEMPTS, CI_LINE, CI_IT, CI_NREC,
@@ -277,6 +277,8 @@ def _crash_top(sf, si, W, prev_free, indptr, indices, data, have_j):
     fb = math.sqrt(np.dot(phi, phi))
     sf[CF_FB] = fb
     si[CI_K_FB] = si[CI_K]
+    if si[CI_IT] == 1:
+        sf[CF_FB0] = fb  # (the start's: crash.RAISED)
     if fb <= sf[CF_TOL]:
         return _crash_done(sf, si, W, R_CONVERGED, True)
     if not have_j:
@@ -332,6 +334,11 @@ def crash_dense(sf, si, W, prev_free, ft, indptr, indices, data, arg):
             if sf[CF_REC + j] > top:
                 top = sf[CF_REC + j]
         if nmt <= (1.0 - sf[CF_SIGMA] * alpha) * top:
+            # ... unless it raises ||Phi|| above the start's (crash.RAISED)
+            phi = W[CW_PHI]
+            fb_phi_kernel(W[CW_ZT], ft, W[CW_LB], W[CW_UB], phi)
+            if math.sqrt(np.dot(phi, phi)) > sf[CF_FB0]:
+                return _crash_done(sf, si, W, R_RAISED, True)
             # accepted: the trial point becomes z (its F and x too), the memory moves on
             sf[CF_NMT] = nmt
             si[CI_ACCEPTED] += 1

@@ -14,13 +14,14 @@ from .._jit import NO_INDICES, NO_VALUES
 from ..linalg.csc import float_csc
 from . import _kernels as ck
 from .outcome import (CRASH_START_FACTOR, CRASH_STEP_LIMIT, EPS_SCALE, PERTURB_ATTEMPTS,
-                      CrashResult, offer_point)
+                      RAISED, CrashResult, offer_point)
 
 __all__ = ["crash_compiled"]
 
 
 _REASONS = ("iteration limit", "converged", "domain error in J", "no basis change",
-            "singular reduced Jacobian", "no progress", "time limit")  # (ck.R_* order)
+            "singular reduced Jacobian", "no progress", "time limit",
+            RAISED)  # (ck.R_* order)
 
 
 _SETTINGS: dict = {}  # id(options) -> (options, tol, sf, si): see _dense_settings

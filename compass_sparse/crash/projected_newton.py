@@ -17,7 +17,7 @@ from ..linalg.csc import reduced_system
 from ..merit import fb_phi, normal_map_at
 from ._kernels import NO_BASIS_CHANGE, crash_active_set, dense_crash_step
 from .outcome import (CRASH_MEMORY, CRASH_START_FACTOR, CRASH_STEP_LIMIT, EPS_SCALE,
-                      PERTURB_ATTEMPTS, CrashResult, offer_point)
+                      PERTURB_ATTEMPTS, RAISED, CrashResult, offer_point)
 from . import reduced
 from .reduced import reuse_solve, solve_reduced
 
@@ -184,6 +184,8 @@ def crash_python(evalr, z, f0, J0, lb, ub, opt, tol, deadline, log, on_point, st
             break
         fb = dot_norm(fb_phi(z, f, lb, ub))
         fb_at = (z, f, fb)
+        if it == 1:
+            fb_start = fb
         if fb <= tol:
             reason = "converged"
             it -= 1
@@ -202,6 +204,11 @@ def crash_python(evalr, z, f0, J0, lb, ub, opt, tol, deadline, log, on_point, st
         step = steps.search(z, d, max(recent))
         if step is None:
             reason = "no progress"
+            it -= 1
+            break
+        if dot_norm(fb_phi(step[0], step[1], lb, ub)) > fb_start:
+            # The step would raise the solver's merit above the start's (see RAISED).
+            reason = RAISED
             it -= 1
             break
         z, f, x, nm_norm, alpha = step

@@ -48,6 +48,9 @@ from .._merit_kernels import (fb_directional_kernel, fb_phi_kernel, max_abs_kern
                               normal_map_kernel)
 from ..path.direct_step import dense_newton_direct
 
+STALL_RTOL = 1e-3  # nms.STALL_RTOL (the stall rule's relative progress)
+REFERENCE_WINDOW = 5  # nms.REFERENCE_WINDOW
+
 # requests (returns)
 NEED_NEWTON, NEED_F_CAND, NEED_F_TRIAL, JUDGE, NEED_FALLBACK, TIME_UP, STALLED, NEED_PATH = \
     range(8)
@@ -73,8 +76,8 @@ S_SIZE = 23
 (I_PHASE, I_ND, I_WATCHDOGS, I_STALL, I_NMEM, I_MEMSIZE, I_MONOTONE, I_MSTEP_FREQ,
  I_MAX_WATCHDOGS, I_STALL_LIMIT, I_NEWTON_SET, I_NEWTON_OK, I_CUR_IS_CKPT, I_LINE, I_LOG,
  I_USABLE, I_RES_SOLVED, I_RES_MOVED, I_BEST_NEW, I_HAS_WARM, I_BASIS_NEW, I_DIRECT,
- I_NF, I_SCATTER, I_GUESSED) = range(25)
-I_SIZE = 25
+ I_NF, I_SCATTER, I_GUESSED, I_PROGRESS, I_REFERENCE_RULE, I_SINCE_BEST) = range(28)
+I_SIZE = 28
 # rows of the int8 array B: the warm basis (the last path's), the start basis, its slack
 B_WARM, B_BASIC, B_SLACK = range(3)
 # phases: what the next call receives
@@ -197,11 +200,21 @@ def _descent_ok(sf, W, R, indptr, indices, data):
 
 @njit(cache=True)
 def _end_major(sf, si):
-    """The stall rule at the end of a major iteration."""
-    if sf[S_BPSI] < sf[S_BEST_SEEN] * (1.0 - 1e-3):
+    """The stall rule at the end of a major iteration (nms.NMSSolver._run's): progress is
+    a 0.1% better best merit, or, where si[I_REFERENCE_RULE] (the restart rule), a
+    checkpoint 0.1% below its reference value (si[I_PROGRESS], nms.below_reference) within
+    REFERENCE_WINDOW major iterations of the best merit's last improvement."""
+    progress = si[I_PROGRESS] != 0 and si[I_REFERENCE_RULE] != 0
+    si[I_PROGRESS] = 0
+    if sf[S_BPSI] < sf[S_BEST_SEEN] * (1.0 - STALL_RTOL):
         sf[S_BEST_SEEN] = sf[S_BPSI]
         si[I_STALL] = 0
+        si[I_SINCE_BEST] = 0
+    elif progress and si[I_SINCE_BEST] + 1 < REFERENCE_WINDOW:
+        si[I_SINCE_BEST] += 1
+        si[I_STALL] = 0
     else:
+        si[I_SINCE_BEST] += 1
         si[I_STALL] += 1
         if si[I_STALL] >= si[I_STALL_LIMIT]:
             return STALLED
@@ -233,6 +246,7 @@ def _classify(sf, si, W, mem, indptr, indices, data):
         si[I_ND] += 1
         sf[S_DELTA] = _py_max(sf[S_DELTA] * sf[S_DELTA_SHRINK], sf[S_DELTA_MIN])
     if step != LOG_D or psi < _memory_min(si, mem):
+        si[I_PROGRESS] = psi < R * (1.0 - STALL_RTOL)
         _checkpoint(sf, si, W, mem, W_RX)
         si[I_WATCHDOGS] = 0
     else:  # the candidate becomes the current iterate only
@@ -293,6 +307,7 @@ def _trial_test(sf, si, W, mem):
             and psi < R):
         if si[I_LINE] != 0:
             normal_map_kernel(W[W_TZ], W[W_TF], W[W_LB], W[W_UB], W[W_TX], W[W_D])
+        si[I_PROGRESS] = psi < R * (1.0 - STALL_RTOL)
         _checkpoint(sf, si, W, mem, W_TX)
         si[I_ND] = 0
         si[I_LOG] = LOG_W

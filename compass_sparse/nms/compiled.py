@@ -73,7 +73,7 @@ class CompiledRun:
     with options ``opt`` (see the module docstring); :meth:`run` returns why it stopped,
     as the Python loop does."""
 
-    def __init__(self, solver, st, opt, stall_limit):
+    def __init__(self, solver, st, opt, stall_limit, reference_progress):
         self.solver, self.opt = solver, opt
         n = solver.n
         self.W = W = np.empty((nk.W_ROWS, n))
@@ -103,6 +103,7 @@ class CompiledRun:
                      (nk.I_MONOTONE, not opt.nms), (nk.I_MSTEP_FREQ, opt.nms_mstep_frequency),
                      (nk.I_MAX_WATCHDOGS, opt.nms_maximum_watchdogs),
                      (nk.I_STALL_LIMIT, stall_limit), (nk.I_CUR_IS_CKPT, 1),
+                     (nk.I_REFERENCE_RULE, reference_progress),
                      (nk.I_LINE, opt.nms_searchtype == "line")):
             si[k] = v
         self.B = np.zeros((3, n), dtype=np.int8)  # the warm basis, the start basis, its slack

@@ -32,7 +32,8 @@ from .fallback import gradient_steps, lm_step
 from .log import MajorLog
 from .newton import NewtonStep
 from .restarts import FROM_RANDOM, FROM_START, RestartSchedule
-from .state import NMSState, NMSStop, Outcome, Point, classify_step, reference_value
+from .state import (REFERENCE_PROGRESS, NMSState, NMSStop, Outcome, Point, below_reference,
+                    classify_step, reference_value, stall_update)
 from .stationarity import stationarity, worst_rows
 
 __all__ = ["NMSSolver"]
@@ -274,8 +275,14 @@ class NMSSolver:
     def run(self, start, opt, stall_limit=None):
         """Crash + NMS from ``start`` (a point of the box, or an evaluated Point) with
         options opt.  Returns when stuck (for a restart or the homotopy): when the best
-        merit has not improved in ``stall_limit`` major iterations (default
-        opt.restart_stationary_limit)."""
+        merit has not improved in ``stall_limit`` major iterations, or, for a restart
+        (stall_limit None: opt.restart_stationary_limit), when in that many the best merit
+        has not improved and no checkpoint has beaten its reference value
+        (REFERENCE_PROGRESS)."""
+        # The restart rule also counts checkpoints below their reference value as progress
+        # (below_reference); the hand-over to the homotopy (its own stall_limit) watches
+        # the best merit only: see REFERENCE_PROGRESS.
+        reference_progress = stall_limit is None and REFERENCE_PROGRESS
         if stall_limit is None:
             stall_limit = opt.restart_stationary_limit
         cur = start if isinstance(start, Point) else self.point(start)
@@ -298,8 +305,8 @@ class NMSSolver:
             delta=10.0 * max(1.0, float(np.max(np.abs(cur.z))) if cur.z.size else 1.0),
             eps=opt.proximal_perturbation, best_seen=self.best.point.psi, fbn_start=cur.fbn)
         if self.routes.nms == "compiled":
-            return CompiledRun(self, st, opt, stall_limit).run()
-        return self._python_run(st, opt, stall_limit)
+            return CompiledRun(self, st, opt, stall_limit, reference_progress).run()
+        return self._python_run(st, opt, stall_limit, reference_progress)
 
     def _crash(self, cur, x, opt):
         """The crash from the run's start ``cur`` (x its normal-map point): (the point the
@@ -337,7 +344,7 @@ class NMSSolver:
                 return pt, cr.x
         return cur, x
 
-    def _python_run(self, st, opt, stall_limit):
+    def _python_run(self, st, opt, stall_limit, reference_progress):
         """The major iterations of :meth:`run` in Python (the compiled route's reference)."""
         c = self.counts
         while True:
@@ -346,6 +353,7 @@ class NMSSolver:
             self._progress(st.cur)
             res, J, code = self.newton.point(st.cur, st.x, st.eps, opt, c.nit == 0)
             c.nit += 1
+            st.progress = False
             if res is None:  # J could not be evaluated at z_k
                 fb, letter = self.fallback(opt)
                 if fb is None:
@@ -355,14 +363,11 @@ class NMSSolver:
                 continue
             if not self._major_step(st, res, opt):
                 return "no descent from the best point"
-            # Stationarity: restart when the best merit has not improved for a while.
-            if self.best.point.psi < st.best_seen * (1.0 - 1e-3):
-                st.best_seen = self.best.point.psi
-                st.stall = 0
-            else:
-                st.stall += 1
-                if st.stall >= stall_limit:
-                    return f"no progress in {st.stall} major iterations"
+            # Stationarity: restart when neither the best merit nor (for a while after
+            # the best merit's last improvement) the reference value has been beaten.
+            stall_update(st, self.best.point.psi, reference_progress)
+            if st.stall >= stall_limit:
+                return f"no progress in {st.stall} major iterations"
 
     def _major_step(self, st, res, opt) -> bool:
         """The NMS test of the Newton point ``res`` of the current iterate: a d-, m- or
@@ -394,6 +399,7 @@ class NMSSolver:
         xN = res.x if cand.z is res.z else normal_map_at(cand.z, cand.f, lb, ub)[0]
         st.cur, st.x = cand, xN
         if step in ("M", "O") or cand.psi < min(st.memory):
+            st.progress = below_reference(cand.psi, R)
             st.checkpoint(cand, xN)
             st.watchdogs = 0
         st.eps *= opt.proximal_shrink_factor
@@ -417,6 +423,7 @@ class NMSSolver:
             found = self._watchdog_search(st.ckpt, newton, R, opt)
         nit = self.counts.nit
         if found is not None:
+            st.progress = below_reference(found[0].psi, R)
             st.checkpoint(*found)
             st.n_d = 0
             self.log.iteration(nit, res.code, "W", st.cur, st.eps, res.pivots)

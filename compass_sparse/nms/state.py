@@ -11,6 +11,7 @@ import scipy.sparse as sp
 
 from ..path.outcome import WarmBasis
 from ..status import Status, WorkCounts
+from . import _kernels as nk
 
 __all__ = ["LOCAL_FACTOR", "NMSState", "NMSStop", "Outcome", "Point", "classify_step",
            "reference_value"]
@@ -79,7 +80,9 @@ class NMSState:
     ckpt_newton: object = None  #: the path computed at the checkpoint, when it was
     n_d: int = 0  #: consecutive d-steps
     watchdogs: int = 0  #: watchdog returns since the last checkpoint
-    stall: int = 0  #: major iterations without a 0.1% better best merit
+    stall: int = 0  #: major iterations without progress (see REFERENCE_PROGRESS)
+    progress: bool = False  #: this major iteration set a checkpoint below its reference
+    since_best: int = 0  #: major iterations since the best merit last improved by 0.1%
 
     def checkpoint(self, pt: Point, x):
         """pt becomes the current point and a checkpoint, its merit enters the memory."""
@@ -93,6 +96,55 @@ class NMSState:
         self.cur, self.x = pt, x
         self.memory = [pt.psi]
         self.ckpt, self.ckpt_newton = (pt, x), None
+
+
+STALL_RTOL = nk.STALL_RTOL
+"""A major iteration makes progress when it lowers the best merit, or (the restart rule)
+sets a checkpoint below the reference value in force, by this fraction."""
+
+REFERENCE_PROGRESS = True
+"""The restart rule (restart_stationary_limit) counts from the reference value, as PATH's
+does: a major iteration that sets a checkpoint below the reference value in force is
+progress, like one that lowers the best merit (below_reference).  A non-monotone
+excursion that the stabilization accepted and that came back below R is the method
+working: counting it as "no progress" restarted the traffic equilibrium (n = 912: merit
+21 -> 700 -> 214 by d-steps, then 56 -> 9.7 -> 0.68) after 3 major iterations and threw
+505 pivots away (1098 pivots against 586).  The hand-over to the homotopy
+(homotopy_stationary_limit) still watches the best merit alone: on the thesis families
+(n <= 200, where the homotopy comes first) counting checkpoints there delayed it, every
+instance still solved but with 6x the pivots on the 271 instances it changed."""
+
+REFERENCE_WINDOW = nk.REFERENCE_WINDOW
+"""... but only within this many major iterations (5) of the best merit's last 0.1%
+improvement.  Without the window a run that oscillates, with checkpoints below a reference
+value that the oscillation itself keeps high, makes such "progress" forever: F = (x_p^2 +
+1, ...) (a stationary point of the merit, no zero; merit 1.0 <-> 2-5 every other
+iteration) ran to the major iteration limit (500) where it had stalled after 3 major
+iterations per restart; with a window of 10 it still used up the 500 before its 50
+restarts.  The traffic excursion needs 4 (n = 2452: a watchdog return, a d-step, then a
+checkpoint below R, 4 major iterations after the best merit's last improvement)."""
+
+
+def below_reference(psi, R):
+    """Whether a new checkpoint of merit psi is progress against the reference value R
+    (REFERENCE_PROGRESS)."""
+    return psi < R * (1.0 - STALL_RTOL)
+
+
+def stall_update(st: "NMSState", best_psi: float, reference_progress: bool) -> None:
+    """The stall count after a major iteration: reset by a 0.1% better best merit, or
+    (``reference_progress``: the restart rule) by a checkpoint below its reference value
+    within REFERENCE_WINDOW major iterations of the best merit's last improvement."""
+    if best_psi < st.best_seen * (1.0 - STALL_RTOL):
+        st.best_seen = best_psi
+        st.stall = 0
+        st.since_best = 0
+    elif st.progress and reference_progress and st.since_best + 1 < REFERENCE_WINDOW:
+        st.since_best += 1
+        st.stall = 0
+    else:
+        st.since_best += 1
+        st.stall += 1
 
 
 def reference_value(memory, psi, fbn, fbn_start):

@@ -14,6 +14,8 @@ Families
 * :func:`p_matrix_lcp`, :func:`monotone_lcp`, :func:`obstacle_problem`,
   :func:`infeasible_lcp`, :func:`duplicated_columns_lcp` -- sparse LCPs; all but the
   infeasible one have manufactured solutions.
+* :func:`traffic_equilibrium` -- the Wardrop traffic equilibrium on the Sioux Falls network
+  (the GAMS model library's ``traffic``), n = 912 (8 destinations) ... 2452 (all 24).
 * :func:`brute_force_lcp` -- enumerate every active set of a tiny box LCP (reference).
 * :func:`manufacture`, :func:`manufactured_point` -- turn any F into an MCP with a chosen
   solution (shift F by a constant).
@@ -57,6 +59,7 @@ from .lcp import (  # noqa: E402
     obstacle_problem,
     p_matrix_lcp,
 )
+from .traffic import traffic_equilibrium  # noqa: E402
 
 __all__ = [
     "GeneratedProblem",
@@ -74,4 +77,5 @@ __all__ = [
     "duplicated_columns_lcp",
     "brute_force_lcp",
     "lcp_problem",
+    "traffic_equilibrium",
 ]
