@@ -427,7 +427,7 @@ def test_small_tariff_counterfactual_reaches_1e_10_on_the_dense_engine():
 
 
 def test_output_tax_shock_is_solved_without_the_crash_raising_the_merit():
-    """Regression (issue: pivots thrown away): the static CGE model of n = 2024 under a
+    """Regression (pivots thrown away): the static CGE model of n = 2024 under a
     50% output tax on every sector took 17705-32846 pivots, 12-18 major iterations and
     60-70 s, because the crash (measuring the normal map) went on through points whose
     ||Phi|| rose above the start's (181 -> 255) and handed on one from which every
