@@ -48,8 +48,8 @@ N_ISTATE = 14
 F_ES, F_EV, F_T, F_BEST_T, F_RES, F_TLOW = range(6)
 N_FSTATE = 6
 # tolerances (tol) and limits (lim)
-T_PIV, T_RATIO, T_RANK, T_UPDATE, T_STAB, T_GROWTH, T_PROGRESS, T_FILL = range(8)
-N_TOL = 8
+T_PIV, T_RATIO, T_RANK, T_UPDATE, T_STAB, T_GROWTH, T_PROGRESS, T_FILL, T_THRESH = range(9)
+N_TOL = 9
 L_MINOR, L_CYCLE, L_CHUNK, L_FREE_BELOW, L_BELOW = range(5)
 N_LIM = 5
 # the per-pivot records of path_loop (a minor log): columns, and the two kinds of pivot
@@ -117,7 +117,7 @@ def _ftran_rhs(fk, D, S, nupd, rhs, out):
 
 
 @njit(cache=True)
-def _factor(fk, prob, tab, D, S, rank_tol, repair):
+def _factor(fk, prob, tab, D, S, rank_tol, piv_thresh, repair):
     """The LU of the slot table; returns 0, the number of dependent slots (their slots
     and rows in the factors' repair rows) or SP_GROW.  Dense kind: partial pivoting, and
     with ``repair`` the home-row rule of the thesis (see _dense_lu.factor)."""
@@ -131,7 +131,7 @@ def _factor(fk, prob, tab, D, S, rank_tol, repair):
                           rank_tol, perm[W_REP_SLOT], perm[W_REP_ROW], True,
                           perm[W_FACTOR:W_FACTOR + 4], fwork[2, :n])
         return lu_factor(M, r, sk, si, art_sign, L, U, perm, fwork, rank_tol)
-    return sp_factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol,
+    return sp_factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh,
                      perm[W_REP_SLOT], perm[W_REP_ROW])
 
 
@@ -190,7 +190,7 @@ def _recompute(fk, prob, tab, D, S, t, t_slot, nupd, rhs, w, t_lower):
 
 
 @njit(cache=True)
-def refactor(fk, prob, tab, state, D, S, rank_tol, t_lower):
+def refactor(fk, prob, tab, state, D, S, tol, t_lower):
     """PivotalPath._factor: factorize, repair dependent columns with artificials,
     recompute the basic values.  Returns 0 or a SINGULAR message code (MSG_GROW: the
     sparse factors need more storage)."""
@@ -202,9 +202,10 @@ def refactor(fk, prob, tab, state, D, S, rank_tol, t_lower):
     istate[I_NFAC] += 1
     # A regular basis is factorized as it is; only a singular one is repaired (the dense
     # kind by the home-row rule of the thesis, see _dense_lu.factor).
-    nrep = _factor(fk, prob, tab, D, S, rank_tol, False)
+    rank_tol = tol[T_RANK]
+    nrep = _factor(fk, prob, tab, D, S, rank_tol, tol[T_THRESH], False)
     if nrep > 0 and fk == FAC_DENSE:
-        nrep = _factor(fk, prob, tab, D, S, rank_tol, True)
+        nrep = _factor(fk, prob, tab, D, S, rank_tol, tol[T_THRESH], True)
     if nrep == SP_GROW:
         return MSG_GROW
     if nrep > 0:
@@ -228,7 +229,7 @@ def refactor(fk, prob, tab, state, D, S, rank_tol, t_lower):
             si[slot] = new_row
             art_sign[new_row] = 1
         # The LU of the repaired basis for the solves.
-        nrep = _factor(fk, prob, tab, D, S, rank_tol, False)
+        nrep = _factor(fk, prob, tab, D, S, rank_tol, tol[T_THRESH], False)
         if nrep == SP_GROW:
             return MSG_GROW
         if nrep > 0:
@@ -270,7 +271,7 @@ def _record(sk, si, xb, zval, lb, ub, t, fstate, istate, best_x, bp_t, bp_x, wor
 
 
 @njit(cache=True)
-def verify(fk, prob, tab, state, D, S, rank_tol):
+def verify(fk, prob, tab, state, D, S, tol):
     """PivotalPath._verify_solution: (code, message)."""
     M, Mp, Mi, Mx, q, r, rI, rX, lb, ub, colkey = prob
     sk, si, xb, zval, art_sign, displaced, enter_count = tab
@@ -281,9 +282,9 @@ def verify(fk, prob, tab, state, D, S, rank_tol):
     for i in range(n):
         qmax = max(qmax, abs(q[i]))
         rmax = max(rmax, abs(r[i]))
-    tol = 1e-9 * (1.0 + qmax + rmax)
+    art_tol = 1e-9 * (1.0 + qmax + rmax)
     for k in range(n):
-        if sk[k] == VAR_A and abs(xb[k]) > tol:
+        if sk[k] == VAR_A and abs(xb[k]) > art_tol:
             return SINGULAR, MSG_SING_ART
     z = work[2]
     w = work[3]
@@ -312,7 +313,7 @@ def verify(fk, prob, tab, state, D, S, rank_tol):
         if res <= 1e-9 * (1.0 + mz_max + qmax):
             return SOLVED, MSG_NONE
         if attempt == 0:
-            msg = refactor(fk, prob, tab, state, D, S, rank_tol, fstate[F_TLOW])
+            msg = refactor(fk, prob, tab, state, D, S, tol, fstate[F_TLOW])
             if msg == MSG_GROW:
                 return GROW, MSG_GROW
             if msg != 0:
@@ -506,7 +507,7 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
                 istate[I_GROWTH] += 1
             elif upd == UPD_FILL:
                 istate[I_FILL] += 1
-            msg = refactor(fk, prob, tab, state, D, S, tol[T_RANK], t_lower)
+            msg = refactor(fk, prob, tab, state, D, S, tol, t_lower)
             if msg == MSG_GROW:
                 return GROW, MSG_GROW
             if msg != 0:
@@ -549,7 +550,7 @@ def start_path(fk, prob, tab, state, D, S, tol, lim, slack, use_slack, z, w, v, 
     istate[I_BELOW] = -1
     for i in range(n):
         displaced[i] = -1
-    msg = refactor(fk, prob, tab, state, D, S, tol[T_RANK], 0.0)
+    msg = refactor(fk, prob, tab, state, D, S, tol, 0.0)
     if use_slack and msg != MSG_GROW:
         artificial = False
         for k in range(n):
@@ -563,7 +564,7 @@ def start_path(fk, prob, tab, state, D, S, tol, lim, slack, use_slack, z, w, v, 
                 zval[i] = z[i]
                 art_sign[i] = 1
                 displaced[i] = -1
-            msg = refactor(fk, prob, tab, state, D, S, tol[T_RANK], 0.0)
+            msg = refactor(fk, prob, tab, state, D, S, tol, 0.0)
     if msg == MSG_GROW:
         return False, GROW, msg
     if msg != 0:
@@ -586,5 +587,5 @@ def run_pivots(fk, prob, tab, state, D, S, tol, lim, rec, rect):
     solution check (verify): (code, message), RUNNING when the pivots are used up."""
     code, msg = path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect)
     if code == SOLVED:
-        code, msg = verify(fk, prob, tab, state, D, S, tol[T_RANK])
+        code, msg = verify(fk, prob, tab, state, D, S, tol)
     return code, msg

@@ -9,18 +9,16 @@ The basis B (n x n) has one column per slot, as in :mod:`compass_sparse.path._de
 Factorization: left-looking LU (Gilbert-Peierls) with threshold partial pivoting
 ---------------------------------------------------------------------------------
 Columns are eliminated in a fixed order: the unit columns first (each pivots on its own
-row and eliminates nothing), then the z columns in the order of a symmetric fill-reducing
-ordering of M's pattern (AMD on M + M^T, computed once per pattern by the engine: the
-non-unit block of a path's basis is mostly a principal submatrix of M, on which the
-ordering of M restricted is a fill-reducing order), then r.  Step k takes the column
+row and eliminates nothing), then the z columns in the order ``colkey`` of M's columns
+(COLAMD's, computed once per pattern by the engine), then r.  Step k takes the column
 b = B[:, s] and solves ``L_k x = b`` with the k columns of L made so far: the rows
 reached from b's nonzeros in the graph of L (depth-first search, Gilbert and Peierls
 1988) in topological order, so a step costs its flops, not n.  The entries of x on
-pivoted rows are column k of U; among the rest the pivot row is z_j's own row j (the
-"diagonal" of M's ordering) when ``|x_j| >= PIVOT_THRESHOLD * max |x_i|``, else the
-row of largest |x_i| (threshold partial pivoting: multipliers at most 1 / PIVOT_THRESHOLD;
-the diagonal keeps the fill of the ordering).  L's column k is x / pivot on the remaining
-rows.  So ``P B Q = L U`` over *positions* (step indices), with L and U held in CSC
+pivoted rows are column k of U; among the rest the pivot row is z_j's own row j when
+``|x_j| >= piv_thresh * max |x_i|``, else the row of largest |x_i| (threshold partial
+pivoting, multipliers at most 1 / piv_thresh; the engine uses ``PIVOT_THRESHOLD`` = 1:
+partial pivoting, the diagonal kept on ties only).  L's column k is x / pivot on the
+remaining rows.  So ``P B Q = L U`` over *positions* (step indices), with L and U held in CSC
 arrays over positions after the factorization.
 
 Rank repair (thesis §3.3.1, as the basis manager and the dense engine do): a column
@@ -38,9 +36,10 @@ extraction, an ordering of its pattern, the triangular factors' conversion -- co
 1-3 ms per factorization against 0.05-0.4 ms for the numeric LU itself, and a path
 refactorizes every 50 updates and at every declined update.  The compiled LU reuses the
 ordering of M for every basis of a linearization (and of the next ones: the pattern of
-M does not change) and costs its flops.  Bases that are large and fill much (dense
-Jacobians of the thesis families, n >= 600) factor more slowly here than by a
-supernodal LU; the engine then stays on the manager (see sparse_engine.py).
+M does not change) and costs its flops.  Bases that fill much factor more slowly here
+than by a supernodal LU: dense Jacobians (the thesis families, n >= 600) stay on the
+manager (see sparse_engine.py), and on traffic n = 2452 (L + U ~1e5 entries from M's
+1.3e4) a factorization costs ~20-50 ms here against ~10 ms for SuperLU's numeric LU.
 
 FTRAN, BTRAN and the Forrest-Tomlin update
 ------------------------------------------
@@ -79,10 +78,10 @@ from ._kernels import VAR_A, VAR_T, VAR_V, VAR_W, VAR_S, VAR_Z
 UPD_FILL = 5
 """replace_column's outcome when the update would exceed the fill limit or the storage."""
 
-PIVOT_THRESHOLD = 0.1
-"""Threshold partial pivoting: z_j's own row pivots while ``|x_j| >= 0.1 max |x_i|``
-(SuperLU's threshold under a symmetric ordering, the manager's
-``SYMMETRIC_PIVOT_THRESH``: multipliers stay below 10)."""
+PIVOT_THRESHOLD = 1.0
+"""The sparse engine's pivoting threshold: partial pivoting (multipliers at most 1), as
+COLAMD's column order is made for.  A diagonal preference at 0.1 with AMD's symmetric
+order (the manager's choice) filled more on the traffic model's bases (sparse_engine.py)."""
 
 GROW = -1
 """factor()'s return when L or U did not fit in the preallocated storage (the engine
@@ -192,7 +191,8 @@ def _column(kind, idx, Mp, Mi, Mx, rI, rX, art_sign, rows, vals):
 
 
 @njit(cache=True)
-def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, rep_slot, rep_row):
+def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh,
+           rep_slot, rep_row):
     """LU of the slot basis (see the module docstring).  Returns 0 (the factors are
     valid), the number of dependent slots (slots in rep_slot, their rows in rep_row, row
     -1 for a covering-vector or slack column, which nothing repairs) or GROW.
@@ -286,7 +286,7 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, rep_slot, 
                     amax = a
                     piv = i
         if kind == VAR_Z and pinv[si[s]] < 0 and mark[si[s]] == 1 \
-                and abs(x[si[s]]) >= PIVOT_THRESHOLD * amax:
+                and abs(x[si[s]]) >= piv_thresh * amax:
             piv = si[s]
         if not (amax > rank_tol * cmax) or piv < 0:
             rep_slot[nrep] = s

@@ -56,7 +56,7 @@ class DensePathEngine(PathEngine):
             update_limit = options.factorization_update_limit if options is not None else 50
         self._dense = None
         self.set_matrix(M)
-        self._init_common(update_limit, pivot_tolerance, rank_tolerance,
+        self.init_common(update_limit, pivot_tolerance, rank_tolerance,
                           stability_tolerance, growth_limit)
         self.L = None  # the factors: allocated by the first path (see _allocate)
         self._S = None
@@ -91,7 +91,7 @@ class DensePathEngine(PathEngine):
             self._pending = None
         return self._dense
 
-    def _prepare(self, q, lb, ub):
+    def prepare(self, q, lb, ub):
         if self.L is None:
             self._allocate()
         prob = (self.M, *_NO_CSC, q, self.r, _NO_CSC[1], _NO_CSC[2], lb, ub, _NO_CSC[1])

@@ -50,7 +50,7 @@ _CODES = {K.SOLVED: LinearCode.SOLVED, K.RAY: LinearCode.RAY, K.CYCLE: LinearCod
 
 class PathEngine:
     """What the two engines share.  A subclass sets ``kind`` (K.FAC_DENSE / FAC_SPARSE),
-    the tolerances, ``stats`` and ``n``, and provides :meth:`_prepare` (the factors and
+    the tolerances, ``stats`` and ``n``, and provides :meth:`prepare` (the factors and
     the problem bundle of a path, after ``_allocate``) and :meth:`_grow` (more storage
     for the factors: the sparse kind)."""
 
@@ -58,7 +58,7 @@ class PathEngine:
     kind = K.FAC_DENSE
     chunk = PIVOT_CHUNK
 
-    def _init_common(self, update_limit, pivot_tolerance, rank_tolerance,
+    def init_common(self, update_limit, pivot_tolerance, rank_tolerance,
                      stability_tolerance, growth_limit, fill_factor=2.0):
         self.update_limit = max(1, int(update_limit))
         self.pivot_tolerance = float(pivot_tolerance)
@@ -66,6 +66,7 @@ class PathEngine:
         self.stability_tolerance = float(stability_tolerance)
         self.growth_limit = float(growth_limit)
         self.fill_factor = float(fill_factor)
+        self.pivot_threshold = 1.0  # the sparse LU's diagonal preference (sparse_engine.py)
         self.stats = BasisStats()
         self._rec = None  # the pivot records of a minor log (see _records)
         self.r = np.zeros(self.n)
@@ -102,7 +103,7 @@ class PathEngine:
         opt = path.opt
         tol = np.array([opt.pivot_tolerance, opt.ratio_tolerance, self.rank_tolerance,
                         self.pivot_tolerance, self.stability_tolerance, self.growth_limit,
-                        float(PK.T_PROGRESS), self.fill_factor])
+                        float(PK.T_PROGRESS), self.fill_factor, self.pivot_threshold])
         lim = np.array([int(path.minor_limit), int(opt.lemke_cycle_limit), self.chunk,
                         int(bool(st.free_below)), int(PK.BELOW_ZERO_PIVOTS)], dtype=np.int64)
         tab = (st.sk, st.si, st.xb, st.zval, st.art_sign, self.displaced, self.enter_count)
@@ -113,7 +114,7 @@ class PathEngine:
         table0 = tuple(a.copy() for a in tab[:5]) if self.kind == K.FAC_SPARSE else None
         logged = 0  # pivots logged (a path run again after GROW does not log them twice)
         while True:
-            prob, D, S = self._prepare(q, lb, ub)
+            prob, D, S = self.prepare(q, lb, ub)
             # the state's reset, the factorization (again on the slack basis when needed),
             # the first chunk of pivots and the solution check in one compiled call
             factored, code, msg = K.start_path(

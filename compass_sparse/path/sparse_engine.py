@@ -13,10 +13,14 @@ manager's safeguards.  No Python runs per pivot, nor per refactorization: the pa
 its factorization from compiled code (see the LU module's docstring for why this, and not
 a backend called back from Python, was chosen).
 
-The LU's column order is AMD on the pattern of M + M^T, computed once per pattern of M
+The LU's column order is COLAMD's order of M's columns, computed once per pattern of M
 (the pattern does not change between the linearizations of a solve): a basis' non-unit
-block is mostly a principal submatrix of M, on which that order restricted is a
-fill-reducing order.  The factors' storage is preallocated from M's entries; a
+columns are a subset of M's columns (and r, last), and COLAMD's order of a matrix is a
+fill-reducing order of any subset of its columns under partial pivoting (it bounds the
+fill by that of the Cholesky factor of A^T A, which a subset of columns only thins).
+Measured on traffic n = 2452 against AMD on M + M^T with a diagonal preference (the
+manager's symmetric ordering): L + U 108e3 against 177e3 entries, 1.36 s against 1.74 s a
+solve; on traffic n = 912, 0.086 s against 0.106 s.  The factors' storage is preallocated from M's entries; a
 factorization that does not fit returns to Python, which doubles the storage and runs
 the path again from its start (it is deterministic: the same pivots).
 
@@ -38,7 +42,6 @@ from . import _path_kernels as K
 from . import _sparse_lu as SL
 from .engine import PIVOT_CHUNK, PathEngine
 from ._dense_lu import N_PERM
-from ..basis.ordering import amd_order, symmetrized
 from ..linalg._csc_kernels import csc_is_canonical, csc_same_pattern
 
 __all__ = ["SPARSE_ENGINE_MAX_DENSITY", "SparsePathEngine"]
@@ -87,9 +90,10 @@ class SparsePathEngine(PathEngine):
         self.colkey = None
         self.n = M.shape[0]
         self.set_matrix(M)
-        self._init_common(update_limit, pivot_tolerance, rank_tolerance,
+        self.init_common(update_limit, pivot_tolerance, rank_tolerance,
                           stability_tolerance, growth_limit, fill_factor)
         self.chunk = int(max(16, min(PIVOT_CHUNK, CHUNK_WORK // max(self.n, 1))))
+        self.pivot_threshold = SL.PIVOT_THRESHOLD
         self._S = None
         self._D = None
 
@@ -112,9 +116,17 @@ class SparsePathEngine(PathEngine):
             self._pattern = None  # the column order follows on the first path
 
     def _order(self):
-        """colkey[j]: the position of column j in AMD's order of M + M^T's pattern."""
-        S, _ = symmetrized(self._M)
-        perm = amd_order(S)
+        """colkey[j]: the position of column j in COLAMD's column order of M's pattern
+        (SuperLU's, on a diagonally dominant matrix of M's pattern: only its column
+        permutation is kept)."""
+        # (lazy: scipy's sparse linalg is a heavy import that small solves skip)
+        from scipy.sparse.linalg import splu
+
+        M = self._M
+        A = sp.csc_matrix((np.ones(M.nnz), M.indices, M.indptr), shape=M.shape)
+        A = sp.csc_matrix(A + sp.identity(self.n, format="csc") * (self.n + 1.0))
+        perm_c = splu(A, permc_spec="COLAMD", diag_pivot_thresh=0.0).perm_c
+        perm = np.argsort(perm_c).astype(_I)  # (perm_c[j]: the position of column j)
         colkey = np.empty(self.n, dtype=_I)
         colkey[perm] = np.arange(self.n, dtype=_I)
         self.colkey = colkey
@@ -131,7 +143,7 @@ class SparsePathEngine(PathEngine):
     def _grow(self):
         self._S = SL.grown(self._S)
 
-    def _prepare(self, q, lb, ub):
+    def prepare(self, q, lb, ub):
         if self._pattern is None:
             self._order()
         if self._S is None:
