@@ -24,6 +24,12 @@ here: GAMS' demo licence expired).
 
     python benchmarks/bench_pivots.py --quick     # traffic8, cge_outtax, grid, obstacle
     python benchmarks/bench_pivots.py             # every problem, 3 timed repeats
+    python benchmarks/bench_pivots.py --baseline /path/to/old/tree --suffix engine
+
+With ``--baseline`` every problem is solved in two child processes in turn, one importing
+the package from the baseline tree and one from this tree (before and after in the same
+minutes of a shared machine; the ratio is what to read), and the CSV has one row per tree
+(column ``tree``: "baseline" or "this").
 
 The command, the git revision and the machine are printed and written to the CSV's
 companion ``.json``; the CSV is ``benchmarks/results/pivots[_SUFFIX].csv``.
@@ -191,7 +197,7 @@ def load_reference():
     return ref
 
 
-FIELDS = ["problem", "n", "status", "success", "natural", "pivots", "factorizations", "majors",
+FIELDS = ["tree", "problem", "n", "status", "success", "natural", "pivots", "factorizations", "majors",
           "restarts", "crash", "nfev", "njev", "domain_errors", "cpu", "wall", "user_cpu",
           "net_cpu", "us_per_pivot", "pivots_per_var", "repeats", "counts_repeat",
           "path_pivots", "path_time", "path_source"]
@@ -208,6 +214,18 @@ def git_revision():
         return "unknown"
 
 
+def run_child(name, tree, repeats, time_limit):
+    """run_case in a child process importing compass_sparse from ``tree``."""
+    env = dict(os.environ, PYTHONPATH=str(tree))
+    out = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--child", name,
+                          "--repeats", str(repeats), "--time-limit", str(time_limit)],
+                         env=env, cwd=str(tree), capture_output=True, text=True)
+    lines = [ln for ln in out.stdout.splitlines() if ln.startswith("{")]
+    if not lines:
+        raise RuntimeError(f"{name} in {tree}: {out.stderr[-2000:]}")
+    return json.loads(lines[-1])
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="four problems, one timed repeat")
@@ -217,11 +235,20 @@ def main(argv=None):
     ap.add_argument("--suffix", default="", help="CSV name: pivots[_SUFFIX].csv")
     ap.add_argument("--revision", default=None,
                     help="the revision to record when the tree is an export without git")
+    ap.add_argument("--baseline", default=None,
+                    help="a tree (export) of another revision: each problem is solved by "
+                         "both, in child processes, in turn")
+    ap.add_argument("--baseline-revision", default="", help="the baseline tree's revision")
+    ap.add_argument("--child", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
+    if args.child:  # one problem, its row as JSON (run_child)
+        print(json.dumps(run_case(args.child, args.repeats or 3, args.time_limit)))
+        return
     names = args.problems or (QUICK if args.quick else list(CASES))
     repeats = args.repeats or (1 if args.quick else 3)
     command = "python " + " ".join([sys.argv[0]] + (argv if argv is not None else sys.argv[1:]))
-    info = dict(command=command, revision=args.revision or git_revision(), date=time.strftime("%Y-%m-%d %H:%M"),
+    info = dict(command=command, revision=args.revision or git_revision(),
+                baseline=args.baseline_revision, date=time.strftime("%Y-%m-%d %H:%M"),
                 machine=f"{platform.machine()}, {os.cpu_count()} cores, {platform.python_version()}",
                 numpy=np.__version__)
     print(f"# {info['command']}\n# revision {info['revision']}  {info['date']}  {info['machine']}",
@@ -236,15 +263,19 @@ def main(argv=None):
         hdr = (f"{'problem':18s} {'n':>5s} {'status':10s} {'pivots':>7s} {'PATH':>5s} "
                f"{'fact':>5s} {'maj':>4s} {'rst':>3s} {'crash':>5s} {'cpu s':>7s} "
                f"{'wall s':>7s} {'net s':>7s} {'us/piv':>7s}")
-        print(hdr, flush=True)
-        for name in names:
-            r = run_case(name, repeats, args.time_limit)
+        print(hdr + ("   (* baseline)" if args.baseline else ""), flush=True)
+        trees = ([("baseline", Path(args.baseline)), ("this", HERE.parent)]
+                 if args.baseline else [("this", None)])
+        for name, (tree, root) in ((nm, t) for nm in names for t in trees):
+            r = (run_child(name, root, repeats, args.time_limit) if root is not None
+                 else run_case(name, repeats, args.time_limit))
+            r["tree"] = tree
             pr = ref.get(name, {})
             r.update(path_pivots=pr.get("pivots", ""), path_time=pr.get("time_s", ""),
                      path_source=pr.get("source", ""))
             w.writerow(r)
             fh.flush()
-            print(f"{name:18s} {r['n']:5d} {r['status']:10s} {r['pivots']:7d} "
+            print(f"{name[:13] + ('*' if tree == 'baseline' else ''):18s} {r['n']:5d} {r['status']:10s} {r['pivots']:7d} "
                   f"{r['path_pivots'] or '-':>5s} {r['factorizations']:5d} {r['majors']:4d} "
                   f"{r['restarts']:3d} {r['crash']:5d} {r['cpu']:7.3f} {r['wall']:7.3f} "
                   f"{r['net_cpu']:7.3f} {r['us_per_pivot']:7.0f}"

@@ -11,8 +11,10 @@ log level and never from the clock -- and recorded in ``Result.routes``:
               numba is loaded (the cold start: :func:`kernel_route`, decided when the solve
               starts and held to its end);
 ``path``      "dense engine" (n <= ``DENSE_ENGINE_MAX_N``, option ``path_basis = "auto"``),
+              "sparse engine" (above it, ``path_basis = "auto"``, ``engine = "auto"``, and
+              a Jacobian of at most ``SPARSE_ENGINE_MAX_DENSITY`` entries per column),
               "dense basis" (``path_basis = "dense"``, n <= ``DENSE_BASIS_MAX_N``) or
-              "sparse basis" (every other case);
+              "sparse basis" (the Python loop over the basis manager: every other case);
 ``nms``       "compiled" (``engine = "auto"``, compiled kernels, the problem left unscaled
               by the scaling pass, n <= ``COMPILED_NMS_MAX_N``) or "python";
 ``crash``     "compiled" (``engine = "auto"``, every block dense: n <= ``DENSE_SOLVE_MAX_N``)
@@ -48,6 +50,7 @@ from .basis.types import BasisOptions
 from .homotopy.tracker import compiled_tracker_available
 from .options import HOMOTOPY_DENSE_MAX_N, Options
 from .path.dense_engine import DensePathEngine
+from .path.sparse_engine import SPARSE_ENGINE_MAX_DENSITY, SparsePathEngine
 
 __all__ = ["COMPILED_NMS_MAX_N", "DENSE_BASIS_MAX_N", "DENSE_ENGINE_MAX_N",
            "UPDATE_LIMIT_FLOOR", "Routes", "basis_factory", "choose_routes", "kernel_route"]
@@ -97,24 +100,29 @@ class kernel_route:
         return self._mode.__exit__(*exc)
 
 
-def path_route(n: int, options: Options) -> str:
-    """The basis of the pivotal paths of a problem of order n."""
+def path_route(n: int, options: Options, nnz: int | None = None) -> str:
+    """The basis of the pivotal paths of a problem of order n whose Jacobian has ``nnz``
+    entries (None: unknown, taken as sparse)."""
     if options.path_basis == "auto" and n <= DENSE_ENGINE_MAX_N:
         return "dense engine"
+    if (options.path_basis == "auto" and options.engine == "auto"
+            and (nnz is None or nnz <= SPARSE_ENGINE_MAX_DENSITY * n)):
+        return "sparse engine"
     if options.path_basis == "dense" and n <= DENSE_BASIS_MAX_N:
         return "dense basis"
     return "sparse basis"
 
 
 def choose_routes(n: int, options: Options, *, kernels: str = "compiled",
-                  scaled: bool = False) -> Routes:
-    """The routes of a solve of a problem of order n (after the preprocessor); ``scaled``:
-    the scaling pass scaled it (the compiled major iterations judge points unscaled)."""
+                  scaled: bool = False, nnz: int | None = None) -> Routes:
+    """The routes of a solve of a problem of order n (after the preprocessor) whose
+    Jacobian has ``nnz`` entries; ``scaled``: the scaling pass scaled it (the compiled
+    major iterations judge points unscaled)."""
     compiled = options.engine == "auto"
     running = compiled and kernels == "compiled"
     return Routes(
         kernels=kernels,
-        path=path_route(n, options),
+        path=path_route(n, options, nnz),
         nms="compiled" if running and not scaled and 0 < n <= COMPILED_NMS_MAX_N else "python",
         crash="compiled" if compiled and 0 < n <= DENSE_SOLVE_MAX_N else "python",
         homotopy="compiled" if (running and n <= HOMOTOPY_DENSE_MAX_N
@@ -132,6 +140,8 @@ def basis_factory(route: str, options: Options, deadline=None):
         limit = min(options.factorization_update_limit, max(n, UPDATE_LIMIT_FLOOR))
         if route == "dense engine":
             return DensePathEngine(M, options, update_limit=limit)
+        if route == "sparse engine":
+            return SparsePathEngine(M, options, update_limit=limit)
         if route == "dense basis":
             return DenseBasis(M)
         return BasisManager(M, options=BasisOptions(update_limit=limit, deadline=deadline,

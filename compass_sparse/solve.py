@@ -319,7 +319,8 @@ def _from_start(problem, pre, work, f0, J0, phi0, verdict0, opt, t0, passes, ker
         z0, f0, J0 = z0 / sc.col, sc.row * f0, sc.scale_jacobian(J0)
         phi0 = fb_phi(z0, f0, inner.lb, inner.ub)
     deadline = t0 + opt.time_limit if math.isfinite(opt.time_limit) else None
-    routes = choose_routes(inner.n, opt, kernels=kernels, scaled=sc is not None)
+    routes = choose_routes(inner.n, opt, kernels=kernels, scaled=sc is not None,
+                           nnz=J0.nnz)
     log_major, log_minor = loggers(opt)
     solver = NMSSolver(inner, opt, make_basis=basis_factory(routes.path, opt, deadline),
                        routes=routes, callback=callback, deadline=deadline,

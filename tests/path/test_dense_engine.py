@@ -61,7 +61,7 @@ def test_engine_path_stops_at_the_time_limit_between_pivot_chunks(monkeypatch):
     pivot and a deadline in the past the path stops after one pivot."""
     import time
 
-    monkeypatch.setattr(dense_path, "PIVOT_CHUNK", 1)
+    monkeypatch.setattr(DensePathEngine, "chunk", 1)
     g = gen.p_matrix_lcp(50, "grid", 1, "ncp")
     M, q, lb, ub = g.lcp
     res = PivotalPath(M, q, lb, ub, DensePathEngine(M), Options(),

@@ -1,6 +1,7 @@
 """The log never changes the arithmetic: a solve at verbosity 3 (major and minor logs)
 returns the bits and counts of the same solve at verbosity 0, on every route -- the
-compiled dense engine (which reports its pivots from a record buffer), the sparse basis,
+compiled dense and sparse engines (which report their pivots from a record buffer), the
+sparse basis,
 the compiled and Python major iterations, restarts, an LCP -- and logs one minor line per
 pivot it makes."""
 from __future__ import annotations
@@ -49,8 +50,12 @@ def _cases():
          {"homotopy": "off", "engine": "reference"}),
         ("n=400 (dense engine above the dense basis' order)",
          (_nonlinear(gen.p_matrix_lcp(400, "banded", 3, "mixed")),), {"crash_method": "none"}),
-        ("n=576 (sparse basis)", (_nonlinear(gen.obstacle_problem(24, 1)),),
+        ("n=576 (sparse engine)", (_nonlinear(gen.obstacle_problem(24, 1)),),
          {"crash_method": "none"}),
+        ("n=576 (sparse basis: the Python loop)", (_nonlinear(gen.obstacle_problem(24, 1)),),
+         {"crash_method": "none", "path_basis": "sparse"}),
+        ("traffic n=912 (sparse engine, 586 pivots)",
+         (gen.traffic_equilibrium(8).problem,), {}),
     ]
 
 
@@ -79,6 +84,8 @@ def test_verbosity_3_solves_the_silent_solves_bits(case, minor_log):
     assert minor_log == []
     loud = cs.solve_mcp(*args, options={**opts, "verbosity": 3})
     assert _record(loud) == _record(quiet), name
+    if "(sparse engine" in name:
+        assert quiet.routes["path"] == "sparse engine"
     pivots = [s for s in minor_log if s.startswith("minor") and "direct step" not in s]
     assert len(pivots) == loud.minor_iterations, name
     majors = [s for s in minor_log if s[:5].strip().isdigit()]

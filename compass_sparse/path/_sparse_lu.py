@@ -1,0 +1,613 @@
+"""The sparse LU of the compiled path engine's basis and its Forrest-Tomlin updates
+(:mod:`compass_sparse.path._path_kernels` runs the path on them; the engine is
+:mod:`compass_sparse.path.sparse_engine`).
+
+The basis B (n x n) has one column per slot, as in :mod:`compass_sparse.path._dense_lu`:
+``M[:, i]`` for a basic z_i, ``-e_i`` for w_i and for a fixed variable's free slack,
+``+e_i`` for v_i, ``art_sign[i] e_i`` for an artificial and the covering vector r for t.
+
+Factorization: left-looking LU (Gilbert-Peierls) with threshold partial pivoting
+---------------------------------------------------------------------------------
+Columns are eliminated in a fixed order: the unit columns first (each pivots on its own
+row and eliminates nothing), then the z columns in the order ``colkey`` of M's columns
+(COLAMD's, computed once per pattern by the engine), then r.  Step k takes the column
+b = B[:, s] and solves ``L_k x = b`` with the k columns of L made so far: the rows
+reached from b's nonzeros in the graph of L (depth-first search, Gilbert and Peierls
+1988) in topological order, so a step costs its flops, not n.  The entries of x on
+pivoted rows are column k of U; among the rest the pivot row is z_j's own row j when
+``|x_j| >= piv_thresh * max |x_i|``, else the row of largest |x_i| (threshold partial
+pivoting, multipliers at most 1 / piv_thresh; the engine uses ``PIVOT_THRESHOLD`` = 1:
+partial pivoting, the diagonal kept on ties only).  L's column k is x / pivot on the
+remaining rows.  So ``P B Q = L U`` over *positions* (step indices), with L and U held in CSC
+arrays over positions after the factorization.
+
+Rank repair (thesis §3.3.1, as the basis manager and the dense engine do): a column
+whose largest remaining entry is at most ``rank_tol * ||B[:, s]||_inf`` (or a second unit
+column on a row already covered) is dependent; it gets no position.  After the last
+column the rows left without a pivot, in increasing order, go to the dependent slots in
+increasing slot order: each such slot becomes an artificial unit column on its row, and
+the caller factors the repaired table again (a dependent covering vector or slack column
+cannot be repaired: the basis is singular).
+
+Why a compiled LU and not the backends' (SuperLU, UMFPACK, KLU) with reverse
+communication: measured on the traffic model (n = 912), the Python around a backend
+factorization of the basis -- the slot table's column assembly, the non-unit block's
+extraction, an ordering of its pattern, the triangular factors' conversion -- cost
+1-3 ms per factorization against 0.05-0.4 ms for the numeric LU itself, and a path
+refactorizes every 50 updates and at every declined update.  The compiled LU reuses the
+ordering of M for every basis of a linearization (and of the next ones: the pattern of
+M does not change) and costs its flops.  Bases that fill much factor more slowly here
+than by a supernodal LU: dense Jacobians (the thesis families, n >= 600) stay on the
+manager (see sparse_engine.py), and on traffic n = 2452 (L + U ~1e5 entries from M's
+1.3e4) a factorization costs ~20-50 ms here against ~10 ms for SuperLU's numeric LU.
+
+FTRAN, BTRAN and the Forrest-Tomlin update
+------------------------------------------
+As the basis manager's factors (:mod:`compass_sparse.basis.manager`, the same formulas;
+Forrest and Tomlin 1972): after k updates ``R_k ... R_1 L^{-1} P B Q_k = U_k`` with U on
+positions 0 .. n+k-1 (a replaced position is *dead*: empty column, unit diagonal);
+FTRAN ``w = P a; w = L^{-1} w; w = R_k...R_1 w; w = U^{-1} w; x = Q^T w``, each solve
+column-oriented and skipping zeros, so a sparse right-hand side costs O(n) index checks
+plus its flops.  The update replacing position p by a column with spike s:
+``y = U^{-T} e_p`` (row form of the fresh U plus the appended columns), row eta
+``c_i = -u_pp y_i`` (i > p), new diagonal ``d2 = u_pp y^T s`` appended as position
+n + k with column s (row p dropped); position p dies.
+
+Safeguards (each declines the update: the path refactorizes, with the repair):
+
+* ``update_tol`` (the manager's ``pivot_tolerance``, 1e-11): refused when
+  ``|d_p u_pp| <= update_tol ||s||_inf``, ``|d_p| <= update_tol ||d||_inf`` or
+  ``|d2| <= update_tol ||s||_inf`` (d = B^{-1} a);
+* ``stab_tol`` (1e-8): ``|d1 - d2| > stab_tol |d1|`` with ``d1 = d_p u_pp`` (the two
+  computations of the new diagonal disagree);
+* ``growth_limit`` (100, as the dense engine): a row-eta multiplier ``|c_i|`` above it;
+* fill (the manager's ``fill_factor``, 2): L, U and the etas would hold more than
+  ``fill_factor`` times the fresh factorization's entries, or the preallocated storage
+  is full;
+
+and the update limit (``factorization_update_limit``) refactorizes in any case.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .._jit import njit
+from ._dense_lu import UPD_GROWTH, UPD_LIMIT, UPD_OK, UPD_REFUSED, UPD_UNSTABLE
+from ._kernels import VAR_A, VAR_T, VAR_V, VAR_W, VAR_S, VAR_Z
+
+UPD_FILL = 5
+"""replace_column's outcome when the update would exceed the fill limit or the storage."""
+
+PIVOT_THRESHOLD = 1.0
+"""The sparse engine's pivoting threshold: partial pivoting (multipliers at most 1), as
+COLAMD's column order is made for.  A diagonal preference at 0.1 with AMD's symmetric
+order (the manager's choice) filled more on the traffic model's bases (sparse_engine.py)."""
+
+GROW = -1
+"""factor()'s return when L or U did not fit in the preallocated storage (the engine
+grows it and runs the path again)."""
+
+# the header array h (int64) of the factors
+H_M1, H_NNZL, H_UFREE, H_NNZU, H_NNZR, H_BASE, H_N = range(7)
+N_HEADER = 8
+
+
+def allocate(n: int, update_limit: int, nnz_guess: int):
+    """The factor tuple of an n x n basis with room for ``update_limit`` updates and about
+    ``nnz_guess`` entries in L and in U: nothing is allocated by a path after this (a
+    factorization that does not fit returns GROW)."""
+    lim = max(int(update_limit), 1)
+    N = n + lim + 1
+    capL = max(int(nnz_guess), 4 * n, 1024)
+    capU = capL + lim * (n + 1)
+    capR = max(lim * (n + 1), 1024)
+    h = np.zeros(N_HEADER, dtype=np.int64)
+    h[H_N] = n
+    i64 = np.int64
+    return (h,
+            np.zeros(n + 1, i64), np.zeros(capL, i64), np.zeros(capL),          # L
+            np.zeros(N, i64), np.zeros(N, i64), np.zeros(capU, i64), np.zeros(capU),
+            np.ones(N),                                                         # U
+            np.zeros(n + 1, i64), np.zeros(capU, i64), np.zeros(capU),          # U rows
+            np.zeros(N, i64),                                                   # dead
+            np.zeros(lim + 1, i64), np.zeros(capR, i64), np.zeros(capR),
+            np.zeros(lim + 1, i64),                                             # R
+            np.zeros(n, i64), np.zeros(N, i64), np.zeros(n, i64),   # pinv, slot_at, pos_of
+            np.zeros(5 * n + 4, i64),                                           # int work
+            np.zeros((3, N)))                                                   # float work
+
+
+def grown(S, factor: float = 2.0):
+    """A factor tuple like S with ``factor`` times its L and U storage."""
+    n = int(S[0][H_N])
+    lim = S[13].shape[0] - 1
+    return allocate(n, lim, int(factor * S[2].shape[0]))
+
+
+def empty():
+    """The factor tuple of the dense engine's calls (no sparse factors)."""
+    return allocate(1, 1, 0)
+
+
+@njit(cache=True, inline="always")
+def _unit_sign(kind, idx, art_sign):
+    if kind == VAR_W or kind == VAR_S:
+        return -1.0
+    if kind == VAR_A:
+        return float(art_sign[idx])
+    return 1.0
+
+
+@njit(cache=True)
+def _dfs(j, Lp, Li, pinv, top, xi, pstack, mark):
+    """Depth-first search of the graph of L from row j (Gilbert-Peierls; CSparse's
+    cs_dfs without recursion): pushes the rows reached, in reverse topological order,
+    on xi[top - ...]; returns the new top."""
+    head = 0
+    xi[0] = j
+    while head >= 0:
+        j = xi[head]
+        J = pinv[j]
+        if mark[j] == 0:
+            mark[j] = 1
+            pstack[head] = 0 if J < 0 else Lp[J]
+        done = True
+        p2 = 0 if J < 0 else Lp[J + 1]
+        p = pstack[head]
+        while p < p2:
+            i = Li[p]
+            if mark[i] == 0:
+                pstack[head] = p + 1
+                head += 1
+                xi[head] = i
+                done = False
+                break
+            p += 1
+        if done:
+            head -= 1
+            top -= 1
+            xi[top] = j
+    return top
+
+
+@njit(cache=True)
+def _column(kind, idx, Mp, Mi, Mx, rI, rX, art_sign, rows, vals):
+    """The entries (rows, vals) of a slot variable's basis column; returns their count."""
+    if kind == VAR_Z:
+        c = 0
+        for e in range(Mp[idx], Mp[idx + 1]):
+            rows[c] = Mi[e]
+            vals[c] = Mx[e]
+            c += 1
+        return c
+    if kind == VAR_T:
+        for e in range(rI.shape[0]):
+            rows[e] = rI[e]
+            vals[e] = rX[e]
+        return rI.shape[0]
+    rows[0] = idx
+    vals[0] = _unit_sign(kind, idx, art_sign)
+    return 1
+
+
+@njit(cache=True)
+def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh,
+           rep_slot, rep_row):
+    """LU of the slot basis (see the module docstring).  Returns 0 (the factors are
+    valid), the number of dependent slots (slots in rep_slot, their rows in rep_row, row
+    -1 for a covering-vector or slack column, which nothing repairs) or GROW.
+
+    A compiled kernel whose length is the algorithm (the elimination order, one
+    Gilbert-Peierls step per column with the pivot choice and the rank test, the repair's
+    row assignment and the conversion to positions): exempt from the package's limit of
+    100 lines per function."""
+    (h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead, Rs, Ri, Rx, Rpos, pinv,
+     slot_at, pos_of, iw, fw) = S
+    n = sk.shape[0]
+    capL = Li.shape[0]
+    capU = Ui.shape[0]
+    order = iw[0:n]
+    xi = iw[n:2 * n]
+    pstack = iw[2 * n:3 * n]
+    mark = iw[3 * n:4 * n]
+    crow = iw[4 * n:5 * n]
+    x = fw[0]
+    cval = fw[1]
+    # elimination order: unit slots in slot order, z slots by colkey, t last
+    m = 0
+    for s in range(n):
+        if sk[s] != VAR_Z and sk[s] != VAR_T:
+            order[m] = s
+            m += 1
+    nunit = m
+    for i in range(n):
+        mark[i] = -1
+    for s in range(n):
+        if sk[s] == VAR_Z:
+            mark[colkey[si[s]]] = s
+    for i in range(n):
+        if mark[i] >= 0:
+            order[m] = mark[i]
+            m += 1
+    for s in range(n):
+        if sk[s] == VAR_T:
+            order[m] = s
+            m += 1
+    for i in range(n):
+        mark[i] = 0
+        pinv[i] = -1
+        x[i] = 0.0
+    k = 0
+    nrep = 0
+    ufree = 0
+    Lp[0] = 0
+    for t in range(n):
+        s = order[t]
+        kind = sk[s]
+        if t < nunit:
+            row = si[s]
+            if pinv[row] >= 0:  # a second unit column on a covered row: dependent
+                rep_slot[nrep] = s
+                nrep += 1
+                continue
+            pinv[row] = k
+            slot_at[k] = s
+            Ud[k] = _unit_sign(kind, row, art_sign)
+            Lp[k + 1] = Lp[k]
+            Us[k] = ufree
+            Ue[k] = ufree
+            k += 1
+            continue
+        nb = _column(kind, si[s], Mp, Mi, Mx, rI, rX, art_sign, crow, cval)
+        cmax = 0.0
+        top = n
+        for e in range(nb):
+            cmax = max(cmax, abs(cval[e]))
+            if mark[crow[e]] == 0:
+                top = _dfs(crow[e], Lp, Li, pinv, top, xi, pstack, mark)
+        for e in range(nb):
+            x[crow[e]] = cval[e]
+        for q in range(top, n):
+            j = xi[q]
+            J = pinv[j]
+            if J < 0:
+                continue
+            xj = x[j]
+            if xj != 0.0:
+                for p in range(Lp[J], Lp[J + 1]):
+                    x[Li[p]] -= Lx[p] * xj
+        amax = 0.0
+        piv = -1
+        for q in range(top, n):
+            i = xi[q]
+            if pinv[i] < 0:
+                a = abs(x[i])
+                if a > amax or (a == amax and piv >= 0 and i < piv):
+                    amax = a
+                    piv = i
+        if kind == VAR_Z and pinv[si[s]] < 0 and mark[si[s]] == 1 \
+                and abs(x[si[s]]) >= piv_thresh * amax:
+            piv = si[s]
+        if not (amax > rank_tol * cmax) or piv < 0:
+            rep_slot[nrep] = s
+            nrep += 1
+            for q in range(top, n):
+                x[xi[q]] = 0.0
+                mark[xi[q]] = 0
+            continue
+        # column k of U (pivoted rows, by position) and of L (the others, by row)
+        cu = 0
+        cl = 0
+        for q in range(top, n):
+            i = xi[q]
+            if x[i] != 0.0 and i != piv:
+                if pinv[i] >= 0:
+                    cu += 1
+                else:
+                    cl += 1
+        if ufree + cu > capU or Lp[k] + cl > capL:
+            for q in range(top, n):
+                x[xi[q]] = 0.0
+                mark[xi[q]] = 0
+            return GROW
+        Us[k] = ufree
+        lp = Lp[k]
+        pv = x[piv]
+        for q in range(top, n):
+            i = xi[q]
+            xv = x[i]
+            if xv != 0.0 and i != piv:
+                if pinv[i] >= 0:
+                    Ui[ufree] = pinv[i]
+                    Ux[ufree] = xv
+                    ufree += 1
+                else:
+                    Li[lp] = i
+                    Lx[lp] = xv / pv
+                    lp += 1
+            x[i] = 0.0
+            mark[i] = 0
+        Ue[k] = ufree
+        Lp[k + 1] = lp
+        Ud[k] = pv
+        pinv[piv] = k
+        slot_at[k] = s
+        k += 1
+    if nrep > 0:
+        # dependent slots in increasing order get the rows left without a pivot
+        for a in range(1, nrep):
+            v = rep_slot[a]
+            b = a - 1
+            while b >= 0 and rep_slot[b] > v:
+                rep_slot[b + 1] = rep_slot[b]
+                b -= 1
+            rep_slot[b + 1] = v
+        f = 0
+        for i in range(n):
+            if pinv[i] < 0:
+                rep_row[f] = i
+                f += 1
+        for a in range(nrep):
+            kind = sk[rep_slot[a]]
+            if kind != VAR_Z and kind != VAR_A:
+                rep_slot[0] = rep_slot[a]
+                rep_row[0] = -1
+                return 1
+        return nrep
+    # L's rows to positions; U's row form (for U^{-T} e_p in the updates)
+    for p in range(Lp[n]):
+        Li[p] = pinv[Li[p]]
+    for i in range(n + 1):
+        Urp[i] = 0
+    for j in range(n):
+        for e in range(Us[j], Ue[j]):
+            Urp[Ui[e] + 1] += 1
+    for i in range(n):
+        Urp[i + 1] += Urp[i]
+    for i in range(n):
+        crow[i] = Urp[i]
+    for j in range(n):
+        for e in range(Us[j], Ue[j]):
+            r = Ui[e]
+            Urj[crow[r]] = j
+            Urx[crow[r]] = Ux[e]
+            crow[r] += 1
+    N = Us.shape[0]
+    for j in range(n, N):
+        slot_at[j] = -1
+        Us[j] = ufree
+        Ue[j] = ufree
+        Ud[j] = 1.0
+    for j in range(N):
+        dead[j] = 0
+    for j in range(n):
+        pos_of[slot_at[j]] = j
+    h[H_M1] = nunit
+    h[H_NNZL] = Lp[n]
+    h[H_UFREE] = ufree
+    h[H_NNZU] = ufree + n
+    h[H_NNZR] = 0
+    h[H_BASE] = Lp[n] + ufree + n
+    Rs[0] = 0
+    return 0
+
+
+@njit(cache=True)
+def solve(S, nupd, w, out, keep):
+    """out = B^{-1} b (by slot) for w = P b scattered over positions (w: fw[0], zero past
+    the scattered entries, overwritten); with ``keep`` the spike (the vector before the U
+    solve) is left in fw[2]."""
+    (h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead, Rs, Ri, Rx, Rpos, pinv,
+     slot_at, pos_of, iw, fw) = S
+    n = out.shape[0]
+    m1 = h[H_M1]
+    for j in range(m1, n):
+        x = w[j]
+        if x != 0.0:
+            for p in range(Lp[j], Lp[j + 1]):
+                w[Li[p]] -= Lx[p] * x
+    for t in range(nupd):
+        p = Rpos[t]
+        s = w[p]
+        for e in range(Rs[t], Rs[t + 1]):
+            s -= Rx[e] * w[Ri[e]]
+        w[n + t] = s
+        w[p] = 0.0
+    N = n + nupd
+    if keep:
+        sp = fw[2]
+        for j in range(N):
+            sp[j] = w[j]
+    for j in range(N - 1, -1, -1):
+        x = w[j]
+        if x != 0.0:
+            x = x / Ud[j]
+            w[j] = x
+            for e in range(Us[j], Ue[j]):
+                w[Ui[e]] -= Ux[e] * x
+    for s in range(n):
+        out[s] = w[pos_of[s]]
+
+
+@njit(cache=True)
+def ftran_column(kind, idx, Mp, Mi, Mx, rI, rX, art_sign, S, nupd, d):
+    """d = B^{-1} a for the basis column a of a slot variable; the spike kept (fw[2])."""
+    pinv = S[17]
+    fw = S[21]
+    n = d.shape[0]
+    w = fw[0]
+    N = n + nupd
+    for j in range(N):
+        w[j] = 0.0
+    if kind == VAR_Z:
+        for e in range(Mp[idx], Mp[idx + 1]):
+            w[pinv[Mi[e]]] = Mx[e]
+    elif kind == VAR_T:
+        for e in range(rI.shape[0]):
+            w[pinv[rI[e]]] = rX[e]
+    else:
+        w[pinv[idx]] = _unit_sign(kind, idx, art_sign)
+    solve(S, nupd, w, d, True)
+
+
+@njit(cache=True)
+def ftran_dense(S, nupd, b, out):
+    """out = B^{-1} b for a dense b (by row)."""
+    pinv = S[17]
+    w = S[21][0]
+    n = b.shape[0]
+    for j in range(n + nupd):
+        w[j] = 0.0
+    for i in range(n):
+        w[pinv[i]] = b[i]
+    solve(S, nupd, w, out, False)
+
+
+@njit(cache=True)
+def btran(S, nupd, c, out):
+    """out = B^{-T} c (c by slot, out by row): U^{-T}, the etas' transposes, L^{-T}."""
+    (h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead, Rs, Ri, Rx, Rpos, pinv,
+     slot_at, pos_of, iw, fw) = S
+    n = c.shape[0]
+    N = n + nupd
+    w = fw[0]
+    for j in range(N):
+        w[j] = 0.0
+    for s in range(n):
+        w[pos_of[s]] = c[s]
+    _utsolve(S, w, 0, N)
+    for t in range(nupd - 1, -1, -1):
+        q = n + t
+        s = w[q]
+        w[q] = 0.0
+        if s != 0.0:
+            w[Rpos[t]] += s
+            for e in range(Rs[t], Rs[t + 1]):
+                w[Ri[e]] -= Rx[e] * s
+    m1 = h[H_M1]
+    for j in range(n - 1, m1 - 1, -1):  # L^T: row j of L^T is column j of L
+        s = w[j]
+        for p in range(Lp[j], Lp[j + 1]):
+            s -= Lx[p] * w[Li[p]]
+        w[j] = s
+    for i in range(n):
+        out[i] = w[pinv[i]]
+
+
+@njit(cache=True)
+def _utsolve(S, w, start, N):
+    """In place w <- U^{-T} w over positions start..N-1 (w[:start] zero): the fresh U by
+    its row form skipping dead positions, the appended columns in dot-product form."""
+    (h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead, Rs, Ri, Rx, Rpos, pinv,
+     slot_at, pos_of, iw, fw) = S
+    n = pinv.shape[0]
+    for j in range(start, min(n, N)):
+        if dead[j] != 0:
+            w[j] = 0.0
+            continue
+        x = w[j]
+        if x != 0.0:
+            x = x / Ud[j]
+            w[j] = x
+            for e in range(Urp[j], Urp[j + 1]):
+                k = Urj[e]
+                if dead[k] == 0:
+                    w[k] -= Urx[e] * x
+    for j in range(max(start, n), N):
+        if dead[j] != 0:
+            w[j] = 0.0
+            continue
+        s = w[j]
+        for e in range(Us[j], Ue[j]):
+            s -= Ux[e] * w[Ui[e]]
+        w[j] = s / Ud[j]
+
+
+@njit(cache=True)
+def replace_column(S, nupd, slot, d, update_tol, stab_tol, growth_limit, fill_factor):
+    """Forrest-Tomlin replacement of the column of ``slot`` by the column whose FTRAN is
+    d, its spike in fw[2] (:func:`ftran_column`).  Returns UPD_OK (the factors represent
+    the new basis) or why the caller must refactorize (UPD_REFUSED, UPD_LIMIT,
+    UPD_UNSTABLE, UPD_GROWTH, UPD_FILL; the factors are unchanged then).
+
+    A compiled kernel whose length is the algorithm (the three safeguards, the fill test
+    and the commit of the row eta and the spike column): exempt from the package's limit
+    of 100 lines per function."""
+    (h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead, Rs, Ri, Rx, Rpos, pinv,
+     slot_at, pos_of, iw, fw) = S
+    n = d.shape[0]
+    if nupd >= Rpos.shape[0] - 1:
+        return UPD_LIMIT
+    N = n + nupd
+    spike = fw[2]
+    y = fw[1]
+    p = pos_of[slot]
+    alpha = d[slot]
+    upp = Ud[p]
+    d1 = alpha * upp
+    snorm = 0.0
+    for i in range(N):
+        snorm = max(snorm, abs(spike[i]))
+    dnorm = 0.0
+    for i in range(n):
+        dnorm = max(dnorm, abs(d[i]))
+    if (not np.isfinite(d1) or not np.isfinite(dnorm) or abs(d1) <= update_tol * snorm
+            or abs(alpha) <= update_tol * dnorm or d1 == 0.0):
+        return UPD_REFUSED
+    for i in range(N):
+        y[i] = 0.0
+    y[p] = 1.0
+    _utsolve(S, y, p, N)
+    d2 = 0.0
+    for i in range(p, N):
+        if y[i] != 0.0:
+            d2 += y[i] * spike[i]
+    d2 *= upp
+    if not np.isfinite(d2) or abs(d1 - d2) > stab_tol * abs(d1):
+        return UPD_UNSTABLE
+    if abs(d2) <= update_tol * snorm:
+        return UPD_REFUSED
+    ne = 0
+    gmax = 0.0
+    for i in range(p + 1, N):
+        if y[i] != 0.0:
+            ne += 1
+            gmax = max(gmax, abs(upp * y[i]))
+    if not gmax <= growth_limit:
+        return UPD_GROWTH
+    nc = 0
+    for i in range(N):
+        if spike[i] != 0.0 and i != p:
+            nc += 1
+    old_len = Ue[p] - Us[p]
+    if (h[H_NNZL] + h[H_NNZU] - old_len + nc + h[H_NNZR] + ne > fill_factor * h[H_BASE]
+            or h[H_UFREE] + nc > Ui.shape[0] or Rs[nupd] + ne > Ri.shape[0]):
+        return UPD_FILL
+    # commit: the spike as column q = N, position p dead, the row eta
+    f = h[H_UFREE]
+    Us[N] = f
+    for i in range(N):
+        if spike[i] != 0.0 and i != p:
+            Ui[f] = i
+            Ux[f] = spike[i]
+            f += 1
+    Ue[N] = f
+    h[H_UFREE] = f
+    Ud[N] = d2
+    Ue[p] = Us[p]
+    Ud[p] = 1.0
+    dead[p] = 1
+    r0 = Rs[nupd]
+    for i in range(p + 1, N):
+        if y[i] != 0.0:
+            Ri[r0] = i
+            Rx[r0] = -upp * y[i]
+            r0 += 1
+    Rs[nupd + 1] = r0
+    Rpos[nupd] = p
+    slot_at[p] = -1
+    slot_at[N] = slot
+    pos_of[slot] = N
+    h[H_NNZU] += nc - old_len
+    h[H_NNZR] += ne
+    return UPD_OK

@@ -1,0 +1,176 @@
+"""The sparse engine: the whole pivotal path in compiled code on a sparse LU.
+
+Above the dense engine's order the basis of a path is large and sparse: unit columns for
+the slacks, columns of M for the basic z, the covering vector.  The Python loop over the
+sparse basis manager (``PivotalPath._pivot_loop``, the reference route) spends most of a
+pivot in Python: 280-400 us per pivot at n = 912 and 620-760 us at n = 2452 on the traffic
+model, against ~10-30 us of arithmetic.  :class:`SparsePathEngine` runs the loop of
+:mod:`compass_sparse.path._path_kernels` -- the one the dense engine runs -- on the sparse
+factors of :mod:`compass_sparse.path._sparse_lu`: a compiled left-looking LU with
+threshold partial pivoting and the thesis' rank repair, hypersparse in its triangular
+solves (each column's elimination costs its flops), and Forrest-Tomlin updates with the
+manager's safeguards.  No Python runs per pivot, nor per refactorization: the path calls
+its factorization from compiled code (see the LU module's docstring for why this, and not
+a backend called back from Python, was chosen).
+
+The LU's column order is COLAMD's order of M's columns, computed once per pattern of M
+(the pattern does not change between the linearizations of a solve): a basis' non-unit
+columns are a subset of M's columns (and r, last), and COLAMD's order of a matrix is a
+fill-reducing order of any subset of its columns under partial pivoting (it bounds the
+fill by that of the Cholesky factor of A^T A, which a subset of columns only thins).
+Measured on traffic n = 2452 against AMD on M + M^T with a diagonal preference (the
+manager's symmetric ordering): L + U 108e3 against 177e3 entries, 1.36 s against 1.74 s a
+solve; on traffic n = 912, 0.086 s against 0.106 s.  The factors' storage is preallocated from M's entries; a
+factorization that does not fit returns to Python, which doubles the storage and runs
+the path again from its start (it is deterministic: the same pivots).
+
+Tolerances (the basis manager's defaults, :class:`compass_sparse.basis.types.BasisOptions`):
+``rank_tolerance`` 1e-11 relative to the column's inf-norm (a dependent column is repaired
+by an artificial), ``pivot_tolerance`` 1e-11 (a replacement refused), ``stability_tolerance``
+1e-8 (|d1 - d2| / |d1|), ``fill_factor`` 2 and ``growth_limit`` ``GROWTH_LIMIT``.
+The route (:func:`compass_sparse.routes.path_route`) gives the engine the problems above
+the dense engine's order whose Jacobian has at most ``SPARSE_ENGINE_MAX_DENSITY`` entries
+per column on average; denser ones (the thesis families' dense Jacobians) stay on the
+basis manager, whose supernodal LU factors a dense block faster.
+"""
+from __future__ import annotations
+
+import hashlib
+
+import numpy as np
+import scipy.sparse as sp
+
+from . import _path_kernels as K
+from . import _sparse_lu as SL
+from .engine import PIVOT_CHUNK, PathEngine
+from ._dense_lu import N_PERM
+from ..linalg._csc_kernels import csc_is_canonical, csc_same_pattern
+
+__all__ = ["SPARSE_ENGINE_MAX_DENSITY", "SparsePathEngine"]
+
+_I = np.int64
+
+SPARSE_ENGINE_MAX_DENSITY = 8.0
+"""Average entries per column of the Jacobian above which a problem's paths stay on the
+basis manager (``routes.path_route``): the compiled LU eliminates column by column, and
+on bases that fill (dense blocks; the CGE models) a supernodal LU is faster, and the
+manager reuses the crash's factors.  Measured (benchmarks/pivots.md): traffic (5.2 entries
+per column) 3.5x faster on the engine at n = 912; the static CGE model at n = 2024 (9.6
+per column) under a 50% output tax 2.07 s on the engine against 0.32 s on the manager
+(36 pivots: its time is the factorizations); the thesis families' dense Jacobians (n per
+column) alike."""
+
+GROWTH_LIMIT = 1e8
+"""The Forrest-Tomlin growth limit of the sparse factors: an update whose row-eta
+multiplier ``|c_i| = |u_pp y_i|`` exceeds it is declined (the dense engine's limit is
+100).  Measured on the traffic model (n = 912, 586 pivots, same path for every limit):
+a limit of 100 declined 315 updates (339 factorizations against the Python loop's 35),
+1e6 declined 57, 1e8 and above 4 (38 factorizations).  Multipliers of 1e4-1e6 are common
+on these bases (variables of different units: flows and potentials) and harmless: the
+d1 / d2 stability test and the final residual check guard the accuracy, as in the basis
+manager, which has no growth test."""
+
+CHUNK_WORK = 2_000_000
+"""Pivots per compiled call are at most CHUNK_WORK / n (and PIVOT_CHUNK): a pivot costs
+O(n) at least, so the time limit is checked about every few milliseconds."""
+
+ORDER_CACHE_SIZE = 8
+"""Column orders of recent patterns of M kept for later solves (a solve makes its own
+engine: the same model solved again reuses its order, ~12 ms at n = 912)."""
+
+_ORDERS: list = []  # (pattern digest, colkey), newest last
+
+_DENSE_PLACEHOLDERS = (np.zeros((2, 2), order="F"), np.zeros((2, 2), order="F"),
+                       np.zeros((2, 2)))
+
+
+class SparsePathEngine(PathEngine):
+    """Runs pivotal paths of a linear MCP with the sparse matrix M (n x n) in compiled
+    code on sparse factors; takes the place of the basis manager (``set_matrix``,
+    ``set_dense_column``, ``stats``, :meth:`run_path`)."""
+
+    kind = K.FAC_SPARSE
+
+    def __init__(self, M, options=None, *, update_limit: int | None = None,
+                 pivot_tolerance: float = 1e-11, rank_tolerance: float = 1e-11,
+                 stability_tolerance: float = 1e-8, growth_limit: float | None = None,
+                 fill_factor: float = 2.0):
+        if growth_limit is None:
+            growth_limit = GROWTH_LIMIT
+        if update_limit is None:
+            update_limit = options.factorization_update_limit if options is not None else 50
+        self._pattern = None  # (indptr, indices) of the ordering's pattern
+        self.colkey = None
+        self.n = M.shape[0]
+        self.set_matrix(M)
+        self.init_common(update_limit, pivot_tolerance, rank_tolerance,
+                          stability_tolerance, growth_limit, fill_factor)
+        self.chunk = int(max(16, min(PIVOT_CHUNK, CHUNK_WORK // max(self.n, 1))))
+        self.pivot_threshold = SL.PIVOT_THRESHOLD
+        self._S = None
+        self._D = None
+
+    def set_matrix(self, M):
+        """Take M (scipy sparse; canonical CSC float64 is used as it is, else a copy)."""
+        if not (sp.issparse(M) and M.format == "csc" and M.dtype == np.float64
+                and M.indices.dtype == M.indptr.dtype
+                and csc_is_canonical(M.indptr, M.indices, M.shape[0], M.nnz)):
+            M = sp.csc_matrix(M, dtype=np.float64, copy=True)
+            M.sum_duplicates()
+            M.sort_indices()
+        self.n = M.shape[0]
+        self._M = M
+        self._Mp = M.indptr.astype(_I, copy=False)
+        self._Mi = M.indices.astype(_I, copy=False)
+        self._Mx = M.data
+        pat = self._pattern
+        if pat is None or not (pat[0].size == self._Mp.size and pat[1].size == self._Mi.size
+                               and csc_same_pattern(self._Mp, self._Mi, pat[0], pat[1])):
+            self._pattern = None  # the column order follows on the first path
+
+    def _order(self):
+        """colkey[j]: the position of column j in COLAMD's column order of M's pattern
+        (SuperLU's, on a diagonally dominant matrix of M's pattern: only its column
+        permutation is kept)."""
+        # (lazy: scipy's sparse linalg is a heavy import that small solves skip)
+        from scipy.sparse.linalg import splu
+
+        M = self._M
+        key = (self.n, hashlib.sha1(self._Mp.tobytes() + self._Mi.tobytes()).digest())
+        for k, colkey in _ORDERS:
+            if k == key:
+                self.colkey = colkey
+                self._pattern = (self._Mp.copy(), self._Mi.copy())
+                return
+        A = sp.csc_matrix((np.ones(M.nnz), M.indices, M.indptr), shape=M.shape)
+        A = sp.csc_matrix(A + sp.identity(self.n, format="csc") * (self.n + 1.0))
+        perm_c = splu(A, permc_spec="COLAMD", diag_pivot_thresh=0.0).perm_c
+        perm = np.argsort(perm_c).astype(_I)  # (perm_c[j]: the position of column j)
+        colkey = np.empty(self.n, dtype=_I)
+        colkey[perm] = np.arange(self.n, dtype=_I)
+        self.colkey = colkey
+        _ORDERS.append((key, colkey))
+        del _ORDERS[:-ORDER_CACHE_SIZE]
+        self._pattern = (self._Mp.copy(), self._Mi.copy())
+
+    def _allocate(self, nnz_guess=None):
+        n = self.n
+        if nnz_guess is None:
+            nnz_guess = 2 * int(self._Mp[-1]) + 8 * n
+        self._S = SL.allocate(n, self.update_limit, nnz_guess)
+        perm = np.zeros((N_PERM, max(n, 2)), dtype=_I)  # (its repair rows serve the LU)
+        self._D = (*_DENSE_PLACEHOLDERS, perm, np.zeros((3, 2)))
+
+    def _grow(self):
+        self._S = SL.grown(self._S)
+
+    def prepare(self, q, lb, ub):
+        if self._pattern is None:
+            self._order()
+        if self._S is None:
+            self._allocate()
+        r = self.r
+        rI = np.flatnonzero(r).astype(_I)
+        prob = (self._D[0], self._Mp, self._Mi, self._Mx, q, r, rI, r[rI], lb, ub,
+                self.colkey)
+        return prob, self._D, self._S
