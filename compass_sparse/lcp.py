@@ -48,7 +48,7 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     opt = Options.coerce(options)
     M, q = _lcp_data(M, q)
     with kernel_route(q.size) as kernels:
-        routes = choose_routes(q.size, opt, kernels=kernels)
+        routes = choose_routes(q.size, opt, kernels=kernels, nnz=M.nnz)
         res = _solve_lcp(M, q, lb, ub, x0, opt, var_names, routes, t0)
     if not res.routes:
         res.routes = routes.as_dict()

@@ -144,12 +144,13 @@ class Options(OptionsMixin):
     factor_reuse: bool = _opt(
         True, "a pivotal path whose start basis has the slot table of the previous path's "
         "factors (or, first, the crash's last reduced Jacobian as its M block) solves with "
-        "GMRES preconditioned by those factors instead of factoring (sparse basis; falls "
-        "back to a fresh factorization when a solve does not reach a backward error of "
-        "1e-12 in 30 steps, and before any pivot)")
+        "GMRES preconditioned by those factors instead of factoring (on the sparse basis "
+        "manager's route, see path_basis; falls back to a fresh factorization when a solve "
+        "does not reach a backward error of 1e-12 in 30 steps, and before any pivot)")
     lu_backend: str = _opt(
-        "auto", "sparse LU of the basis (problems above n = 500; below, the compiled dense "
-        "engine) and of the crash's reduced Jacobians (above order 200; below, dense LU): "
+        "auto", "sparse LU of the basis manager (problems above n = 500; below, the "
+        "compiled dense engine; a value other than 'auto' keeps the paths off the sparse "
+        "engine, whose LU is its own) and of the crash's reduced Jacobians (above order 200; below, dense LU): "
         "'superlu' (scipy) with the ordering of lu_ordering, 'umfpack' (SuiteSparse "
         "through kvxopt; orders by itself, so lu_ordering must be 'auto'), or 'auto' "
         "(SuperLU; with 'auto' for both options the Newton steps that need no pivot "
@@ -289,7 +290,9 @@ class Options(OptionsMixin):
         choices=("auto", "reference"))
     path_basis: str = _opt(
         "auto", "the basis the pivotal paths run on: 'auto' (the compiled dense engine, a dense "
-        "LU with Forrest-Tomlin updates, up to n = 500; the sparse basis manager above), "
+        "LU with Forrest-Tomlin updates, up to n = 500; above, the compiled sparse engine, a "
+        "sparse LU with Forrest-Tomlin updates, for Jacobians of at most 8 entries per "
+        "column when lu_backend and lu_ordering are 'auto', else the sparse basis manager), "
         "'dense' (the Python pivot loop on the dense reference basis, an explicit inverse "
         "with rank-one updates, up to n = 300; the sparse basis manager above) or 'sparse' "
         "(the Python pivot loop on the sparse basis manager at every order); the three take "

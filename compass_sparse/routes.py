@@ -11,8 +11,10 @@ log level and never from the clock -- and recorded in ``Result.routes``:
               numba is loaded (the cold start: :func:`kernel_route`, decided when the solve
               starts and held to its end);
 ``path``      "dense engine" (n <= ``DENSE_ENGINE_MAX_N``, option ``path_basis = "auto"``),
-              "sparse engine" (above it, ``path_basis = "auto"``, ``engine = "auto"``, and
-              a Jacobian of at most ``SPARSE_ENGINE_MAX_DENSITY`` entries per column),
+              "sparse engine" (above it, ``path_basis = "auto"``, ``engine = "auto"``, the
+              sparse LU left to the solver -- ``lu_backend`` and ``lu_ordering`` "auto" and
+              no ``COMPASS_SPARSE_LU`` in the environment: a chosen LU is the manager's --
+              and a Jacobian of at most ``SPARSE_ENGINE_MAX_DENSITY`` entries per column),
               "dense basis" (``path_basis = "dense"``, n <= ``DENSE_BASIS_MAX_N``) or
               "sparse basis" (the Python loop over the basis manager: every other case);
 ``nms``       "compiled" (``engine = "auto"``, compiled kernels, the problem left unscaled
@@ -48,6 +50,7 @@ from .basis.dense import DenseBasis
 from .basis.manager import BasisManager
 from .basis.types import BasisOptions
 from .homotopy.tracker import compiled_tracker_available
+from .linalg.direct import automatic_lu
 from .options import HOMOTOPY_DENSE_MAX_N, Options
 from .path.dense_engine import DensePathEngine
 from .path.sparse_engine import SPARSE_ENGINE_MAX_DENSITY, SparsePathEngine
@@ -106,6 +109,7 @@ def path_route(n: int, options: Options, nnz: int | None = None) -> str:
     if options.path_basis == "auto" and n <= DENSE_ENGINE_MAX_N:
         return "dense engine"
     if (options.path_basis == "auto" and options.engine == "auto"
+            and automatic_lu(options.lu_backend, options.lu_ordering)
             and (nnz is None or nnz <= SPARSE_ENGINE_MAX_DENSITY * n)):
         return "sparse engine"
     if options.path_basis == "dense" and n <= DENSE_BASIS_MAX_N:

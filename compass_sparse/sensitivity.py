@@ -251,7 +251,7 @@ def _linear_mcp(M, q, lo, hi):
     MCP has one solution, which the path reaches."""
     opt = Options(convergence_tolerance=LINEAR_TOLERANCE)
     n = q.size
-    basis = basis_factory(path_route(n, opt), opt)(M)
+    basis = basis_factory(path_route(n, opt, M.nnz), opt)(M)
     return solve_linear_mcp(M, q, lo, hi, basis, opt, np.zeros(n), keep_ray=True,
                             minor_limit=max(10 * n, 1000))
 

@@ -125,6 +125,11 @@ class FactorBudget:
         return value
 
 
+MEMORY_SHARE = 0.8
+"""The share of the memory the system reports available that a basis' factors may take
+(a factorization, or the sparse engine's storage, that would need more is not started:
+MEMORY_LIMIT)."""
+
 MEMINFO_MAX_AGE = 0.5
 """Seconds a reading of the available memory is reused (memory budgets of
 factorizations: a factorization that may take 80% of it is refused)."""
@@ -514,7 +519,7 @@ def solve_sparse(A, b, deadline=None, labels=None, keep=False, backend="auto",
     avail = FactorBudget.available_memory()
     b_ = make_backend(backend, ordering,
                       budget=FactorBudget(deadline=deadline,
-                                          memory_bytes=0.8 * avail if avail else None))
+                                          memory_bytes=MEMORY_SHARE * avail if avail else None))
     if isinstance(b_, AutoBackend):
         b_ = b_.small if A.shape[0] < AUTO_SYMMETRIC_MIN_N else b_.large
     if isinstance(b_, SuperLUBackend):

@@ -66,7 +66,7 @@ import scipy.sparse as sp
 from ..exceptions import CompassError, ProblemError, ShapeError, SingularBasisError
 from . import _kernels as kern
 from . import debug, products
-from .backends import FactorBudget, make_backend
+from .backends import MEMORY_SHARE, FactorBudget, make_backend
 from .factors import UpdatedFactors
 from .repair import select_regular_block
 from .reuse import FactorReuse
@@ -124,7 +124,7 @@ class BasisManager:
         mem = o.memory_limit
         if mem is None:
             avail = FactorBudget.available_memory()
-            mem = 0.8 * avail if avail is not None else None
+            mem = MEMORY_SHARE * avail if avail is not None else None
         self.budget = FactorBudget(o.deadline, None if mem == np.inf else mem)
         self._backend = make_backend(o.backend, o.ordering, o.diag_pivot_thresh, self.budget)
         self._Mc = self._absMc = None

@@ -92,15 +92,27 @@ H_M1, H_NNZL, H_UFREE, H_NNZU, H_NNZR, H_BASE, H_N = range(7)
 N_HEADER = 8
 
 
+def _capacities(n: int, update_limit: int, nnz_guess: int):
+    lim = max(int(update_limit), 1)
+    capL = max(int(nnz_guess), 4 * n, 1024)
+    return lim, n + lim + 1, capL, capL + lim * (n + 1), max(lim * (n + 1), 1024)
+
+
+def storage_bytes(n: int, update_limit: int, nnz_guess: int) -> int:
+    """The bytes :func:`allocate` takes for these arguments (the engine checks them
+    against the memory budget before allocating)."""
+    lim, N, capL, capU, capR = _capacities(n, update_limit, nnz_guess)
+    ints = N_HEADER + (n + 1) + capL + 2 * N + capU + (n + 1) + capU + N \
+        + 2 * (lim + 1) + capR + 2 * n + N + 5 * n + 4
+    floats = capL + capU + N + capU + capR + 3 * N
+    return 8 * (ints + floats)
+
+
 def allocate(n: int, update_limit: int, nnz_guess: int):
     """The factor tuple of an n x n basis with room for ``update_limit`` updates and about
     ``nnz_guess`` entries in L and in U: nothing is allocated by a path after this (a
     factorization that does not fit returns GROW)."""
-    lim = max(int(update_limit), 1)
-    N = n + lim + 1
-    capL = max(int(nnz_guess), 4 * n, 1024)
-    capU = capL + lim * (n + 1)
-    capR = max(lim * (n + 1), 1024)
+    lim, N, capL, capU, capR = _capacities(n, update_limit, nnz_guess)
     h = np.zeros(N_HEADER, dtype=np.int64)
     h[H_N] = n
     i64 = np.int64
@@ -117,11 +129,10 @@ def allocate(n: int, update_limit: int, nnz_guess: int):
             np.zeros((3, N)))                                                   # float work
 
 
-def grown(S, factor: float = 2.0):
-    """A factor tuple like S with ``factor`` times its L and U storage."""
-    n = int(S[0][H_N])
-    lim = S[13].shape[0] - 1
-    return allocate(n, lim, int(factor * S[2].shape[0]))
+def grown_size(S, factor: float = 2.0):
+    """(n, update limit, L's capacity) of a factor tuple like S with ``factor`` times its
+    L and U storage."""
+    return int(S[0][H_N]), S[13].shape[0] - 1, int(factor * S[2].shape[0])
 
 
 def empty():

@@ -44,6 +44,8 @@ from . import _path_kernels as K
 from . import _sparse_lu as SL
 from .engine import PIVOT_CHUNK, PathEngine
 from ._dense_lu import N_PERM
+from ..basis.backends import MEMORY_SHARE, FactorBudget
+from ..exceptions import FactorBudgetError
 from ..linalg._csc_kernels import csc_is_canonical, csc_same_pattern
 
 __all__ = ["SPARSE_ENGINE_MAX_DENSITY", "SparsePathEngine"]
@@ -157,12 +159,33 @@ class SparsePathEngine(PathEngine):
         n = self.n
         if nnz_guess is None:
             nnz_guess = 2 * int(self._Mp[-1]) + 8 * n
-        self._S = SL.allocate(n, self.update_limit, nnz_guess)
+        self._S = self._within_budget(n, self.update_limit, nnz_guess)
         perm = np.zeros((N_PERM, max(n, 2)), dtype=_I)  # (its repair rows serve the LU)
         self._D = (*_DENSE_PLACEHOLDERS, perm, np.zeros((3, 2)))
+        self.stats.backend, self.stats.ordering = "sparse engine", "colamd"
 
     def _grow(self):
-        self._S = SL.grown(self._S)
+        size = SL.grown_size(self._S)
+        self._S = None  # (the old storage is released before the new is taken)
+        self._S = self._within_budget(*size)
+
+    def _within_budget(self, n, update_limit, nnz_guess):
+        """The factors' storage, unless it would exceed ``MEMORY_SHARE`` of the memory the
+        system reports available (the manager's budget for its factors): then
+        FactorBudgetError, which the solve reports as MEMORY_LIMIT."""
+        need = SL.storage_bytes(n, update_limit, nnz_guess)
+        avail = FactorBudget.available_memory()
+        if avail is not None and need > MEMORY_SHARE * avail:
+            raise FactorBudgetError(
+                "memory", f"the sparse engine's factors of a {n} x {n} basis would need "
+                f"{need / 2**30:.1f} GiB ({nnz_guess:.3g} entries of L and U, "
+                f"{update_limit} updates); {MEMORY_SHARE * avail / 2**30:.1f} GiB allowed")
+        return SL.allocate(n, update_limit, nnz_guess)
+
+    def _account(self, istate):
+        super()._account(istate)
+        h = self._S[0]
+        self.stats.max_nnz_lu = max(self.stats.max_nnz_lu, int(h[SL.H_BASE]))
 
     def prepare(self, q, lb, ub):
         if self._pattern is None:

@@ -1,5 +1,10 @@
 """A solve stops with TIME_LIMIT / MEMORY_LIMIT instead of starting a factorization its
-symbolic estimate says cannot finish or fit; the Result reports the LU figures."""
+symbolic estimate says cannot finish or fit; the Result reports the LU figures.
+
+The budget of the basis manager's factorizations is tested on its route (path_basis
+"sparse"; the automatic route gives this problem, 5 Jacobian entries per column, to the
+sparse engine); the sparse engine, whose LU has no symbolic estimate, checks the storage
+of its factors against the memory budget and reports its own figures."""
 
 import numpy as np
 import pytest
@@ -26,8 +31,11 @@ def _natural(res, p):
     return float(np.abs(res.x - np.clip(res.x - f, p.lb, p.ub)).max())
 
 
+MANAGER = {"path_basis": "sparse"}
+
+
 def test_solve_reports_lu_estimates_and_peak_memory(problem, lu_choice):
-    res = cs.solve_mcp(problem.problem)
+    res = cs.solve_mcp(problem.problem, options=MANAGER)
     assert res.status is Status.SOLVED and _natural(res, problem.problem) <= 1e-6
     lu = res.lu
     assert lu["max_nnz_lu"] > 0 and lu["peak_rss_bytes"] > 0
@@ -38,7 +46,7 @@ def test_solve_reports_lu_estimates_and_peak_memory(problem, lu_choice):
 def test_solve_stops_with_time_limit_before_a_factorization_that_cannot_finish(
         problem, monkeypatch, lu_choice):
     monkeypatch.setattr(backends, "FLOP_RATE", 1e-3)     # every factorization 'too slow'
-    res = cs.solve_mcp(problem.problem, options={"time_limit": 3600})
+    res = cs.solve_mcp(problem.problem, options={"time_limit": 3600, **MANAGER})
     if lu_choice in ("superlu:colamd", "umfpack"):
         # no symbolic estimate under these orderings: the check cannot fire
         assert res.status is Status.SOLVED
@@ -51,12 +59,49 @@ def test_solve_stops_with_time_limit_before_a_factorization_that_cannot_finish(
 def test_solve_stops_with_memory_limit_when_the_factors_would_not_fit(
         problem, monkeypatch, lu_choice):
     monkeypatch.setattr(backends.FactorBudget, "available_memory", staticmethod(lambda: 1e3))
-    res = cs.solve_mcp(problem.problem)
+    res = cs.solve_mcp(problem.problem, options=MANAGER)
     if lu_choice in ("superlu:colamd", "umfpack"):
         assert res.status is Status.SOLVED
         return
     assert res.status is Status.MEMORY_LIMIT and res.status.path_code() == 10
     assert "GiB" in res.message and np.all(np.isfinite(res.x))
+
+
+def test_the_sparse_engine_reports_its_factors(problem, lu_choice):
+    """The sparse engine's route left Result.lu empty (backend '', max_nnz_lu 0)."""
+    if lu_choice != "auto":
+        pytest.skip("a chosen LU keeps the paths on the basis manager")
+    res = cs.solve_mcp(problem.problem)
+    assert res.routes["path"] == "sparse engine"
+    assert res.status is Status.SOLVED and _natural(res, problem.problem) <= 1e-6
+    lu = res.lu
+    assert (lu["backend"], lu["ordering"]) == ("sparse engine", "colamd")
+    assert lu["max_nnz_lu"] >= problem.problem.n and lu["peak_rss_bytes"] > 0
+
+
+def test_the_sparse_engine_stops_with_memory_limit_when_its_factors_would_not_fit(
+        problem, monkeypatch, lu_choice):
+    """The sparse engine allocated its factors' storage (and doubled it) without a
+    budget: a basis whose factors could not fit would have exhausted the memory."""
+    if lu_choice != "auto":
+        pytest.skip("a chosen LU keeps the paths on the basis manager")
+    monkeypatch.setattr(backends.FactorBudget, "available_memory", staticmethod(lambda: 1e3))
+    res = cs.solve_mcp(problem.problem)
+    assert res.routes["path"] == "sparse engine"
+    assert res.status is Status.MEMORY_LIMIT and "sparse engine" in res.message
+    assert "GiB" in res.message and np.all(np.isfinite(res.x))
+
+
+def test_a_chosen_lu_keeps_the_paths_on_the_basis_manager(problem, lu_choice):
+    """lu_backend / lu_ordering (or COMPASS_SPARSE_LU) did nothing on the sparse engine's
+    route: the engine has its own LU."""
+    res = cs.solve_mcp(problem.problem, options={"lu_backend": "superlu", "lu_ordering": "amd"})
+    assert res.routes["path"] == "sparse basis" and res.lu["ordering"] == "amd"
+    assert res.status is Status.SOLVED and _natural(res, problem.problem) <= 1e-6
+    if lu_choice == "auto":
+        assert cs.solve_mcp(problem.problem).routes["path"] == "sparse engine"
+    else:
+        assert cs.solve_mcp(problem.problem).routes["path"] == "sparse basis"
 
 
 def test_available_memory_is_read_at_most_every_max_age(monkeypatch):

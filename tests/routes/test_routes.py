@@ -11,6 +11,7 @@ from compass_sparse.exceptions import OptionError
 from compass_sparse.options import HOMOTOPY_DENSE_MAX_N, Options
 from compass_sparse.routes import (COMPILED_NMS_MAX_N, DENSE_BASIS_MAX_N, DENSE_ENGINE_MAX_N,
                                    Routes, choose_routes)
+from compass_sparse.path.sparse_engine import SPARSE_ENGINE_MAX_DENSITY
 
 FIELDS = ("kernels", "path", "nms", "crash", "homotopy")
 
@@ -31,7 +32,13 @@ def test_the_log_level_does_not_choose_a_route(verbosity):
 def test_auto_routes_by_size():
     opt = Options()
     assert choose_routes(DENSE_ENGINE_MAX_N, opt).path == "dense engine"
-    assert choose_routes(DENSE_ENGINE_MAX_N + 1, opt).path == "sparse basis"
+    n = DENSE_ENGINE_MAX_N + 1
+    assert choose_routes(n, opt).path == "sparse engine"  # (no entry count: sparse)
+    assert choose_routes(n, opt, nnz=int(SPARSE_ENGINE_MAX_DENSITY * n)).path == \
+        "sparse engine"
+    assert choose_routes(n, opt, nnz=int(SPARSE_ENGINE_MAX_DENSITY * n) + 1).path == \
+        "sparse basis"
+    assert choose_routes(n, Options(lu_ordering="metis")).path == "sparse basis"
     assert choose_routes(COMPILED_NMS_MAX_N, opt).nms == "compiled"
     assert choose_routes(COMPILED_NMS_MAX_N + 1, opt).nms == "python"
     assert choose_routes(HOMOTOPY_DENSE_MAX_N + 1, opt).homotopy == "python"
@@ -63,3 +70,24 @@ def test_path_basis_forces_the_reference_bases():
 def test_route_options_are_checked(field, value):
     with pytest.raises(OptionError, match=field):
         Options(**{field: value})
+
+
+def test_a_dense_lcp_above_the_dense_engines_order_stays_on_the_basis_manager():
+    """solve_lcp gave its routes no entry count, which the path route takes as sparse: a
+    dense LCP of order 501 went to the compiled sparse engine, whose left-looking LU is
+    for sparse bases.  The route now sees M's entries (and sensitivity's linearized MCP
+    its own)."""
+    import numpy as np
+
+    n = DENSE_ENGINE_MAX_N + 1
+    rng = np.random.default_rng(0)
+    A = rng.normal(size=(n, n)) / n
+    M = A @ A.T + np.eye(n)
+    q = rng.normal(size=n)
+    r = cs.solve_lcp(M, q, options={"crash_method": "none"})
+    assert r.routes["path"] == "sparse basis"
+    assert r.success and r.residual.natural <= 1e-6
+    banded = cs.solve_lcp(gen.p_matrix_lcp(n, "banded", seed=1).lcp[0],
+                          gen.p_matrix_lcp(n, "banded", seed=1).lcp[1],
+                          options={"crash_method": "none"})
+    assert banded.routes["path"] == "sparse engine"

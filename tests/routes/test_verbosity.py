@@ -81,7 +81,10 @@ def minor_log():
 def test_verbosity_3_solves_the_silent_solves_bits(case, minor_log):
     name, args, opts = _cases()[case]
     quiet = cs.solve_mcp(*args, options={**opts, "verbosity": 0})
-    assert minor_log == []
+    # at verbosity 0 only the preprocessor's records reach the logger (the traffic
+    # model's structural-rank warning and its summary: the logging module's levels)
+    assert [s for s in minor_log if not s.startswith(("presolve:", "Preprocessor"))] == []
+    minor_log.clear()
     loud = cs.solve_mcp(*args, options={**opts, "verbosity": 3})
     assert _record(loud) == _record(quiet), name
     if "(sparse engine" in name:
