@@ -35,15 +35,15 @@ Three tests, at the user's ``convergence_tolerance`` tol:
 
 3. *Vanished rows.*  Far enough down a flat tail F underflows: F = a exp(-z) (M z + q)
    is exactly 0, and so is its Jacobian, at z ~ 3e4, where every residual is 0 and test
-   (2) has nothing to divide.  A row whose F value and Jacobian row are both exactly 0
-   at z, although its Jacobian row was not 0 at the solve's start point, is
-   such a tail: the point is not accepted (its d_i is reported as inf).  A row that was
-   0 at the start too is taken to be identically 0 (a variable nothing depends on, whose
-   every value solves its row, as PATH treats it).  The price: a degenerate root hit
-   exactly (F_i = (x - 1)^2 at x = 1 from a start where J_i was not 0) is not accepted
-   either; the solve goes on and ends FLAT_RESIDUAL at that point.  A point that passes (1) but fails (2) is not a
-   solution; when the solve ends there the status says that the residual is small only
-   because F is flat (``Status.FLAT_RESIDUAL``).
+   (2) has nothing to divide.  A row strictly inside its bounds whose F value and
+   Jacobian row are both exactly 0 at z, although its F was not 0 at the solve's start
+   point, is such a tail: the point is not accepted (its d_i is reported as inf).  A row
+   whose F was 0 at the start too may be identically 0 (a variable nothing depends on,
+   whose every value solves its row, as PATH treats it), and a row at a bound is
+   complementary whatever F's sign below the underflow.  The price: a degenerate root
+   hit exactly (F_i = (x - 1)^2 at x = 1, from a start where it was not 0) is not
+   accepted either; the solve goes on and ends FLAT_RESIDUAL at that point.  J is read
+   for this test only where such a row exists.
 """
 from __future__ import annotations
 
@@ -85,8 +85,8 @@ class Verdict:
     def flat_message(self, row_label) -> str:
         if math.isinf(self.step):
             return (f"the residual is 0 only because F vanished: F and its Jacobian are "
-                    f"exactly 0 in row {row_label(self.flat_row)}, whose Jacobian was not 0 "
-                    "at the start point (F underflowed in a flat tail)")
+                    f"exactly 0 in row {row_label(self.flat_row)}, whose F was not 0 at the "
+                    "start point (F underflowed in a flat tail)")
         return (f"the residual is below the tolerance only because F is flat: a Newton step "
                 f"would still move the point by {self.step:.3g} in row "
                 f"{row_label(self.flat_row)}")
@@ -118,11 +118,11 @@ def live_rows(J) -> np.ndarray:
     return np.asarray(abs(J).max(axis=1).todense()).ravel() != 0.0
 
 
-def judge(z, f, lb, ub, tol, jac=None, phi=None, small=False, start_jac=None) -> Verdict:
+def judge(z, f, lb, ub, tol, jac=None, phi=None, small=False, start_f=None) -> Verdict:
     """The three tests.  ``jac(z)`` returns J(z) (sparse) or None when it cannot be
     evaluated; without a Jacobian only test (1) is applied.  ``phi``: fb_phi(z, f) when
     known; ``small``: test (1) is known to pass (the caller has just applied it);
-    ``start_jac``: J at the solve's start point (None: test (3) is skipped)."""
+    ``start_f``: F at the solve's start point (None: test (3) is skipped)."""
     z = np.asarray(z, dtype=float)
     f = np.asarray(f, dtype=float)
     if phi is None:
@@ -131,19 +131,19 @@ def judge(z, f, lb, ub, tol, jac=None, phi=None, small=False, start_jac=None) ->
         return Verdict(False, False)
     if jac is None:
         return Verdict(True, True)
-    # Test (3) asks for J only where a row's F is exactly 0 (rare: its cost is then paid).
-    live = None
-    if start_jac is not None and not f.all():
-        live = live_rows(start_jac) & (f == 0.0)
-    vanish = live is not None and bool(live.any())
-    if max_abs(phi) == 0.0 and not vanish:  # (phi.any() through numpy's wrapper: ~2 us)
+    vanished = None
+    if start_f is not None and not f.all():  # (rare: a row's F exactly 0)
+        vanished = (f == 0.0) & (np.asarray(start_f) != 0.0) & (lb < z) & (z < ub)
+        if not vanished.any():
+            vanished = None
+    if max_abs(phi) == 0.0 and vanished is None:  # (phi.any() via numpy's wrapper: ~2 us)
         return Verdict(True, True)
     J = jac(z)
     if J is None:
         return Verdict(True, True)
     v = _scale_test(z, f, lb, ub, phi, J)
-    if v.solved and vanish:
-        dead = np.flatnonzero(live & ~live_rows(J))
+    if v.solved and vanished is not None:
+        dead = np.flatnonzero(vanished & ~live_rows(J))
         if dead.size:
             return Verdict(False, True, flat_row=int(dead[0]), step=math.inf)
     return v
@@ -195,9 +195,9 @@ class Acceptance:
     (z_user = col * z, F_user = f / row; see :mod:`compass_sparse.scaling`): the verdict is
     always on the user's problem, at the user's tolerance."""
 
-    def __init__(self, lb, ub, tol, row=None, col=None, user_jac=None, start_jac=None):
+    def __init__(self, lb, ub, tol, row=None, col=None, user_jac=None, start_f=None):
         self.lb, self.ub, self.tol = lb, ub, tol
-        self.start_jac = start_jac  #: test (3)'s J at the start point, unscaled (or None)
+        self.start_f = start_f  #: test (3)'s F at the start point, unscaled (or None)
         self.row, self.col = row, col
         #: with a scaling: ``user_jac(z_user)``, the user's J at the user's point (None
         #: when it cannot be evaluated), which the caller guarantees to be evaluated,
@@ -232,7 +232,7 @@ class Acceptance:
         zu, fu = self.user_point(z, f)
         if self.row is None:
             return judge(zu, fu, self.lb, self.ub, self.tol, jac=jac, phi=phi, small=small,
-                         start_jac=self.start_jac)
+                         start_f=self.start_f)
         read = []  # whether J was asked for, and obtained
         if jac is not None and self.user_jac is not None and self.user_jac.applies():
             def direct(y):
@@ -241,7 +241,7 @@ class Acceptance:
                 return J
 
             v = judge(zu, fu, self.lb, self.ub, self.tol, jac=direct, small=small,
-                      start_jac=self.start_jac)
+                      start_f=self.start_f)
             v.reusable = all(read)
             return v
 
@@ -255,6 +255,6 @@ class Acceptance:
             return scale_entries(J, 1.0 / self.row, 1.0 / self.col)
 
         v = judge(zu, fu, self.lb, self.ub, self.tol,
-                  jac=None if jac is None else user_jac, small=small, start_jac=self.start_jac)
+                  jac=None if jac is None else user_jac, small=small, start_f=self.start_f)
         v.reusable = not read
         return v

@@ -329,18 +329,21 @@ def test_flat_tail_ncp_started_past_its_humps_is_not_solved_where_F_underflows(s
         assert "vanished" in r.message or "flat" in r.message
 
 
-def test_vanished_row_is_flat_only_when_its_jacobian_was_alive_at_the_start():
-    """Test (3) of the acceptance: F_i = 0 and J_i = 0 at z is a flat tail when J_i was
-    not 0 at the start point, and an identically zero row (0 at the start too) when it
-    was: any value of its variable solves it.  (A new argument: b6f9c1f's judge knew no
-    start point and accepted every point whose residuals are exactly 0.)"""
-    lb, ub = np.full(2, -np.inf), np.full(2, np.inf)
-    z, f = np.array([3e4, 1.0]), np.array([0.0, 0.0])
-    J_here = sp.csc_matrix(np.array([[0.0, 0.0], [0.0, 2.0]]))
-    alive = sp.csc_matrix(np.array([[1e-9, 0.0], [0.0, 2.0]]))
-    dead = sp.csc_matrix(np.array([[0.0, 0.0], [0.0, 2.0]]))
-    v = judge(z, f, lb, ub, TOL, jac=lambda y: J_here, start_jac=alive)
+def test_vanished_row_is_flat_only_when_its_F_was_not_zero_at_the_start():
+    """Test (3) of the acceptance: F_i = 0 and J_i = 0 at z strictly inside the bounds is
+    a flat tail when F_i was not 0 at the start point, and may be an identically zero
+    row (any value of its variable solves it) when it was; a row at a bound is
+    complementary whatever F's sign below the underflow.  (A new argument: b6f9c1f's
+    judge knew no start point and accepted every point whose residuals are exactly 0.)"""
+    lb, ub = np.array([-np.inf, -np.inf, 0.0]), np.full(3, np.inf)
+    z, f = np.array([3e4, 1.0, 0.0]), np.zeros(3)
+    J_here = sp.csc_matrix(np.diag([0.0, 2.0, 0.0]))
+    v = judge(z, f, lb, ub, TOL, jac=lambda y: J_here, start_f=np.array([1e-9, 0.0, 1.0]))
     assert v.small_residual and not v.solved and v.flat_row == 0 and np.isinf(v.step)
     assert "vanished" in v.flat_message(lambda i: f"F[{i}]")
-    assert judge(z, f, lb, ub, TOL, jac=lambda y: J_here, start_jac=dead).solved
+    # F_0 was 0 at the start too; F_2 vanished at its bound: both accepted
+    assert judge(z, f, lb, ub, TOL, jac=lambda y: J_here, start_f=np.array([0.0, 1.0, 1.0])).solved
     assert judge(z, f, lb, ub, TOL, jac=lambda y: J_here).solved  # no start: not tested
+    # J_0 not 0: a genuine root of row 0, accepted
+    J_root = sp.csc_matrix(np.diag([1e-3, 2.0, 0.0]))
+    assert judge(z, f, lb, ub, TOL, jac=lambda y: J_root, start_f=np.ones(3)).solved
