@@ -128,24 +128,26 @@ def _show(key, v):
         return "none"
     if key in ("var_names", "eqn_names") and isinstance(v, dict):
         return ", ".join(v["first"]) + (", ..." if v["first"] else "")
-    if isinstance(v, dict):
-        return "values"
     return str(v)
+
+
+_VECTORS = ("lb", "ub", "x0", "F(x0)", "F(x1)")
 
 
 def compare(here: dict, stored: dict) -> list[tuple[str, str, str]]:
     """What differs between two fingerprints: [(what, here, in the folder)], empty when
-    they match.  A fingerprint of another layout is compared by n alone."""
+    they match; a vector that differs is (what, "differs", "").  Models of different
+    orders are told apart by n alone; a fingerprint of another layout is compared by n
+    alone."""
     keys = list(_WHAT) if stored.get("format") == FORMAT else ["n"]
     out = []
     for k in keys:
+        a, b = here.get(k), stored.get(k)
         if k == "build":
-            if here.get("build") != stored.get("build"):
-                out.append((_WHAT[k], here.get("build") or "builds",
-                            stored.get("build") or "builds"))
+            if a != b:
+                out.append((_WHAT[k], a or "builds", b or "builds"))
                 break  # nothing else to compare against a model that was not built
             continue
-        a, b = here.get(k), stored.get(k)
         if k in ("var_names", "eqn_names"):
             same = (a is None and b is None) or (a is not None and b is not None
                                                  and a["digest"] == b["digest"])
@@ -153,6 +155,12 @@ def compare(here: dict, stored: dict) -> list[tuple[str, str, str]]:
             same = a is not None and b is not None and float(a) == float(b)
         else:
             same = _same_signature(a, b)
-        if not same:
+        if same:
+            continue
+        if k in _VECTORS:
+            out.append((_WHAT[k], "differs", ""))
+        else:
             out.append((_WHAT[k], _show(k, a), _show(k, b)))
+        if k == "n":
+            break  # every vector differs too: n says it
     return out

@@ -194,12 +194,13 @@ def _check_model(store, builder, scenarios, opt, record, on_mismatch):
         return
     raise ModelMismatchError(
         f"the results in {store.path} are of another model ({_differences(diffs)}): "
-        "resume with the model that wrote them, write to another folder, or pass "
-        "on_mismatch='new' to move them aside and solve afresh", diffs)
+        "resume with the model that wrote them, write to another folder, or move them "
+        "aside and solve afresh (on_mismatch='new'; the command line's --fresh)", diffs)
 
 
 def _differences(diffs) -> str:
-    return "; ".join(f"{what}: {here} here, {there} in the folder"
+    return "; ".join(f"{what} {here}" if here == "differs" else
+                     f"{what}: {here} here, {there} in the folder"
                      for what, here, there in diffs)
 
 
