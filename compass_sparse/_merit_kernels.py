@@ -161,12 +161,15 @@ def normal_map_kernel(z, f, lb, ub, x, nm):
 
 
 @njit(cache=True)
-def flat_step_kernel(z, phi, da, db, indptr, indices, data, row_max, col_max, diag):
+def flat_step_kernel(z, f, lb, ub, phi, da, db, indptr, indices, data, row_max, col_max,
+                     diag):
     """The scale test of :mod:`compass_sparse.nms.acceptance` on a canonical CSC J: over the
-    rows with Phi_i != 0, the largest d_i / (1 + |z_i|) with d_i = |Phi_i| / ||H_i||_inf,
-    H = diag(da) + diag(db) J (d_i = inf where H_i = 0).  Returns (row, d_row, ratio), row
-    -1 when Phi = 0; the first row attains a tie.  ``row_max`` (zeroed), ``col_max`` and
-    ``diag`` are work areas of length n."""
+    rows with Phi_i != 0, the largest d_i / (1 + |z_i|), where d_i is the larger of the
+    Fischer-Burmeister row's Newton step |Phi_i| / ||H_i||_inf, H = diag(da) + diag(db) J,
+    and, where the natural map's F-piece is active (z_i - u_i < F_i < z_i - l_i), the F
+    row's step |F_i| / ||J_i||_inf (d_i = inf where the row is zero).  Returns (row,
+    d_row, ratio), row -1 when Phi = 0; the first row attains a tie.  ``row_max``
+    (zeroed), ``col_max`` and ``diag`` are work areas of length n."""
     csc_abs_maxima(indptr, indices, data, row_max, col_max, diag)
     best, best_d, best_ratio = -1, 0.0, -1.0
     for i in range(z.shape[0]):
@@ -176,6 +179,13 @@ def flat_step_kernel(z, phi, da, db, indptr, indices, data, row_max, col_max, di
         h2 = abs(da[i] + db[i] * diag[i])
         h = h1 if (h1 > h2 or h1 != h1) else h2  # np.maximum
         d = abs(phi[i]) / h if h > 0.0 else np.inf
+        # At a bound the FB row is mostly the bound's own (da = -1): its step says
+        # nothing of F.  The natural map's F row does (F = 1e-9 (x - 1) at x = 0).
+        fi = f[i]
+        if z[i] - ub[i] < fi < z[i] - lb[i]:
+            dn = abs(fi) / row_max[i] if row_max[i] > 0.0 else np.inf
+            if dn > d:
+                d = dn
         ratio = d / (1.0 + abs(z[i]))
         if best < 0 or ratio > best_ratio:
             best, best_d, best_ratio = i, d, ratio
@@ -191,7 +201,7 @@ def scale_test_kernel(z, f, lb, ub, phi, indptr, indices, data):
     da = np.empty(n)
     db = np.empty(n)
     fb_diagonals_kernel(z, f, lb, ub, da, db)
-    return flat_step_kernel(z, phi, da, db, indptr, indices, data, np.zeros(n),
+    return flat_step_kernel(z, f, lb, ub, phi, da, db, indptr, indices, data, np.zeros(n),
                             np.empty(n), np.empty(n))
 
 

@@ -3,7 +3,7 @@
     compass-sparse demo [--problem obstacle|structured|thesis|kojshin|cge] [--n N] [-v]
     compass-sparse cge  [--regions R --sectors N --households H --shock ...] [--csv FILE]
     compass-sparse cge  ... --scenarios tariff=0:0.5:51 [sigma_armington=1,2,4]
-                        [--scenarios-file FILE] [--output DIR] [--workers W]
+                        [--scenarios-file FILE] [--output DIR] [--workers W] [--fresh]
     compass-sparse options          list every solver option with its default
     compass-sparse --version
 
@@ -213,7 +213,8 @@ def _cge_scenarios(args, model, scenarios) -> int:
     print(f"{len(scenarios)} scenarios over {', '.join(names)}; results in {args.output}/")
     try:
         out = solve_batch(model, scenarios, options=_opts(args), workers=args.workers,
-                          output=args.output)
+                          output=args.output,
+                          on_mismatch="new" if args.fresh else "refuse")
     except KeyboardInterrupt:
         print(f"\ninterrupted: the scenarios finished so far are saved in {args.output}/; "
               "run the same command again to resume", file=sys.stderr)
@@ -322,6 +323,9 @@ def _parser() -> argparse.ArgumentParser:
     c.add_argument("--output", default="cge-scenarios", metavar="DIR",
                    help="directory of the Parquet results (a rerun resumes; default "
                    "cge-scenarios)")
+    c.add_argument("--fresh", action="store_true",
+                   help="when --output holds the results of another model, move them into "
+                   "DIR/previous-<time>/ and solve afresh (default: refuse)")
     c.add_argument("--workers", type=int, default=None,
                    help="worker processes (default: every core; 0: in this process)")
     common(c)

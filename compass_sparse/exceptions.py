@@ -46,6 +46,31 @@ class OptionError(CompassError, ValueError):
     """An unknown option name or a value outside its documented range."""
 
 
+class ResultsFolderError(CompassError):
+    """A batch's results folder cannot be used as asked: it holds the results of another
+    model (:class:`ModelMismatchError`) or another batch is writing to it
+    (:class:`FolderLockedError`).  The message names the folder and what to do."""
+
+
+class ModelMismatchError(ResultsFolderError):
+    """A batch was asked to resume in a results folder whose stored model fingerprint
+    differs from its model's (sizes, names, data, the tolerance): ``differences`` lists
+    what differs, as (what, here, in the folder)."""
+
+    def __init__(self, message, differences=()):
+        super().__init__(message)
+        self.differences = tuple(differences)
+
+
+class FolderLockedError(ResultsFolderError):
+    """Another batch holds the results folder's lock (``owner``: its pid, host and start
+    time, as written in the lock file)."""
+
+    def __init__(self, message, owner=None):
+        super().__init__(message)
+        self.owner = owner or {}
+
+
 class SingularBasisError(CompassError):
     """A basis could not be factorized even after rank repair (internal; the pivotal path
     turns it into a linear-solver code)."""

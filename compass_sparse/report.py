@@ -41,7 +41,8 @@ def judge_on(problem: MCP, z, f, opt: Options, phi=None):
             return problem.evaluator.jac(y)
         except CompassError:
             return None
-    return judge(z, f, problem.lb, problem.ub, opt.convergence_tolerance, jac=jac, phi=phi)
+    return judge(z, f, problem.lb, problem.ub, opt.convergence_tolerance, jac=jac, phi=phi,
+                 start_f=problem.evaluator.start_values())
 
 
 def make_result(problem: MCP, status: Status, message: str, z, f, opt: Options, t0, *,

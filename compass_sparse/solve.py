@@ -314,7 +314,8 @@ def _from_start(problem, pre, work, f0, J0, phi0, verdict0, opt, t0, passes, ker
         inner = scale_problem(work, sc)
         user_jac = _UserJacobian(work.evaluator, inner.evaluator, sc)
     acceptance = Acceptance(work.lb, work.ub, opt.convergence_tolerance,
-                            *((sc.row, sc.col) if sc is not None else ()), user_jac=user_jac)
+                            *((sc.row, sc.col) if sc is not None else ()), user_jac=user_jac,
+                            start_f=f0)
     if sc is not None:
         z0, f0, J0 = z0 / sc.col, sc.row * f0, sc.scale_jacobian(J0)
         phi0 = fb_phi(z0, f0, inner.lb, inner.ub)

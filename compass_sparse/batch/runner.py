@@ -5,16 +5,19 @@ worker dies is tried once more, alone.  See :mod:`compass_sparse.batch`."""
 from __future__ import annotations
 
 import logging
+import os
 import pickle
 import time
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..exceptions import OptionError
+from ..exceptions import ModelMismatchError, OptionError
 from ..options import Options
 from ..progress import Progress
 from .executors import make_executor
+from .fingerprint import compare, fingerprint_at
+from .lock import FolderLock
 from .models import as_builder
 from .scenarios import scenario_key
 from .store import ResultStore
@@ -110,7 +113,8 @@ class BatchResult:
 def solve_batch(model, scenarios, *, options=None, executor=None, workers=None,
                 output=None, warm_start: bool = True, predictor: bool = True,
                 record=None, chunk_size: int = 8, retry_failed: bool = False,
-                progress: bool | None = True, compact: bool = True) -> BatchResult:
+                progress: bool | None = True, compact: bool = True,
+                on_mismatch: str = "refuse", lock_timeout: float = 0.0) -> BatchResult:
     """Solve one MCP per scenario.
 
     Parameters
@@ -132,14 +136,78 @@ def solve_batch(model, scenarios, *, options=None, executor=None, workers=None,
     retry_failed : on a rerun, solve again the scenarios stored as failed.
     progress : True draws a bar on a terminal stderr (a log line every 10 s otherwise);
         False logs only the final counts; None nothing.
+    compact : merge the parts into ``output/results.parquet`` at the end.
+    on_mismatch : what to do when ``output`` holds the results of another model (its
+        fingerprint differs, see :mod:`compass_sparse.batch.fingerprint`): ``"refuse"``
+        raises :class:`~compass_sparse.exceptions.ModelMismatchError` naming what
+        differs; ``"new"`` moves those results into ``output/previous-<time>/`` and solves
+        into the emptied folder.
+    lock_timeout : seconds to wait for a folder another batch is writing to, before
+        :class:`~compass_sparse.exceptions.FolderLockedError` (0: at once; inf: wait).
     """
     t0 = time.perf_counter()
     scenarios = [dict(s) for s in scenarios]
-    N = len(scenarios)
     opt = Options.coerce(options)
     if chunk_size < 1:
         raise OptionError(f"chunk_size must be >= 1, got {chunk_size}")
-    store = ResultStore(output) if output is not None else None
+    if on_mismatch not in ("refuse", "new"):
+        raise OptionError(f"on_mismatch must be 'refuse' or 'new', got {on_mismatch!r}")
+    builder = as_builder(model)
+    if output is None:
+        return _run(builder, scenarios, opt, None, t0, executor=executor, workers=workers,
+                    warm_start=warm_start, predictor=predictor, record=record,
+                    chunk_size=chunk_size, retry_failed=retry_failed, progress=progress)
+    os.makedirs(output, exist_ok=True)
+    with FolderLock(output, lock_timeout):
+        store = ResultStore(output)
+        store.clean_temporary()
+        _check_model(store, builder, scenarios, opt, record, on_mismatch)
+        return _run(builder, scenarios, opt, store, t0, executor=executor, workers=workers,
+                    warm_start=warm_start, predictor=predictor, record=record,
+                    chunk_size=chunk_size, retry_failed=retry_failed, progress=progress,
+                    compact=compact)
+
+
+def _check_model(store, builder, scenarios, opt, record, on_mismatch):
+    """Compare the model with the one whose results ``store`` holds; record it in a new
+    folder.  Raises ModelMismatchError, or sets the old results aside ("new")."""
+    stored = store.model()
+    if stored is None and not store.has_results():
+        if scenarios:
+            ref = scenarios[0]
+            store.set_model(fingerprint_at(builder, ref, opt.convergence_tolerance, record),
+                            ref)
+        return
+    if stored is None:  # results written before folders had a fingerprint
+        diffs = [("model fingerprint", "present", "none (an older version wrote it)")]
+    else:
+        ref = stored.get("reference", {})
+        here = fingerprint_at(builder, ref, opt.convergence_tolerance, record)
+        diffs = compare(here, stored.get("fingerprint", {}))
+        if not diffs:
+            return
+    if on_mismatch == "new":
+        dest = store.set_aside()
+        logger.warning("batch: %s held the results of another model (%s): moved to %s",
+                       store.path, _differences(diffs), dest)
+        _check_model(store, builder, scenarios, opt, record, on_mismatch)
+        return
+    raise ModelMismatchError(
+        f"the results in {store.path} are of another model ({_differences(diffs)}): "
+        "resume with the model that wrote them, write to another folder, or move them "
+        "aside and solve afresh (on_mismatch='new'; the command line's --fresh)", diffs)
+
+
+def _differences(diffs) -> str:
+    return "; ".join(f"{what} {here}" if here == "differs" else
+                     f"{what}: {here} here, {there} in the folder"
+                     for what, here, there in diffs)
+
+
+def _run(builder, scenarios, opt, store, t0, *, executor, workers, warm_start, predictor,
+         record, chunk_size, retry_failed, progress, compact=True) -> BatchResult:
+    """The batch on a checked (and locked) store, or on none."""
+    N = len(scenarios)
     rows = _finished_rows(scenarios, store, retry_failed)
     todo = [i for i in range(N) if i not in rows]
     parent = scenario_tree(scenarios) if warm_start else np.full(N, -1, dtype=np.int64)
@@ -151,7 +219,7 @@ def solve_batch(model, scenarios, *, options=None, executor=None, workers=None,
     tasks.sort(key=lambda p: (-p[1], p[0][0]))
     counts = (_Counts(N, len(rows), Progress(bool(progress), after=0.0, every=10.0))
               if progress is not None else None)
-    blob = _pickler.dumps(as_builder(model), protocol=pickle.HIGHEST_PROTOCOL)
+    blob = _pickler.dumps(builder, protocol=pickle.HIGHEST_PROTOCOL)
     ex = make_executor(executor, workers) if todo else None
     task_base = {"options": opt, "warm": warm_start, "predictor": predictor and warm_start,
                  "record": None if record is None else list(record)}

@@ -84,6 +84,10 @@ def _solve_one(builder, idx, params, parent, state, task) -> dict:
         res = solve_mcp(prob, options=task["options"], basis=basis)
     except Exception as exc:
         return failure_row(row, params, f"the solver raised {exc!r}", t0)
+    if res.status is Status.USER_INTERRUPT:
+        # Ctrl-C stops the batch: the scenario is not finished, and a row would keep it
+        # from being solved when the batch is resumed.
+        raise KeyboardInterrupt
     rep = res.residual
     row.update(_param_columns(params))
     row.update(

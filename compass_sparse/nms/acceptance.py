@@ -1,6 +1,6 @@
 """When a point counts as a solution of MCP(F, [l, u]).
 
-Two tests, both at the user's ``convergence_tolerance`` tol:
+Three tests, at the user's ``convergence_tolerance`` tol:
 
 1. *Residuals.*  ||Phi_FB(z)||_2 <= tol **and** the natural residual
    ||z - pi(z - F(z))||_inf <= tol.  Neither bounds the other tightly (|Phi_i| can be
@@ -20,9 +20,30 @@ Two tests, both at the user's ``convergence_tolerance`` tol:
 
    At a genuine solution d_i is of the order of the residual divided by the row's scale;
    in a flat tail it is the distance still to go (1 for exp(-x), x for -1/(1+x)).  A row
-   with H_i = 0 and Phi_i != 0 fails.  A point that passes (1) but fails (2) is not a
-   solution; when the solve ends there the status says that the residual is small only
-   because F is flat (``Status.FLAT_RESIDUAL``).
+   with H_i = 0 and Phi_i != 0 fails.
+
+   At a bound the FB row is mostly the bound's (z_i = l_i, F_i < 0: H_i ~ -e_i), so its
+   step is ~|Phi_i| whatever F does: F = 1e-9 (x - 1) on x >= 0 looked solved at x = 0.
+   So d_i is also, where the natural map's F-piece is active (z_i - u_i < F_i < z_i - l_i,
+   the min-map's value is F_i and its Newton row is J_i), the larger of that and
+
+       |F_i| / ||J_i||_inf,
+
+   the step of the natural map's Newton row.  Where the bound's piece is active instead
+   the natural map's step is |z_i - l_i| (or |z_i - u_i|), at most tol by test (1).  The
+   verdict is then the same at every small-residual point of a flat F, whatever the start.
+
+3. *Vanished rows.*  Far enough down a flat tail F underflows: F = a exp(-z) (M z + q)
+   is exactly 0, and so is its Jacobian, at z ~ 3e4, where every residual is 0 and test
+   (2) has nothing to divide.  A row strictly inside its bounds whose F value and
+   Jacobian row are both exactly 0 at z, although its F was not 0 at the solve's start
+   point, is such a tail: the point is not accepted (its d_i is reported as inf).  A row
+   whose F was 0 at the start too may be identically 0 (a variable nothing depends on,
+   whose every value solves its row, as PATH treats it), and a row at a bound is
+   complementary whatever F's sign below the underflow.  The price: a degenerate root
+   hit exactly (F_i = (x - 1)^2 at x = 1, from a start where it was not 0) is not
+   accepted either; the solve goes on and ends FLAT_RESIDUAL at that point.  J is read
+   for this test only where such a row exists.
 """
 from __future__ import annotations
 
@@ -40,7 +61,8 @@ from ..merit import fb_jacobian_diagonals_arrays
 from ..box import float_vectors
 from ..scaling import scale_entries
 
-__all__ = ["FLAT_STEP_RTOL", "Verdict", "judge", "residuals_small", "Acceptance"]
+__all__ = ["FLAT_STEP_RTOL", "Verdict", "judge", "live_rows", "residuals_small",
+           "Acceptance"]
 
 FLAT_STEP_RTOL = 1e-3
 """Largest Newton displacement d_i, relative to 1 + |z_i|, of an accepted point."""
@@ -61,6 +83,10 @@ class Verdict:
     reusable: bool = field(default=True, compare=False)
 
     def flat_message(self, row_label) -> str:
+        if math.isinf(self.step):
+            return (f"the residual is 0 only because F vanished: F and its Jacobian are "
+                    f"exactly 0 in row {row_label(self.flat_row)}, whose F was not 0 at the "
+                    "start point (F underflowed in a flat tail)")
         return (f"the residual is below the tolerance only because F is flat: a Newton step "
                 f"would still move the point by {self.step:.3g} in row "
                 f"{row_label(self.flat_row)}")
@@ -86,22 +112,41 @@ def residuals_small(z, f, lb, ub, tol, phi=None) -> bool:
     return bool((np.abs(mm) <= tol).all())
 
 
-def judge(z, f, lb, ub, tol, jac=None, phi=None, small=False) -> Verdict:
-    """Both tests.  ``jac(z)`` returns J(z) (sparse) or None when it cannot be evaluated;
-    without a Jacobian only test (1) is applied.  ``phi``: fb_phi(z, f) when known;
-    ``small``: test (1) is known to pass (the caller has just applied it)."""
+def live_rows(J) -> np.ndarray:
+    """The rows of J with a nonzero stored entry."""
+    J = sp.csr_matrix(J)
+    return np.asarray(abs(J).max(axis=1).todense()).ravel() != 0.0
+
+
+def judge(z, f, lb, ub, tol, jac=None, phi=None, small=False, start_f=None) -> Verdict:
+    """The three tests.  ``jac(z)`` returns J(z) (sparse) or None when it cannot be
+    evaluated; without a Jacobian only test (1) is applied.  ``phi``: fb_phi(z, f) when
+    known; ``small``: test (1) is known to pass (the caller has just applied it);
+    ``start_f``: F at the solve's start point (None: test (3) is skipped)."""
     z = np.asarray(z, dtype=float)
     f = np.asarray(f, dtype=float)
     if phi is None:
         phi = fb_phi(z, f, lb, ub)
     if not (small or residuals_small(z, f, lb, ub, tol, phi)):
         return Verdict(False, False)
-    if jac is None or max_abs(phi) == 0.0:  # (phi.any() through numpy's wrapper: ~2 us)
+    if jac is None:
+        return Verdict(True, True)
+    vanished = None
+    if start_f is not None and not f.all():  # (rare: a row's F exactly 0)
+        vanished = (f == 0.0) & (np.asarray(start_f) != 0.0) & (lb < z) & (z < ub)
+        if not vanished.any():
+            vanished = None
+    if max_abs(phi) == 0.0 and vanished is None:  # (phi.any() via numpy's wrapper: ~2 us)
         return Verdict(True, True)
     J = jac(z)
     if J is None:
         return Verdict(True, True)
-    return _scale_test(z, f, lb, ub, phi, J)
+    v = _scale_test(z, f, lb, ub, phi, J)
+    if v.solved and vanished is not None:
+        dead = np.flatnonzero(vanished & ~live_rows(J))
+        if dead.size:
+            return Verdict(False, True, flat_row=int(dead[0]), step=math.inf)
+    return v
 
 
 def _scale_test(z, f, lb, ub, phi, J) -> Verdict:
@@ -115,8 +160,8 @@ def _scale_test(z, f, lb, ub, phi, J) -> Verdict:
     else:
         da, db = fb_jacobian_diagonals(z, f, lb, ub)
         n = z.size
-        row, d, ratio = flat_step_kernel(z, phi, da, db, J.indptr, J.indices, J.data,
-                                         np.zeros(n), np.empty(n), np.empty(n))
+        row, d, ratio = flat_step_kernel(z, f, lb, ub, phi, da, db, J.indptr, J.indices,
+                                         J.data, np.zeros(n), np.empty(n), np.empty(n))
     if row < 0 or ratio <= FLAT_STEP_RTOL:
         return Verdict(True, True)
     return Verdict(False, True, flat_row=int(row), step=float(d))
@@ -133,6 +178,11 @@ def _scale_test_arrays(z, f, lb, ub, phi, J) -> Verdict:
     h = np.maximum(np.abs(db) * row_max, np.abs(da + db * J.diagonal()))[rows]
     with np.errstate(divide="ignore", invalid="ignore"):
         d = np.where(h > 0, np.abs(phi[rows]) / h, np.inf)
+        fr, zr, rm = f[rows], z[rows], row_max[rows]
+        active = (zr - np.broadcast_to(ub, z.shape)[rows] < fr) & \
+            (fr < zr - np.broadcast_to(lb, z.shape)[rows])
+        dn = np.where(rm > 0, np.abs(fr) / rm, np.inf)
+        d = np.where(active & (dn > d), dn, d)
     ratio = d / (1.0 + np.abs(z[rows]))
     k = int(np.argmax(ratio))
     if ratio[k] <= FLAT_STEP_RTOL:
@@ -145,8 +195,9 @@ class Acceptance:
     (z_user = col * z, F_user = f / row; see :mod:`compass_sparse.scaling`): the verdict is
     always on the user's problem, at the user's tolerance."""
 
-    def __init__(self, lb, ub, tol, row=None, col=None, user_jac=None):
+    def __init__(self, lb, ub, tol, row=None, col=None, user_jac=None, start_f=None):
         self.lb, self.ub, self.tol = lb, ub, tol
+        self.start_f = start_f  #: test (3)'s F at the start point, unscaled (or None)
         self.row, self.col = row, col
         #: with a scaling: ``user_jac(z_user)``, the user's J at the user's point (None
         #: when it cannot be evaluated), which the caller guarantees to be evaluated,
@@ -180,7 +231,8 @@ class Acceptance:
         ``phi`` as in :meth:`small`; ``small``: :meth:`small` has just passed at z."""
         zu, fu = self.user_point(z, f)
         if self.row is None:
-            return judge(zu, fu, self.lb, self.ub, self.tol, jac=jac, phi=phi, small=small)
+            return judge(zu, fu, self.lb, self.ub, self.tol, jac=jac, phi=phi, small=small,
+                         start_f=self.start_f)
         read = []  # whether J was asked for, and obtained
         if jac is not None and self.user_jac is not None and self.user_jac.applies():
             def direct(y):
@@ -188,7 +240,8 @@ class Acceptance:
                 read.append(J is not None)
                 return J
 
-            v = judge(zu, fu, self.lb, self.ub, self.tol, jac=direct, small=small)
+            v = judge(zu, fu, self.lb, self.ub, self.tol, jac=direct, small=small,
+                      start_f=self.start_f)
             v.reusable = all(read)
             return v
 
@@ -202,6 +255,6 @@ class Acceptance:
             return scale_entries(J, 1.0 / self.row, 1.0 / self.col)
 
         v = judge(zu, fu, self.lb, self.ub, self.tol,
-                  jac=None if jac is None else user_jac, small=small)
+                  jac=None if jac is None else user_jac, small=small, start_f=self.start_f)
         v.reusable = not read
         return v

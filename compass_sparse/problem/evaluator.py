@@ -446,6 +446,11 @@ class Evaluator:
         self._mf.pin(x, k)
         self._mj.pin(x, k)
 
+    def start_values(self):
+        """F at the pinned (start) point, or None: the acceptance test's reference for the
+        rows whose F and J later vanish (:mod:`compass_sparse.nms.acceptance`, test 3)."""
+        return self._mf.pvalue
+
     def check_at(self, x):
         """(F(x), J(x)) at the start point, raising :class:`EvaluationError` that names the
         row (and column) of the first non-finite value or the user's exception."""

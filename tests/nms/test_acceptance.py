@@ -237,8 +237,8 @@ def test_scale_test_in_one_kernel_equals_diagonals_then_flat_step(seed):
     J.data *= 10.0 ** rng.integers(-14, 3, J.nnz)
     phi = fb_phi(z, f, lb, ub)
     da, db = fb_jacobian_diagonals(z, f, lb, ub)
-    two = flat_step_kernel(z, phi, da, db, J.indptr, J.indices, J.data, np.zeros(n),
-                           np.empty(n), np.empty(n))
+    two = flat_step_kernel(z, f, lb, ub, phi, da, db, J.indptr, J.indices, J.data,
+                           np.zeros(n), np.empty(n), np.empty(n))
     one = scale_test_kernel(z, f, lb, ub, phi, J.indptr, J.indices, J.data)
     assert one[0] == two[0]
     for a, b in zip(one[1:], two[1:]):

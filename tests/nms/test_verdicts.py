@@ -251,3 +251,99 @@ def test_scaled_solve_takes_the_solvers_verdict_for_its_result(monkeypatch):
     assert np.array_equal(r.x, r2.x) and r.residual == r2.residual
     assert (r.status, r.nit, r.nfev, r.njev, r.domain_errors, r.point_status) == \
         (r2.status, r2.nit, r2.nfev, r2.njev, r2.domain_errors, r2.point_status)
+
+
+# ------------------------------------------------- defect: blind at a bound (issue 38, item 2)
+def _scaled_linear(n=5, s=1e-9):
+    """F = s (A x - 1) on x >= 0, A = diag(1..n): the solution x_i = 1/i, where F is flat
+    (s = 1e-9): every point of small residual is in a flat region of F."""
+    A = sp.diags(np.arange(1.0, n + 1)).tocsc()
+    return (lambda x: s * (A @ x - 1.0)), (lambda x: s * A)
+
+
+def test_flat_residual_verdict_does_not_depend_on_the_start_at_a_bound():
+    """b6f9c1f: SOLVED at x = 0 ("the start point is a solution") from x0 = 0 and from x0 =
+    3, FLAT_RESIDUAL from x0 = 0.5: at x = 0, F = -1e-9 < 0, the FB row is the bound's
+    (H_i ~ -e_i) and its Newton step ~2e-9 looked converged."""
+    n = 5
+    F, J = _scaled_linear(n)
+    sol = 1.0 / np.arange(1.0, n + 1)
+    for x0 in (0.0, 0.5, 3.0):
+        r = solve_mcp(F, J, 0.0, np.inf, np.full(n, x0))
+        if r.success:  # only the genuine solution may be called one
+            assert np.abs(r.x - sol).max() <= 1e-3, (x0, r.x)
+        else:
+            assert r.status is Status.FLAT_RESIDUAL, (x0, r.status)
+            assert "flat" in r.message
+
+
+@pytest.mark.parametrize("scale, accepted", [(1.0, True), (1e-2, True), (4.4e-4, True),
+                                             (3.6e-4, False), (1e-6, False)])
+def test_flat_step_at_a_bound_reads_the_natural_maps_F_row(scale, accepted):
+    """At x = 0 with F = -4e-7 < 0 (||Phi|| = 8e-7, natural residual 4e-7: test (1)
+    passes) the F row's Newton step |F| / |J| = 4e-7 / scale must be at most
+    FLAT_STEP_RTOL = 1e-3: the tolerance is stressed on both sides of its boundary."""
+    from compass_sparse.nms.acceptance import FLAT_STEP_RTOL
+
+    x, f = np.zeros(1), np.array([-4e-7])
+    v = judge(x, f, np.zeros(1), np.full(1, np.inf), TOL, jac=lambda y: sp.csc_matrix([[scale]]))
+    assert v.small_residual and v.solved is accepted
+    assert bool(4e-7 / scale <= FLAT_STEP_RTOL) is accepted
+    # the same row with the bound's piece active (F > 0 at the bound): always accepted,
+    # whatever the scale of J (a genuine solution at a bound with a flat F row)
+    v = judge(x, -f, np.zeros(1), np.full(1, np.inf), TOL, jac=lambda y: sp.csc_matrix([[scale]]))
+    assert v.solved
+
+
+# ----------------------------------------------- defect: underflowed tails (issue 38, item 4)
+def _flat_tail_ncp(seed=5, n=20, a=1.0):
+    """F = a exp(-z) (M z + q), an NCP with a planted solution zs (some components 0)."""
+    rng = np.random.default_rng(seed)
+    M = sp.random(n, n, density=0.3, random_state=seed).toarray()
+    M = M - M.T + np.diag(rng.uniform(1, 2, n))
+    zs = rng.uniform(0, 1, n)
+    zs[rng.random(n) < 0.4] = 0.0
+    q = -M @ zs + np.where(zs == 0, rng.uniform(0.1, 1, n), 0.0)
+
+    def F(z):
+        return a * np.exp(-z) * (M @ z + q)
+
+    def J(z):
+        e = a * np.exp(-z)
+        return sp.csc_matrix(e[:, None] * M + np.diag(e * (M @ z + q)))
+
+    return F, J, zs
+
+
+@pytest.mark.parametrize("seed, a", [(5, 1.0), (5, 3.0), (8, 1.0)])
+def test_flat_tail_ncp_started_past_its_humps_is_not_solved_where_F_underflows(seed, a):
+    """b6f9c1f: SOLVED ("solution found", by the homotopy) at z ~ 2e3..3e4, where
+    exp(-z) underflows: F and J are exactly 0 there, every residual is 0 and the Newton
+    step test had nothing to divide."""
+    F, J, zs = _flat_tail_ncp(seed, a=a)
+    r = solve_mcp(F, J, 0.0, np.inf, zs + 20.0)
+    if r.success:
+        assert np.abs(r.x - zs).max() <= 1e-4, r.x
+    else:
+        assert r.status is Status.FLAT_RESIDUAL, r.status
+        assert "vanished" in r.message or "flat" in r.message
+
+
+def test_vanished_row_is_flat_only_when_its_F_was_not_zero_at_the_start():
+    """Test (3) of the acceptance: F_i = 0 and J_i = 0 at z strictly inside the bounds is
+    a flat tail when F_i was not 0 at the start point, and may be an identically zero
+    row (any value of its variable solves it) when it was; a row at a bound is
+    complementary whatever F's sign below the underflow.  (A new argument: b6f9c1f's
+    judge knew no start point and accepted every point whose residuals are exactly 0.)"""
+    lb, ub = np.array([-np.inf, -np.inf, 0.0]), np.full(3, np.inf)
+    z, f = np.array([3e4, 1.0, 0.0]), np.zeros(3)
+    J_here = sp.csc_matrix(np.diag([0.0, 2.0, 0.0]))
+    v = judge(z, f, lb, ub, TOL, jac=lambda y: J_here, start_f=np.array([1e-9, 0.0, 1.0]))
+    assert v.small_residual and not v.solved and v.flat_row == 0 and np.isinf(v.step)
+    assert "vanished" in v.flat_message(lambda i: f"F[{i}]")
+    # F_0 was 0 at the start too; F_2 vanished at its bound: both accepted
+    assert judge(z, f, lb, ub, TOL, jac=lambda y: J_here, start_f=np.array([0.0, 1.0, 1.0])).solved
+    assert judge(z, f, lb, ub, TOL, jac=lambda y: J_here).solved  # no start: not tested
+    # J_0 not 0: a genuine root of row 0, accepted
+    J_root = sp.csc_matrix(np.diag([1e-3, 2.0, 0.0]))
+    assert judge(z, f, lb, ub, TOL, jac=lambda y: J_root, start_f=np.ones(3)).solved
