@@ -10,6 +10,7 @@ pipeline).
 """
 from __future__ import annotations
 
+import logging
 import math
 import time
 
@@ -29,6 +30,8 @@ from .result import Result
 from .routes import basis_factory, choose_routes, kernel_route
 from .solve import blas_threads, loggers, solve_without_preprocessor
 from .status import PassStats, PointStatus, Status
+
+logger = logging.getLogger("compass_sparse")
 
 __all__ = ["solve_lcp"]
 
@@ -52,6 +55,8 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
         res = _solve_lcp(M, q, lb, ub, x0, opt, var_names, routes, t0)
     if not res.routes:
         res.routes = routes.as_dict()
+    if opt.verbosity >= 1:  # (a hand-over to the general method logs nothing of its own)
+        logger.info(res.summary())
     return res
 
 
