@@ -49,7 +49,8 @@ from .homotopy.tracker import compiled_tracker_available
 from .options import HOMOTOPY_DENSE_MAX_N, Options
 from .path.dense_engine import DensePathEngine
 
-__all__ = ["COMPILED_NMS_MAX_N", "COMPILE_SECONDS_DENSE", "COMPILE_SECONDS_SPARSE",
+__all__ = ["COMPILED_NMS_MAX_N", "COMPILE_SECONDS_DENSE", "COMPILE_SECONDS_MEDIUM",
+           "COMPILE_SECONDS_SPARSE",
            "DENSE_BASIS_MAX_N", "DENSE_ENGINE_MAX_N", "UPDATE_LIMIT_FLOOR", "Routes",
            "basis_factory", "choose_routes", "compile_estimate", "kernel_route"]
 
@@ -82,19 +83,25 @@ class Routes:
         return asdict(self)
 
 
-COMPILE_SECONDS_DENSE = 70.0
+COMPILE_SECONDS_DENSE = 80.0
 """Seconds a solve of a small problem (n <= ``DENSE_ENGINE_MAX_N``: the compiled crash,
 major iterations, dense engine and homotopy) spends compiling when numba's cache is empty:
-the estimate of the one-time notice (measured on one core of a 2-core machine,
+the estimate of the one-time notice (CPU seconds measured on a 2-core machine,
 benchmarks/first_run.md; a partly warm cache compiles less)."""
 
+COMPILE_SECONDS_MEDIUM = 45.0
+"""The same up to ``COMPILED_NMS_MAX_N`` (the sparse basis, the compiled major iterations;
+the preprocessor of a model of that size)."""
+
 COMPILE_SECONDS_SPARSE = 25.0
-"""The same for a larger problem (the sparse basis)."""
+"""The same for larger problems (the sparse basis, the Python major iterations)."""
 
 
 def compile_estimate(n: int) -> float:
     """Seconds a solve of order n would spend compiling its kernels with an empty cache."""
-    return COMPILE_SECONDS_DENSE if n <= DENSE_ENGINE_MAX_N else COMPILE_SECONDS_SPARSE
+    if n <= DENSE_ENGINE_MAX_N:
+        return COMPILE_SECONDS_DENSE
+    return COMPILE_SECONDS_MEDIUM if n <= COMPILED_NMS_MAX_N else COMPILE_SECONDS_SPARSE
 
 
 class kernel_route:

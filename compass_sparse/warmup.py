@@ -82,11 +82,11 @@ def _small_models():
 WORKLOADS = {
     # name: (what it compiles, seconds of one core measured cold (benchmarks/first_run.md),
     #        the workload)
-    "dense paths": ("compiled major iterations, dense engine", 60.0, _dense_paths),
-    "dense crash": ("compiled crash", 40.0, _dense_crash),
-    "dense homotopy": ("compiled homotopy", 15.0, _dense_homotopy),
-    "sparse": ("sparse basis, Python major iterations", 25.0, _sparse),
-    "medium": ("preprocessor, sparse basis with compiled major iterations", 20.0, _medium),
+    "dense paths": ("compiled major iterations, dense engine", 50.0, _dense_paths),
+    "dense crash": ("compiled crash", 26.0, _dense_crash),
+    "dense homotopy": ("compiled homotopy", 17.0, _dense_homotopy),
+    "sparse": ("sparse basis, Python major iterations", 23.0, _sparse),
+    "medium": ("preprocessor, sparse basis with compiled major iterations", 46.0, _medium),
     "small models": ("small CGE model, LCP", 15.0, _small_models),
 }
 """The warm-up's workloads, each run in a process of its own."""
