@@ -30,7 +30,6 @@ from .linalg._csc_kernels import csc_scaled_all_finite
 from .linalg.blas import BLAS_LIMIT_MIN_N, single_threaded_blas
 from .merit import fb_phi, fb_psi
 from .nms.acceptance import Acceptance
-from .nms.log import HEADER
 from .nms.solver import NMSSolver
 from .nms.state import Point
 from ._options_base import suggest
@@ -285,6 +284,8 @@ def _solve_evaluated(problem: MCP, opt: Options, kernels: str, *, callback=None,
     passes["presolve"] = st
     if pre is not None:
         st.reason = pre.summary_line()
+        if opt.verbosity >= 2:
+            logger.info(f"preprocessor: {st.reason}")
         if pre.infeasible is None and pre.reduced is problem:
             pre = None  # nothing removed: no postsolve needed
     if pre is None:
@@ -339,6 +340,8 @@ def _from_start(problem, pre, work, f0, J0, phi0, verdict0, opt, t0, passes, ker
         return _finish(problem, pre, status, msg, z0, opt, t0, passes,
                        f_reduced=f0, start_z=problem.x0, basis=basis)
     sc, passes["scaling"] = _scaling_pass(J0, opt)
+    if sc is not None and opt.verbosity >= 2:
+        logger.info(f"scaling: {passes['scaling'].reason}")
     inner = work
     user_jac = None
     if sc is not None:  # the solver works in the scaled units
@@ -358,8 +361,6 @@ def _from_start(problem, pre, work, f0, J0, phi0, verdict0, opt, t0, passes, ker
                        warm_basis=basis,
                        # the solver's start Point is (z0, f0) of `work`, judged above
                        start_verdict=verdict0 if sc is None else None)
-    if log_major is not None:
-        log_major(HEADER)
     tn = time.perf_counter()
     with blas_threads(work.n):
         out = solver.solve(Point(z0, f0, phi0, fb_psi(phi0), J0))

@@ -333,10 +333,13 @@ def test_documented_log_header_and_columns_are_the_logs(caplog):
     with caplog.at_level(logging.INFO, logger="compass_sparse"):
         cs.solve_mcp(lambda x: x**3 + x - 1.0, lambda x: np.diag(3 * x**2 + 1), lb=-np.inf,
                      ub=np.inf, x0=np.full(3, 3.0), options={"verbosity": 2})
-    header = next(r.getMessage() for r in caplog.records if r.getMessage().split()[:1]
-                  == ["major"])
-    assert doc[0].split() == header.split()
+    log = [r.getMessage() for r in caplog.records]
     text = (DOCS / "getting_started.rst").read_text(encoding="utf-8")
-    for col in header.split():
-        if col != "(label)":
-            assert f"   * - ``{col}``" in text, col
+    for title, first in (("Crash Log", "crash"), ("Major Iteration Log", "major")):
+        # the section's title and header, in the log and on the page
+        header = log[log.index(title) + 1]
+        assert header.split()[0] == first
+        assert doc[doc.index(title) + 1].split() == header.split()
+        for col in header.split():
+            if col != "(label)":
+                assert f"   * - ``{col}``" in text, col
