@@ -38,7 +38,7 @@ O(1)."""
 class JacobianCheck:
     """What :func:`check_jacobian` found.  ``worst``: the entries of largest error, as
     (row name, variable name, J's value, the finite difference, error), the error being
-    |J - D| / max(1, |D|); ``max_error`` the largest; ``ok`` whether it is at most the
+    ``|J - D| / max(1, |D|)``; ``max_error`` the largest; ``ok`` whether it is at most the
     tolerance; ``columns`` how many columns were compared (all, or a sample);
     ``skipped`` the columns where F could not be evaluated at x +- h e_j."""
 
@@ -98,7 +98,7 @@ def check_jacobian(F, J=None, x=None, *, var_names=None, eqn_names=None, tol: fl
     var_names, eqn_names : sequences of str, optional
         Names of the variables and rows in the report.
     tol : float
-        An entry is wrong when |J - D| > tol * max(1, |D|).
+        An entry is wrong when ``|J - D| > tol * max(1, |D|)``.
     max_columns : int
         Columns compared at most: all of them up to this n, a seeded random sample above.
 
