@@ -53,10 +53,22 @@ try:
 except ImportError:  # pragma: no cover - Windows
     fcntl = None
 
-__all__ = ["INTERPRET_MAX_ENTRIES", "INTERPRET_MAX_N", "INTERPRET_SOLVES", "LazyKernel",
-           "NO_INDICES", "NO_VALUES", "cold_start", "compilations", "end_cold_start",
-           "kernels_interpreted", "materialize", "may_interpret", "njit",
-           "quiet_compile_notice"]
+__all__ = [
+    "INTERPRET_MAX_ENTRIES",
+    "INTERPRET_MAX_N",
+    "INTERPRET_SOLVES",
+    "NO_INDICES",
+    "NO_VALUES",
+    "LazyKernel",
+    "cold_start",
+    "compilations",
+    "end_cold_start",
+    "kernels_interpreted",
+    "materialize",
+    "may_interpret",
+    "njit",
+    "quiet_compile_notice",
+]
 
 NO_VALUES = np.zeros(0)
 NO_INDICES = np.zeros(0, dtype=np.int32)

@@ -72,11 +72,11 @@ def _labels(problem, var_names, eqn_names, n):
         return problem.row_label, problem.var_label
     var = (lambda j: str(var_names[j])) if var_names is not None else (lambda j: f"x[{j}]")
     if eqn_names is not None:
-        row = lambda i: str(eqn_names[i])  # noqa: E731
+        row = lambda i: str(eqn_names[i])
     elif var_names is not None:
-        row = lambda i: f"F({var_names[i]})"  # noqa: E731
+        row = lambda i: f"F({var_names[i]})"
     else:
-        row = lambda i: f"F[{i}]"  # noqa: E731
+        row = lambda i: f"F[{i}]"
     return row, var
 
 
@@ -143,7 +143,7 @@ def check_jacobian(F, J=None, x=None, *, var_names=None, eqn_names=None, tol: fl
             try:
                 d = (np.asarray(f_of(xp), float).reshape(-1)
                      - np.asarray(f_of(xm), float).reshape(-1)) / (xp[j] - xm[j])
-            except Exception:  # noqa: BLE001 - F outside its domain there: not compared
+            except Exception:
                 d = None
         if d is None or not np.all(np.isfinite(d)):
             skipped.append(col(j))
@@ -189,7 +189,7 @@ def directional_mismatch(problem, z, start) -> float:
                 size = max(float(np.max(np.abs(fd))), float(np.max(np.abs(jd))), 1e-12)
                 worst = max(worst, float(np.max(np.abs(jd - fd))) / size)
             return worst
-    except Exception:  # noqa: BLE001 - a user's F or J that fails here: no conclusion
+    except Exception:
         return 0.0
     finally:
         problem.counters.nfev, problem.counters.njev = saved

@@ -8,14 +8,15 @@ that happen during set-up (``scripts/setup.sh`` runs it), by small representativ
 that take every route a solve can take, each in a process with ``COMPASS_SPARSE_JIT=always``.
 
 numba compiles under one lock per process, so one process compiles one kernel at a time;
-the workloads are therefore spread over ``jobs`` processes (default: one per available
-core, at most one per workload), the longest first.  Processes that compile at the same
-time share the on-disk cache safely (:func:`compass_sparse._jit._lock_cache`); a kernel
-that two workloads need may be compiled by both, which costs time, not correctness.  The
-dense route (a small problem's crash, major iterations and pivotal paths, and homotopy) is
-most of the work, so it is split into three workloads that each compile one of its big
-kernels.  A last check in this process runs the demos' solves and reports what they still
-had to compile (nothing, when the workloads cover their routes).
+the workloads therefore run in processes of their own, ``jobs`` at a time (default: one
+per available core), the longest ready one first.  Processes that compile at the same time
+share the on-disk cache safely (:func:`compass_sparse._jit._lock_cache`); a kernel that
+two running workloads need may be compiled by both, which costs time, not correctness, so
+a workload that shares a big kernel with another waits for it and loads the kernel from
+the cache.  The dense route (a small problem's crash, major iterations and pivotal paths,
+and homotopy) is most of the work, so it is split into three workloads that each compile
+one of its big kernels.  A last check in this process runs the demos' solves and reports
+what they still had to compile (nothing, when the workloads cover their routes).
 """
 from __future__ import annotations
 
@@ -39,7 +40,8 @@ __all__ = ["WORKLOADS", "default_jobs", "run_workloads", "warm_up"]
 
 
 def _thesis():
-    return thesis_family(50, 1, 0).problem  # the problem of ``compass-sparse demo --problem thesis``
+    # the problem of ``compass-sparse demo --problem thesis``
+    return thesis_family(50, 1, 0).problem
 
 
 def _dense_paths():
@@ -81,13 +83,16 @@ def _small_models():
 
 WORKLOADS = {
     # name: (what it compiles, seconds of one core measured cold (benchmarks/first_run.md),
-    #        the workload)
-    "dense paths": ("compiled major iterations, dense engine", 50.0, _dense_paths),
-    "dense crash": ("compiled crash", 26.0, _dense_crash),
-    "dense homotopy": ("compiled homotopy", 17.0, _dense_homotopy),
-    "sparse": ("sparse basis, Python major iterations", 23.0, _sparse),
-    "medium": ("preprocessor, sparse basis with compiled major iterations", 46.0, _medium),
-    "small models": ("small CGE model, LCP", 15.0, _small_models),
+    #        the workload, the workloads to finish first: they compile kernels this one
+    #        shares, which it then loads from the cache instead of compiling them again)
+    "dense paths": ("compiled major iterations, dense engine", 50.0, _dense_paths, ()),
+    "dense crash": ("compiled crash", 26.0, _dense_crash, ()),
+    "dense homotopy": ("compiled homotopy", 17.0, _dense_homotopy, ()),
+    "sparse": ("sparse basis, Python major iterations", 23.0, _sparse, ()),
+    "medium": ("preprocessor, sparse basis with compiled major iterations", 25.0, _medium,
+               ("dense paths",)),
+    "small models": ("small CGE model, LCP", 10.0, _small_models,
+                     ("dense paths", "dense crash")),
 }
 """The warm-up's workloads, each run in a process of its own."""
 
@@ -112,16 +117,10 @@ def default_jobs() -> int:
     return max(1, min(cores, len(WORKLOADS)))
 
 
-def _share(names, jobs):
-    """The workloads of each of ``jobs`` processes: longest first, each to the process
-    with the least work so far."""
-    shares = [[] for _ in range(jobs)]
-    load = [0.0] * jobs
-    for name in sorted(names, key=lambda k: -WORKLOADS[k][1]):
-        k = load.index(min(load))
-        shares[k].append(name)
-        load[k] += WORKLOADS[name][1]
-    return [s for s in shares if s]
+def _next(pending, done):
+    """The longest pending workload whose predecessors are done (None: none is ready)."""
+    ready = [w for w in pending if all(d in done for d in WORKLOADS[w][3])]
+    return max(ready, key=lambda w: WORKLOADS[w][1]) if ready else None
 
 
 def run_workloads(names, stream=sys.stdout):
@@ -139,35 +138,49 @@ def run_workloads(names, stream=sys.stdout):
 
 
 def warm_up(jobs: int | None = None, stream=sys.stdout) -> int:
-    """Compile every kernel the solver's routes use, in ``jobs`` processes (default
-    :func:`default_jobs`), then check the demos' solves; says what it did on ``stream``.
-    Returns the number of kernels the check still had to compile (0 when the cache
-    covers the demos), or -1 when a worker failed."""
+    """Compile every kernel the solver's routes use: each workload in a process of its own,
+    up to ``jobs`` at a time (default :func:`default_jobs`), the longest ready one first;
+    then check the demos' solves.  Says what it did on ``stream``.  Returns the number of
+    kernels the check still had to compile (0 when the cache covers the demos), or -1 when
+    a workload failed."""
     jobs = default_jobs() if jobs is None else max(1, int(jobs))
     t0 = time.perf_counter()
-    shares = _share(list(WORKLOADS), jobs)
-    estimate = max(sum(WORKLOADS[n][1] for n in s) for s in shares)
-    stream.write(f"compiling the solver's kernels in {len(shares)} process"
-                 f"{'es' if len(shares) > 1 else ''} (up to ~{estimate:.0f} s on an idle "
-                 "machine; nothing to do when they are cached already)\n")
+    total = sum(w[1] for w in WORKLOADS.values())
+    stream.write(f"compiling the solver's kernels, {jobs} process{'es' if jobs > 1 else ''} "
+                 f"at a time (~{total:.0f} s of one core on an idle machine; nothing to do "
+                 "when they are cached already)\n")
     stream.flush()
     env = {**os.environ, "COMPASS_SPARSE_JIT": "always"}
-    procs = [subprocess.Popen([sys.executable, "-m", "compass_sparse.warmup", *share],
-                              stdout=subprocess.PIPE, text=True, env=env) for share in shares]
-    failed = False
-    for p in procs:
-        out, _ = p.communicate()
-        for line in out.splitlines():
-            try:
-                r = json.loads(line)
-            except ValueError:
+    pending, running, done, failed = list(WORKLOADS), {}, set(), []
+    while pending or running:
+        while len(running) < jobs:
+            name = _next(pending, done)
+            if name is None:
+                break
+            pending.remove(name)
+            running[name] = subprocess.Popen(
+                [sys.executable, "-m", "compass_sparse.warmup", name], stdout=subprocess.PIPE,
+                text=True, env=env)
+        time.sleep(0.1)
+        for name, proc in list(running.items()):
+            if proc.poll() is None:
                 continue
-            what = (f"{r['compiled']} kernels compiled" if r["compiled"]
-                    else "all from the cache")
-            stream.write(f"  {r['workload']:15s} {r['seconds']:7.1f} s  {what}\n")
-        failed = failed or p.returncode != 0
+            del running[name]
+            done.add(name)
+            out = proc.stdout.read()
+            proc.stdout.close()
+            if proc.returncode != 0:
+                failed.append(name)
+                stream.write(f"  {name:15s} failed (exit code {proc.returncode}; its error "
+                             "is above)\n")
+                continue
+            for r in (json.loads(line) for line in out.splitlines() if line.startswith("{")):
+                what = (f"{r['compiled']} kernels compiled" if r["compiled"]
+                        else "all from the cache")
+                stream.write(f"  {r['workload']:15s} {r['seconds']:7.1f} s  {what}\n")
+            stream.flush()
     if failed:
-        stream.write("the warm-up failed: a worker process stopped with an error (above)\n")
+        stream.write(f"the warm-up failed: {', '.join(failed)}\n")
         return -1
     _jit.end_cold_start()
     _jit.quiet_compile_notice()

@@ -83,7 +83,7 @@ def test_the_summary_is_logged_once_per_solve(case, log_lines):
     g = p_matrix_lcp(30, "banded", 2, "mixed")
     M, q, lb, ub = g.lcp
     if case == "mcp":
-        call = lambda o: cs.solve_mcp(thesis_family(10, 1, 1).problem, options=o)  # noqa: E731
+        call = lambda o: cs.solve_mcp(thesis_family(10, 1, 1).problem, options=o)
         res, lines = log_lines(call, verbosity=1)
     elif case == "lcp":
         res, lines = log_lines(lambda o: cs.solve_lcp(M, q, lb, ub, options=o), verbosity=1)
@@ -108,7 +108,7 @@ def test_passes_nested_in_nms_are_shown_within_its_time():
 
 
 def test_progress_line_moves_during_the_crash(monkeypatch, capsys):
-    import compass_sparse.progress as progress
+    from compass_sparse import progress
 
     monkeypatch.setattr(progress, "PROGRESS_AFTER", 0.0)
     monkeypatch.setattr(progress, "stderr_is_terminal", lambda: True)
@@ -123,7 +123,7 @@ def test_progress_line_moves_during_the_crash(monkeypatch, capsys):
 
 def test_an_lcps_crash_has_its_header_and_moves_the_progress_line(monkeypatch, capsys,
                                                                   log_lines):
-    import compass_sparse.progress as progress
+    from compass_sparse import progress
     from compass_sparse.generators import obstacle_problem
 
     M, q, lb, ub = obstacle_problem(20, seed=0).lcp
