@@ -11,6 +11,7 @@ Public names::
     solve_mcp, solve_lcp, MCPSolver      entry points
     MCP                                  problem definition (sparse Jacobian API)
     Options                              solver options (frozen dataclass)
+    check_jacobian                       J against finite differences of F, by name
     Result, Status, PointStatus          outcome (Iteration: one entry of Result.history)
     plot                                 convergence plots (needs matplotlib)
     exceptions                           CompassError and subclasses
@@ -25,6 +26,7 @@ from .result import Result
 from .status import IntermediateResult, Iteration, PassStats, PointStatus, Status
 from .lcp import solve_lcp
 from .solve import MCPSolver, solve_mcp
+from .diagnostics import JacobianCheck, check_jacobian
 
 __version__ = "0.1.0"
 
@@ -35,5 +37,5 @@ __all__ = [
     "solve_mcp", "solve_lcp", "MCPSolver", "MCP", "Options", "Result", "Status",
     "PointStatus", "PassStats", "IntermediateResult", "Iteration", "CompassError", "ProblemError",
     "ShapeError", "BoundsError", "StartPointError", "EvaluationError",
-    "JacobianPatternError", "OptionError", "__version__",
+    "JacobianPatternError", "OptionError", "check_jacobian", "JacobianCheck", "__version__",
 ]

@@ -48,9 +48,27 @@ import threading
 
 import numpy as np
 
-__all__ = ["INTERPRET_MAX_ENTRIES", "INTERPRET_MAX_N", "INTERPRET_SOLVES", "LazyKernel",
-           "NO_INDICES", "NO_VALUES", "cold_start", "end_cold_start", "kernels_interpreted",
-           "materialize", "may_interpret", "njit"]
+try:
+    import fcntl  # (the cache's lock, :func:`_lock_cache`; POSIX only)
+except ImportError:  # pragma: no cover - Windows
+    fcntl = None
+
+__all__ = [
+    "INTERPRET_MAX_ENTRIES",
+    "INTERPRET_MAX_N",
+    "INTERPRET_SOLVES",
+    "NO_INDICES",
+    "NO_VALUES",
+    "LazyKernel",
+    "cold_start",
+    "compilations",
+    "end_cold_start",
+    "kernels_interpreted",
+    "materialize",
+    "may_interpret",
+    "njit",
+    "quiet_compile_notice",
+]
 
 NO_VALUES = np.zeros(0)
 NO_INDICES = np.zeros(0, dtype=np.int32)
@@ -86,7 +104,9 @@ class _ColdStart:
         self.interpret = mode == "interpret"  # no budget, whatever is compiled
         self.built = False  # a kernel was compiled (numba is loaded)
         self.interpreted_solves = 0
-        self.local = threading.local()  # .mode of this thread's solve, .depth
+        self.local = threading.local()  # .mode, .estimate of this thread's solve, .depth
+        self.compiles = 0  # compilations (cache misses) in this process, nested ones too
+        self.noticed = False  # the one-time notice of compilation was written (or is off)
 
     def may_interpret(self) -> bool:
         """Whether a solve starting now may be interpreted (the size aside)."""
@@ -118,8 +138,9 @@ class kernels_interpreted:
     A solve inside a solve (a hand-over to the general method) keeps the outer one's mode:
     ``interpreted`` is then ignored, and :attr:`interpreted` says which mode holds."""
 
-    def __init__(self, interpreted: bool):
+    def __init__(self, interpreted: bool, compile_estimate: float = 0.0):
         self.interpreted = interpreted
+        self.compile_estimate = compile_estimate
         self._outer = None
 
     def __enter__(self):
@@ -127,6 +148,7 @@ class kernels_interpreted:
         self._outer = getattr(local, "mode", None)
         if self._outer is None:
             local.mode = "interpreted" if self.interpreted else "compiled"
+            local.estimate = self.compile_estimate
             if self.interpreted:
                 _COLD.interpreted_solves += 1
         self.interpreted = local.mode == "interpreted"
@@ -134,6 +156,8 @@ class kernels_interpreted:
 
     def __exit__(self, *exc):
         _COLD.local.mode = self._outer
+        if self._outer is None:
+            _COLD.local.estimate = None
         return False
 
 
@@ -207,8 +231,13 @@ class LazyKernel:
         if self._dispatcher is None:
             import numba  # (lazy: 0.2-0.4 s that a solve which never compiles should not pay)
 
+            if not _COLD.built:
+                _listen_to_compilations()
             _COLD.built = True  # numba is loaded: later solves compile
-            self._dispatcher = numba.njit(**self.options)(self.py_func)
+            d = numba.njit(**self.options)(self.py_func)
+            d.__class__ = _dispatcher_class(d.__class__)
+            _lock_cache(d)
+            self._dispatcher = d
         return self._dispatcher
 
     def __call__(self, *args):
@@ -225,6 +254,112 @@ class LazyKernel:
     def __repr__(self):
         state = "built" if self._dispatcher is not None else "not built"
         return f"<LazyKernel {self.__module__}.{self.__qualname__} ({state})>"
+
+
+def compilations() -> int:
+    """Kernels compiled in this process so far (numba's cache misses, each signature of a
+    kernel and each callee compiled for it counted once): 0 when every kernel came from the
+    on-disk cache."""
+    return _COLD.compiles
+
+
+def quiet_compile_notice():
+    """No notice of compilation in this process (the warm-up's workers, whose parent says
+    it once; the test suite, whose first test to compile would see it on its stderr)."""
+    _COLD.noticed = True
+
+
+def _listen_to_compilations():
+    """Count numba's compilations and announce the first one.  numba signals
+    ``numba:compile`` only when it compiles, never when it loads a kernel from its on-disk
+    cache, so a warm cache says nothing."""
+    from numba.core import event  # (numba is being loaded: a kernel is being built)
+
+    package = __name__.rpartition(".")[0] + "."
+
+    class Listener(event.Listener):
+        def on_start(self, ev):
+            if not ev.data["dispatcher"].py_func.__module__.startswith(package):
+                return  # the user's own numba code, or numba's helpers inside one of ours
+            _COLD.compiles += 1
+            # Only a solve announces: it knows its route, hence how long it will compile;
+            # a kernel called outside a solve (building a large problem) takes a second.
+            if not _COLD.noticed and getattr(_COLD.local, "mode", None) is not None:
+                _COLD.noticed = True
+                _announce(_COLD.local.estimate)
+
+        def on_end(self, ev):
+            pass
+
+    event.register("numba:compile", Listener())
+
+
+def _announce(estimate):
+    """The one-time notice, on stderr.  The one line the library writes itself: a process
+    that is about to spend a minute compiling must say so even where no logging is set up
+    (the package's logger has only a NullHandler), and it says it once."""
+    sys.stderr.write(f"compass_sparse: compiling kernels, one-time: up to ~{estimate:.0f} s "
+                     "(cached on disk afterwards; 'compass-sparse warmup' compiles them "
+                     "all ahead)\n")
+    sys.stderr.flush()
+
+
+_DISPATCHER_CLASSES = {}
+
+
+def _dispatcher_class(base):
+    """numba's dispatcher class ``base`` with one change: a call from compiled code compiles
+    its callee for the arguments' plain types, not their literal values.  numba types a
+    module constant passed as an argument (``_copy(W, W_CZ, W_TZ)``, a reason code, a
+    ``True``) as a literal and compiles the callee once per distinct value: 17 copies of
+    a three-line kernel, 9 of the crash's exit, 218 compilations in the small-problem
+    route where 170 suffice (benchmarks/first_run.md).  No kernel of the package asks for
+    a literal; the arithmetic is the same (the constants only stop being folded)."""
+    cls = _DISPATCHER_CLASSES.get(base)
+    if cls is None:
+        from numba.core import types  # (numba is loaded: a dispatcher is being built)
+
+        def get_call_template(self, args, kws):
+            args = tuple(types.unliteral(a) for a in args)
+            kws = {k: types.unliteral(v) for k, v in kws.items()}
+            return base.get_call_template(self, args, kws)
+
+        cls = type(base.__name__, (base,), {"get_call_template": get_call_template,
+                                            "__module__": base.__module__})
+        _DISPATCHER_CLASSES[base] = cls
+    return cls
+
+
+def _lock_cache(dispatcher):
+    """Make the dispatcher's on-disk cache safe for several processes compiling at once (a
+    parallel warm-up, the workers of a batch on a cold cache).  numba writes a function's
+    index (signature -> data file) and then the data file, each atomically, but a save reads
+    the index first: two processes saving two signatures of one function both pick data
+    file 1, and the index of one can end up naming the other's machine code.  Every save
+    and load of the package's kernels therefore holds an exclusive lock on one file of the
+    cache directory.  Where there is no such lock (no fcntl) or no writable directory, numba
+    is left as it is."""
+    cache_file = getattr(getattr(dispatcher, "_cache", None), "_cache_file", None)
+    path = getattr(cache_file, "_cache_path", None)
+    if fcntl is None or path is None:
+        return
+    lock_path = os.path.join(path, "compass_sparse.lock")
+    for name in ("save", "load"):
+        setattr(cache_file, name, _locked(getattr(cache_file, name), lock_path))
+
+
+def _locked(method, lock_path):
+    def locked(*args):
+        try:
+            fd = os.open(lock_path, os.O_RDWR | os.O_CREAT, 0o666)
+        except OSError:  # a cache directory we cannot write to: numba's own behaviour
+            return method(*args)
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX)
+            return method(*args)
+        finally:
+            os.close(fd)  # (releases the lock)
+    return locked
 
 
 def materialize(namespace: dict):

@@ -64,8 +64,18 @@ def _field_names(cls) -> frozenset:
     return frozenset(f.name for f in dataclasses.fields(cls))
 
 
+def suggest(name: str, names, aliases=None) -> str | None:
+    """The option a misspelt or foreign ``name`` most likely means: its entry in
+    ``aliases`` (the names other solvers use: ``tol``), else the closest of ``names``."""
+    if aliases and name.lower() in aliases:
+        return aliases[name.lower()]
+    close = difflib.get_close_matches(name, sorted(names), n=1)
+    return close[0] if close else None
+
+
 class OptionsMixin:
     _what = "option"
+    _aliases: dict = {}  # other solvers' names of our options (lower case) -> ours
 
     @classmethod
     def check_names(cls, keys):
@@ -76,8 +86,8 @@ class OptionsMixin:
         if unknown:
             hints = []
             for u in unknown:
-                close = difflib.get_close_matches(u, names, n=1)
-                hints.append(f"{u!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+                close = suggest(u, names, cls._aliases)
+                hints.append(f"{u!r}" + (f" (did you mean {close!r}?)" if close else ""))
             raise OptionError(f"unknown {cls._what}(s): " + ", ".join(hints))
 
     @classmethod

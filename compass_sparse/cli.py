@@ -5,6 +5,7 @@
     compass-sparse cge  ... --scenarios tariff=0:0.5:51 [sigma_armington=1,2,4]
                         [--scenarios-file FILE] [--output DIR] [--workers W] [--fresh]
     compass-sparse options          list every solver option with its default
+    compass-sparse warmup [--jobs J] compile the solver's kernels ahead (set-up runs it)
     compass-sparse --version
 
 A mistake on the command line (a bad number, a missing file, an output folder that does
@@ -33,6 +34,7 @@ from .lcp import solve_lcp
 from .options import Options
 from .problem.mcp import MCP
 from .solve import solve_mcp
+from .warmup import default_jobs, warm_up
 
 EXIT_USAGE = 2
 """Exit code of a mistake on the command line (argparse's own)."""
@@ -271,7 +273,7 @@ def _parser() -> argparse.ArgumentParser:
     ap.add_argument("--version", action="version", version=f"compass-sparse {__version__}")
     ap.add_argument("-v", "--verbose", dest="global_verbose", action="count", default=0,
                     help="as -v after the command")
-    sub = ap.add_subparsers(dest="cmd", metavar="{demo,cge,options}")
+    sub = ap.add_subparsers(dest="cmd", metavar="{demo,cge,options,warmup}")
 
     def common(p):
         p.add_argument("--seed", type=int, default=0, help="generator seed (default 0)")
@@ -330,6 +332,11 @@ def _parser() -> argparse.ArgumentParser:
                    help="worker processes (default: every core; 0: in this process)")
     common(c)
     sub.add_parser("options", help="list every solver option with its default")
+    w = sub.add_parser("warmup", help="compile the solver's kernels now, so that the first "
+                       "solves do not (once per installation; scripts/setup.sh runs it)")
+    w.add_argument("--jobs", type=int, default=None,
+                   help=f"processes compiling at once (default: the cores, here "
+                   f"{default_jobs()})")
     return ap
 
 
@@ -346,6 +353,10 @@ def main(argv=None) -> int:
             return _demo(args)
         if args.cmd == "cge":
             return _cge(args)
+        if args.cmd == "warmup":
+            if args.jobs is not None and args.jobs < 1:
+                raise UsageError(f"--jobs must be at least 1 (got {args.jobs})")
+            return 0 if warm_up(args.jobs) >= 0 else 1
         if args.cmd == "options":
             width = shutil.get_terminal_size((100, 24)).columns
             print(_options_table(max(40, width - 1)))

@@ -10,25 +10,31 @@ pipeline).
 """
 from __future__ import annotations
 
+import logging
 import math
 import time
 
 import numpy as np
 import scipy.sparse as sp
 
+from .box import dot_norm
 from .crash.driver import crash
 from .exceptions import ProblemError, ShapeError
 from .linear_system import solve_free_lcp
-from .merit import normal_map_at
+from .merit import fb_phi, normal_map_at
+from .nms.log import SectionLog
 from .options import Options
 from .path.linear_mcp import solve_linear_mcp
 from .path.outcome import LinearCode
+from .progress import Progress, pass_line
 from .problem.mcp import MCP, as_real
 from .report import judge_on, make_result
 from .result import Result
 from .routes import basis_factory, choose_routes, kernel_route
 from .solve import blas_threads, loggers, solve_without_preprocessor
 from .status import PassStats, PointStatus, Status
+
+logger = logging.getLogger("compass_sparse")
 
 __all__ = ["solve_lcp"]
 
@@ -52,6 +58,8 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
         res = _solve_lcp(M, q, lb, ub, x0, opt, var_names, routes, t0)
     if not res.routes:
         res.routes = routes.as_dict()
+    if opt.verbosity >= 1:  # (a hand-over to the general method logs nothing of its own)
+        logger.info(res.summary())
     return res
 
 
@@ -87,8 +95,12 @@ def _solve_lcp(M, q, lb, ub, x0, opt, var_names, routes, t0) -> Result:
     try:
         if opt.crash_method == "pnewton" and n >= opt.crash_minimum_dimension:
             tc = time.perf_counter()
-            cr = crash(problem.evaluator, z, lb, ub, opt, f0=f, J0=M, log=log_major,
-                       deadline=deadline, compiled=routes.crash == "compiled")
+            shown = _crash_progress(opt, problem)
+            cr = crash(problem.evaluator, z, lb, ub, opt, f0=f, J0=M,
+                       log=SectionLog(log_major).writer("crash"), deadline=deadline,
+                       on_point=shown, compiled=routes.crash == "compiled")
+            if shown is not None:
+                shown(None, None, final=True)  # (the line ends: the path logs below it)
             st = PassStats(ran=True, time=time.perf_counter() - tc, iterations=cr.iterations,
                            factorizations=cr.factorizations, reason=cr.stop_reason)
             crash_its = cr.iterations
@@ -103,6 +115,23 @@ def _solve_lcp(M, q, lb, ub, x0, opt, var_names, routes, t0) -> Result:
         return make_result(problem, Status.USER_INTERRUPT, "interrupted by the user (Ctrl-C)",
                            z, f, opt, t0, start_z=problem.x0, passes=passes,
                            crash_iterations=crash_its)
+
+
+def _crash_progress(opt, problem):
+    """The crash's ``on_point``: the progress line (Options.progress) during the crash,
+    with the best residual of its trial points (None when nothing is shown)."""
+    progress = Progress(opt.progress)
+    if not progress.enabled:
+        return None
+    best = [np.inf]
+
+    def on_point(z, f, final=False):
+        if progress.due(final):
+            if z is not None:
+                best[0] = min(best[0], dot_norm(fb_phi(z, f, problem.lb, problem.ub)))
+            progress.show(pass_line("crash", problem.counters.nfev, best[0],
+                                    progress.elapsed), final=final)
+    return on_point
 
 
 def _lcp_path(problem, M, q, z, f, x, opt, t0, passes, st, crash_its, log_minor, routes):

@@ -366,3 +366,21 @@ class Options(OptionsMixin):
         for f in dataclasses.fields(cls):
             rows.append(f"{f.name:36s} {f.default!r:>12}  {f.metadata['doc']}")
         return "\n".join(rows)
+
+ALIASES: dict[str, str] = {
+    **{path.lower(): ours for ours, path in PATH_NAMES.items() if path is not None},
+    # scipy.optimize's, GAMS' and other solvers' words for the same settings
+    "tol": "convergence_tolerance", "ftol": "convergence_tolerance",
+    "fatol": "convergence_tolerance", "gtol": "convergence_tolerance",
+    "tolerance": "convergence_tolerance", "eps": "convergence_tolerance",
+    "maxiter": "major_iteration_limit", "max_iter": "major_iteration_limit",
+    "maxit": "major_iteration_limit", "iterlim": "major_iteration_limit",
+    "max_iterations": "major_iteration_limit", "maxfev": "major_iteration_limit",
+    "reslim": "time_limit", "timelimit": "time_limit", "max_time": "time_limit",
+    "time": "time_limit", "verbose": "verbosity", "disp": "verbosity",
+    "print_level": "verbosity", "random_state": "seed",
+}
+"""The names users bring from elsewhere (PATH's own, where ours differs; scipy's ``tol``,
+``maxiter``; GAMS' ``iterlim``, ``reslim``): an unknown option or keyword so named gets
+the hint of the option it means."""
+Options._aliases = ALIASES

@@ -12,7 +12,7 @@ import logging
 import sys
 import time
 
-__all__ = ["PROGRESS_AFTER", "Progress", "solve_line"]
+__all__ = ["PROGRESS_AFTER", "Progress", "pass_line", "solve_line"]
 
 logger = logging.getLogger("compass_sparse")
 
@@ -77,3 +77,10 @@ def solve_line(nit, pivots, residual, best, restarts, elapsed) -> str:
     """A solve's progress line."""
     return (f"[compass_sparse] major {nit:5d}  pivots {pivots:8d}  residual {residual:10.3e}  "
             f"best {best:10.3e}  restarts {restarts:3d}  {elapsed:8.1f} s")
+
+
+def pass_line(phase, nfev, best, elapsed) -> str:
+    """The progress line of a pass that runs before or between major iterations (the
+    crash, the homotopy): its name, the F evaluations so far and the best residual."""
+    return (f"[compass_sparse] {phase:8s}  F evaluations {nfev:8d}  best {best:10.3e}  "
+            f"{elapsed:8.1f} s")

@@ -75,7 +75,8 @@ def make_result(problem: MCP, status: Status, message: str, z, f, opt: Options, 
         success=status is Status.SOLVED, status=status, point_status=pstat, message=message,
         nfev=c.nfev, njev=c.njev, residual=rep, time=time.perf_counter() - t0,
         domain_errors=c.domain_errors, lb=problem.lb, ub=problem.ub,
-        tolerance=opt.convergence_tolerance, **counts,
+        tolerance=opt.convergence_tolerance, var_names=problem.var_names,
+        eqn_names=problem.eqn_names, **counts,
     )
 
 

@@ -18,7 +18,10 @@ from .merit import ResidualReport, natural_residual, residual_report
 from .problem.mcp import MCP, as_real
 from .status import PointStatus, Status
 
-__all__ = ["Result"]
+__all__ = ["NESTED_IN_NMS", "Result"]
+
+NESTED_IN_NMS = ("crash", "path", "fallback", "homotopy")
+"""Passes that run inside the stabilized Newton method: their times are part of its."""
 
 
 @dataclass
@@ -60,20 +63,68 @@ class Result:
     #: (compiled or interpreted), "path" (dense engine, dense basis or sparse basis),
     #: "nms", "crash", "homotopy" (compiled or python), chosen once for the solve
     routes: dict = field(default_factory=dict)
+    #: the problem's names of the variables and of the rows of F (None: unnamed), which
+    #: :meth:`check`, :meth:`solution` and :meth:`at_bound` speak in
+    var_names: list | None = None
+    eqn_names: list | None = None
 
     @property
     def worst_rows(self):
         return self.residual.worst if self.residual is not None else []
 
+    def var_label(self, i: int) -> str:
+        """The name of variable i (``x[i]`` when the problem has no names)."""
+        return self.var_names[i] if self.var_names is not None else f"x[{i}]"
+
+    def row_label(self, i: int) -> str:
+        """The name of row i of F, as the problem names it (:meth:`MCP.row_label`)."""
+        if self.eqn_names is not None:
+            return self.eqn_names[i]
+        if self.var_names is not None:
+            return f"F({self.var_names[i]})"
+        return f"F[{i}]"
+
+    def solution(self, as_series: bool | None = None):
+        """The point by name: a pandas Series indexed by the variables' names when pandas
+        can be imported (``as_series=None``; True requires it), else a dict name -> value
+        in the variables' order."""
+        names = [self.var_label(i) for i in range(self.x.size)]
+        if as_series is not False:
+            try:
+                import pandas as pd  # (optional: the Series form when it is there)
+            except ImportError:
+                if as_series:
+                    raise
+            else:
+                return pd.Series(self.x.copy(), index=names, name="x")
+        return dict(zip(names, self.x.tolist()))
+
+    def at_bound(self, tol: float = 0.0) -> dict:
+        """The variables at a bound: name -> "lower", "upper" or "fixed" (lb = ub), in the
+        variables' order; ``tol``: how far from the bound still counts as at it."""
+        lb = np.broadcast_to(np.asarray(self.lb if self.lb is not None else -np.inf, float),
+                             self.x.shape)
+        ub = np.broadcast_to(np.asarray(self.ub if self.ub is not None else np.inf, float),
+                             self.x.shape)
+        at_lb = self.x <= lb + tol
+        at_ub = self.x >= ub - tol
+        out = {}
+        for i in np.flatnonzero(at_lb | at_ub).tolist():
+            out[self.var_label(i)] = ("fixed" if lb[i] == ub[i] else
+                                      "lower" if at_lb[i] else "upper")
+        return out
+
     def check(self, F, lb=None, ub=None, names=None) -> ResidualReport:
         """Recompute the residuals of ``x`` from F (a callable or an MCP) — independent of
-        the solver's bookkeeping."""
+        the solver's bookkeeping.  The worst rows are named as the problem names them
+        (``names``: other names, a sequence or a callable i -> str)."""
         if isinstance(F, MCP):
             f = F.F_uncounted(self.x)
             lb = F.lb if lb is None else lb
             ub = F.ub if ub is None else ub
             names = names or F.row_label
         else:
+            names = names or self.row_label
             f = as_real(F(np.array(self.x, copy=True)), "F(x)")
             if f.size != self.x.size:
                 raise ShapeError(f"F(x) returned {f.size} values at the result's point, "
@@ -112,10 +163,27 @@ class Result:
             f"basis         factorizations {self.factorizations}   updates {self.basis_updates}",
             f"time          {self.time:.4f} s",
         ]
-        ran = [f"{k} {v.time:.3f}s" for k, v in self.passes.items() if v.ran]
-        if ran:
-            lines.append("passes        " + ", ".join(ran))
+        passes = self.passes_line()
+        if passes:
+            lines.append("passes        " + passes)
         return "\n".join(lines)
+
+    def passes_line(self) -> str:
+        """The passes that ran and their seconds, those that run inside the stabilized
+        Newton method (the crash, the paths, the fallbacks, the homotopy) within its
+        time: ``presolve 0.1 s, nms 27.5 s (crash 10.5 s, path 13.3 s within)``."""
+        ran = {k: v for k, v in self.passes.items() if v.ran}
+        inner = [k for k in ran if k in NESTED_IN_NMS] if "nms" in ran else []
+        out = []
+        for k, v in ran.items():
+            if k in inner:
+                continue
+            text = f"{k} {v.time:.3f} s"
+            if k == "nms" and inner:
+                text += (" (" + ", ".join(f"{j} {ran[j].time:.3f} s" for j in inner)
+                         + " within)")
+            out.append(text)
+        return ", ".join(out)
 
     def __repr__(self):
         r = self.residual.fb_norm if self.residual is not None else float("nan")

@@ -55,8 +55,10 @@ from .options import HOMOTOPY_DENSE_MAX_N, Options
 from .path.dense_engine import DensePathEngine
 from .path.sparse_engine import SPARSE_ENGINE_MAX_DENSITY, SparsePathEngine
 
-__all__ = ["COMPILED_NMS_MAX_N", "DENSE_BASIS_MAX_N", "DENSE_ENGINE_MAX_N",
-           "UPDATE_LIMIT_FLOOR", "Routes", "basis_factory", "choose_routes", "kernel_route"]
+__all__ = ["COMPILED_NMS_MAX_N", "COMPILE_SECONDS_DENSE", "COMPILE_SECONDS_MEDIUM",
+           "COMPILE_SECONDS_SPARSE",
+           "DENSE_BASIS_MAX_N", "DENSE_ENGINE_MAX_N", "UPDATE_LIMIT_FLOOR", "Routes",
+           "basis_factory", "choose_routes", "compile_estimate", "kernel_route"]
 
 DENSE_ENGINE_MAX_N = 500
 """Largest n whose paths run on the compiled dense engine (above: the sparse manager)."""
@@ -87,14 +89,37 @@ class Routes:
         return asdict(self)
 
 
+COMPILE_SECONDS_DENSE = 80.0
+"""Seconds a solve of a small problem (n <= ``DENSE_ENGINE_MAX_N``: the compiled crash,
+major iterations, dense engine and homotopy) spends compiling when numba's cache is empty:
+the estimate of the one-time notice (CPU seconds measured on a 2-core machine,
+benchmarks/first_run.md; a partly warm cache compiles less)."""
+
+COMPILE_SECONDS_MEDIUM = 45.0
+"""The same up to ``COMPILED_NMS_MAX_N`` (the sparse basis, the compiled major iterations;
+the preprocessor of a model of that size)."""
+
+COMPILE_SECONDS_SPARSE = 25.0
+"""The same for larger problems (the sparse basis, the Python major iterations)."""
+
+
+def compile_estimate(n: int) -> float:
+    """Seconds a solve of order n would spend compiling its kernels with an empty cache."""
+    if n <= DENSE_ENGINE_MAX_N:
+        return COMPILE_SECONDS_DENSE
+    return COMPILE_SECONDS_MEDIUM if n <= COMPILED_NMS_MAX_N else COMPILE_SECONDS_SPARSE
+
+
 class kernel_route:
     """The solve's kernel route (:mod:`compass_sparse._jit`, "Cold start"), entered when a
     solve starts and left when it ends: ``with kernel_route(n) as kernels`` gives
-    "interpreted" or "compiled".  A solve inside a solve keeps the outer one's route."""
+    "interpreted" or "compiled".  A solve inside a solve keeps the outer one's route.  A
+    compiled solve that finds a kernel missing from numba's cache says once, on stderr,
+    that it compiles and about how long that takes (:func:`compile_estimate`)."""
 
     def __init__(self, n: int):
         self._mode = _jit.kernels_interpreted(
-            n <= _jit.INTERPRET_MAX_N and _jit.may_interpret())
+            n <= _jit.INTERPRET_MAX_N and _jit.may_interpret(), compile_estimate(n))
 
     def __enter__(self) -> str:
         return "interpreted" if self._mode.__enter__().interpreted else "compiled"

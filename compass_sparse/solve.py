@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import difflib
 import functools
 import logging
 import math
@@ -25,15 +24,16 @@ import time
 import numpy as np
 
 from .box import float_vector
+from .diagnostics import MISMATCH, directional_mismatch
 from .exceptions import ProblemError, ShapeError
 from .linalg._csc_kernels import csc_scaled_all_finite
 from .linalg.blas import BLAS_LIMIT_MIN_N, single_threaded_blas
 from .merit import fb_phi, fb_psi
 from .nms.acceptance import Acceptance
-from .nms.log import HEADER
 from .nms.solver import NMSSolver
 from .nms.state import Point
-from .options import Options
+from ._options_base import suggest
+from .options import ALIASES, Options
 from .path.outcome import WarmBasis
 from .problem._kernels import any_equal
 from .problem.mcp import MCP
@@ -86,8 +86,12 @@ def _check_keywords(kwargs):
         if u in option_names:
             hints.append(f"{u!r} (an option: pass options={{{u!r}: ...}})")
             continue
-        close = difflib.get_close_matches(u, list(_PROBLEM_KEYWORDS) + sorted(option_names), 1)
-        hints.append(f"{u!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+        close = suggest(u, set(_PROBLEM_KEYWORDS) | option_names, ALIASES)
+        if close in option_names:
+            hints.append(f"{u!r} (did you mean the option {close!r}? pass "
+                         f"options={{{close!r}: ...}})")
+        else:
+            hints.append(f"{u!r}" + (f" (did you mean {close!r}?)" if close else ""))
     raise ProblemError("solve_mcp got unknown keyword(s): " + ", ".join(hints))
 
 
@@ -199,10 +203,32 @@ def _presolve_pass(problem, opt, f0, J0):
     return pre, st
 
 
+_JACOBIAN_SUSPECT = (Status.NO_PROGRESS, Status.STATIONARY_POINT, Status.MAJOR_ITERATION_LIMIT,
+                     Status.MINOR_ITERATION_LIMIT, Status.FLAT_RESIDUAL, Status.ERROR)
+"""The failed solves whose message says when J disagrees with F (a wrong Jacobian ends in
+these; a limit of time, an interrupt or a domain error say nothing about J)."""
+
+
+def jacobian_hint(problem: MCP, res: Result):
+    """Append to a failed solve's message that J disagrees with F near its point, when it
+    does (:func:`compass_sparse.diagnostics.directional_mismatch`: two evaluations of F
+    and one of J, outside the counts), naming check_jacobian."""
+    if res.status not in _JACOBIAN_SUSPECT:
+        return
+    mismatch = directional_mismatch(problem, res.x, problem.x0)
+    if mismatch > MISMATCH:
+        res.message += (f"; the Jacobian disagrees with F near the returned point (J d and "
+                        f"the difference quotient of F along d differ by {mismatch:.1e}, "
+                        "relative): compare them entry by entry with "
+                        "compass_sparse.check_jacobian(F, J, res.x)")
+
+
 def solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None,
-                  check=False) -> Result:
+                  check=False, top=True) -> Result:
     """The pass pipeline on a built problem (``check``: its start point is still to be
-    checked), inside the solve's kernel route (:func:`compass_sparse.routes.kernel_route`)."""
+    checked), inside the solve's kernel route (:func:`compass_sparse.routes.kernel_route`).
+    ``top``: the user's solve, not a hand-over inside one; it alone checks a failed
+    solve's Jacobian and logs the summary (once, at verbosity >= 1)."""
     t0 = time.perf_counter()
     with kernel_route(problem.n) as kernels:
         try:
@@ -220,6 +246,10 @@ def solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None,
             problem.evaluator.forget()
     if not res.routes:  # no pass ran that has a route
         res.routes = {"kernels": kernels}
+    if top:
+        jacobian_hint(problem, res)
+        if opt.verbosity >= 1:
+            logger.info(res.summary())
     return res
 
 
@@ -254,6 +284,8 @@ def _solve_evaluated(problem: MCP, opt: Options, kernels: str, *, callback=None,
     passes["presolve"] = st
     if pre is not None:
         st.reason = pre.summary_line()
+        if opt.verbosity >= 2:
+            logger.info(f"preprocessor: {st.reason}")
         if pre.infeasible is None and pre.reduced is problem:
             pre = None  # nothing removed: no postsolve needed
     if pre is None:
@@ -308,6 +340,8 @@ def _from_start(problem, pre, work, f0, J0, phi0, verdict0, opt, t0, passes, ker
         return _finish(problem, pre, status, msg, z0, opt, t0, passes,
                        f_reduced=f0, start_z=problem.x0, basis=basis)
     sc, passes["scaling"] = _scaling_pass(J0, opt)
+    if sc is not None and opt.verbosity >= 2:
+        logger.info(f"scaling: {passes['scaling'].reason}")
     inner = work
     user_jac = None
     if sc is not None:  # the solver works in the scaled units
@@ -329,8 +363,6 @@ def _from_start(problem, pre, work, f0, J0, phi0, verdict0, opt, t0, passes, ker
                        warm_basis=basis,
                        # the solver's start Point is (z0, f0) of `work`, judged above
                        start_verdict=verdict0 if sc is None else None)
-    if log_major is not None:
-        log_major(HEADER)
     tn = time.perf_counter()
     with blas_threads(work.n):
         out = solver.solve(Point(z0, f0, phi0, fb_psi(phi0), J0))
@@ -356,8 +388,6 @@ def _from_start(problem, pre, work, f0, J0, phi0, verdict0, opt, t0, passes, ker
                   f_reduced=fb, **dataclasses.asdict(out.counts), basis=out.basis,
                   history=out.history, lu=lu_report(solver.newton.basis),
                   routes=routes.as_dict())
-    if opt.verbosity >= 1:
-        logger.info(res.summary())
     return res
 
 
@@ -394,7 +424,8 @@ def solve_without_preprocessor(problem, z, f, opt, t0, passes, presolve_missed=T
             st.reason += ("; its point missed the tolerance on the original problem "
                           "(the postsolve's rounding): solved again without it")
     c = problem.counters  # the evaluations so far (the new solve counts its own)
-    general = solve_problem(problem.with_start(z), opt.replace(presolve=False, time_limit=left))
+    general = solve_problem(problem.with_start(z), opt.replace(presolve=False, time_limit=left),
+                            top=False)
     general.passes = {**passes, **{k: v for k, v in general.passes.items() if k != "presolve"}}
     general.nfev += c.nfev
     general.njev += c.njev

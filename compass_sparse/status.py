@@ -24,7 +24,21 @@ import numpy as np
 __all__ = ["IntermediateResult", "Iteration", "PassStats", "PointStatus", "Status", "WorkCounts"]
 
 
-class Status(enum.IntEnum):
+class _NamedIntEnum(enum.IntEnum):
+    """An IntEnum that prints as its name (``print(res.status)`` gives ``SOLVED``, not
+    ``1``) and compares, hashes and converts as its code (``status == 1``,
+    ``int(status)``); a number format (``f"{status:d}"``) gives the code."""
+
+    def __str__(self):
+        return self.name
+
+    def __format__(self, spec):
+        if spec and spec[-1] in "bcdnoxX":
+            return format(int(self), spec)
+        return format(self.name, spec)
+
+
+class Status(_NamedIntEnum):
     """Why the solve stopped.  Append-only: codes never change meaning."""
 
     SOLVED = 1  #: both residuals <= convergence_tolerance (see compass_sparse.nms.acceptance)
@@ -75,7 +89,7 @@ _PATH_CODE = {Status.CALLBACK_STOP: 6, Status.FLAT_RESIDUAL: 2, Status.STATIONAR
               Status.MEMORY_LIMIT: 10}
 
 
-class PointStatus(enum.IntEnum):
+class PointStatus(_NamedIntEnum):
     """What the returned point x is."""
 
     SOLUTION = 1  #: meets the convergence tolerance

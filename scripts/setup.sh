@@ -29,8 +29,11 @@ else
     fi
   done
 fi
-# Check that the package and its SuiteSparse/METIS wheels import (numba kernels compile on
-# first use and are cached on disk).
+# Check that the package and its SuiteSparse/METIS wheels import.
 $PY -c "import compass_sparse, compass_sparse.basis, compass_sparse.basis.ordering, compass_sparse.path._kernels" || exit 1
 $PY -c "import kvxopt.umfpack, kvxopt.cholmod, kvxopt.amd, pymetis" || { log "SuiteSparse/METIS wheels not importable"; exit 1; }
+# The warm-up: compile the numba kernels now (cached on disk), so that the first solves do
+# not spend a minute compiling.  Nothing to do when they are cached already.
+log "compiling the solver's kernels (compass-sparse warmup)"
+$PY -m compass_sparse.cli warmup || { log "the warm-up failed: solves will compile on first use"; exit 1; }
 log "ready"

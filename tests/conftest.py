@@ -27,6 +27,13 @@ from threadpoolctl import threadpool_limits  # noqa: E402
 
 _blas_limit = threadpool_limits(limits=1, user_api="blas")
 
+# The one-time notice that kernels are being compiled goes to stderr; the first test to
+# compile on a cold cache would see it in what it captured (tests/test_jit.py tests the
+# notice in fresh processes).
+from compass_sparse import _jit  # noqa: E402
+
+_jit.quiet_compile_notice()
+
 
 def pytest_configure(config):
     config.addinivalue_line(

@@ -1,7 +1,8 @@
 """Bad input gets an exception of compass_sparse.exceptions naming the culprit in the user's
 terms; a failed solve gets a Status with the best point (never a raw exception).
 
-The README's table of bad inputs is checked here row by row (``BAD_INPUTS``).
+The table of bad inputs (docs/bad_inputs.md, shown on docs/trust.rst) is checked here row
+by row (``BAD_INPUTS``; the faults during a solve in test_faults.py).
 """
 from __future__ import annotations
 
@@ -31,7 +32,7 @@ def J3(x):
 M2 = np.array([[2.0, 1.0], [1.0, 2.0]])
 q2 = np.array([-1.0, -1.0])
 
-# (label, call, exception class, message pattern): the README's table
+# (label, call, exception class, message pattern): the rows of docs/bad_inputs.md
 BAD_INPUTS = [
     ("complex x0", lambda: solve_mcp(F3, J3, 0.0, np.inf, np.zeros(3) + 1j),
      ProblemError, r"x0 is complex"),

@@ -143,18 +143,13 @@ def test_documented_status_table_lists_every_status_with_its_path_code(built):
     assert all(r[2] for r in pts)
 
 
-def test_bad_input_table_on_the_trust_page_is_the_readmes(built):
+def test_bad_input_table_on_the_trust_page_is_the_files(built):
     _, out = built
-    p = _Tables("compass-readme")
+    p = _Tables("compass-markdown-table")
     p.feed((out / "trust.html").read_text(encoding="utf-8"))
-    lines = (ROOT / "README.md").read_text(encoding="utf-8").splitlines()
-    start = next(i for i, line in enumerate(lines) if line.startswith("Bad inputs and faults"))
-    first = next(i for i in range(start, len(lines)) if lines[i].startswith("|"))
     md = []
-    for line in lines[first:]:
-        if not line.startswith("|"):
-            break
-        if not line.startswith("|---"):
+    for line in (DOCS / "bad_inputs.md").read_text(encoding="utf-8").splitlines():
+        if line.startswith("|") and not line.startswith("|---"):
             md.append([c.strip().replace("`", "") for c in line.strip().strip("|").split(" | ")])
     assert len(md) > 10 and p.rows == md
 
@@ -333,10 +328,45 @@ def test_documented_log_header_and_columns_are_the_logs(caplog):
     with caplog.at_level(logging.INFO, logger="compass_sparse"):
         cs.solve_mcp(lambda x: x**3 + x - 1.0, lambda x: np.diag(3 * x**2 + 1), lb=-np.inf,
                      ub=np.inf, x0=np.full(3, 3.0), options={"verbosity": 2})
-    header = next(r.getMessage() for r in caplog.records if r.getMessage().split()[:1]
-                  == ["major"])
-    assert doc[0].split() == header.split()
+    log = [r.getMessage() for r in caplog.records]
     text = (DOCS / "getting_started.rst").read_text(encoding="utf-8")
-    for col in header.split():
-        if col != "(label)":
-            assert f"   * - ``{col}``" in text, col
+    for title, first in (("Crash Log", "crash"), ("Major Iteration Log", "major")):
+        # the section's title and header, in the log and on the page
+        header = log[log.index(title) + 1]
+        assert header.split()[0] == first
+        assert doc[doc.index(title) + 1].split() == header.split()
+        for col in header.split():
+            if col != "(label)":
+                assert f"   * - ``{col}``" in text, col
+
+
+# ------------------------------------------------------------------ the README
+README = ROOT / "README.md"
+
+
+def _readme_blocks():
+    """The README's ```python blocks, in order."""
+    return re.findall(r"^```python\n(.*?)^```", README.read_text(encoding="utf-8"), re.M | re.S)
+
+
+# The optional extras a README block imports, and the reason its test skips without them.
+README_EXTRAS = {"pyomo": [("pyomo.environ", "the pyomo extra (pyomo) is not installed"),
+                           ("casadi", "the pyomo extra (casadi) is not installed")]}
+
+
+def test_readme_is_short():
+    lines = README.read_text(encoding="utf-8").splitlines()
+    assert len(lines) < 200, len(lines)
+    assert len(_readme_blocks()) >= 4
+
+
+@pytest.mark.parametrize("k", range(len(_readme_blocks())))
+def test_readme_code_block_runs_as_pasted(k, tmp_path, capsys, monkeypatch):
+    # each block on its own, in a fresh namespace, as a reader pastes it
+    block = _readme_blocks()[k]
+    for word, needs in README_EXTRAS.items():
+        if f"import {word}" in block:
+            for module, reason in needs:
+                pytest.importorskip(module, reason=reason)
+    monkeypatch.chdir(tmp_path)
+    exec(compile(block, f"README.md (python block {k + 1})", "exec"), {"__name__": "readme"})

@@ -289,7 +289,7 @@ def test_time_limit_holds_through_the_levenberg_marquardt_factorizations(clock, 
 
 @pytest.mark.parametrize("where", ["F", "J"])
 def test_wrong_shape_from_F_or_J_after_the_start_is_a_shape_error_naming_it(where):
-    # the README's bad-input table: a wrong shape is a bug in the user's function, raised
+    # the bad-input table (docs/bad_inputs.md): a wrong shape is a bug in the user's function, raised
     # (not taken for a domain error that would hide it), at any call
     from compass_sparse.exceptions import ShapeError
 

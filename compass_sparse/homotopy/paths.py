@@ -53,11 +53,11 @@ def _follow_paths(tr, z_start, opt, center, rng, polish, log) -> HomotopyOutcome
         except HomotopyStop as stop:
             status, message = stop.status, stop.message
         statuses.append(status)
+        if log is not None:
+            log(f"path {k + 1}: {status.value} ({message}); "
+                f"{tr.steps} steps so far, {tr.factorizations} factorizations")
         if status is HomotopyStatus.SOLVED:
             break
-        if log is not None:
-            log(f"homotopy path {k + 1}: {status.value} ({message}); "
-                f"{tr.steps} steps so far, {tr.factorizations} factorizations")
         if status is HomotopyStatus.TIME_LIMIT:
             break
     z = tr.best[0] if tr.best is not None else None

@@ -234,9 +234,11 @@ class Tracker:
         return status, text, y
 
     def _log_step(self, lam, h, x):
-        if self.log is not None and self.steps % 20 == 0:
-            self.log(f"homotopy step {self.steps:5d} lam {lam:.6f} h {h:9.2e} "
-                     f"|x| {np.linalg.norm(x, np.inf):9.2e}")
+        """The log line of an accepted step (:data:`compass_sparse.nms.log.HOMOTOPY_HEADER`:
+        steps so far, lambda, the next step length, ||x||_inf, F evaluations so far)."""
+        if self.log is not None:
+            self.log(f"{self.steps:6d} {lam:10.6f} {h:9.2e} {np.linalg.norm(x, np.inf):9.2e} "
+                     f"{self.ev.counters.nfev:6d}")
 
     def follow(self, a, polish=None):
         """Track gamma_a from (a, 0).  Returns (status, message, last point (x, lam))."""

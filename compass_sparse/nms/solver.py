@@ -22,7 +22,7 @@ from ..homotopy.outcome import HomotopyStatus
 from ..homotopy.paths import homotopy_pass
 from ..merit import fb_directional, fb_phi, fb_psi, normal_map_at
 from ..path.outcome import LinearCode, WarmBasis
-from ..progress import Progress, solve_line
+from ..progress import Progress, pass_line, solve_line
 from ..routes import Routes
 from ..status import IntermediateResult, PassStats, Status, WorkCounts
 from .acceptance import Acceptance
@@ -70,10 +70,11 @@ class NMSSolver:
         self.passes = {"crash": PassStats(), "path": PassStats(), "fallback": PassStats()}
         self.best = BestPoint(self.acceptance, self.ev, self.lb, self.ub, deadline,
                               problem.row_label)
+        self.log = MajorLog(log_major, problem.counters, problem.row_label)
         self.newton = NewtonStep(self.ev, self.lb, self.ub, make_basis=make_basis,
                                  stats=self.passes["path"], counts=self.counts,
-                                 deadline=deadline, log=log_minor, warm=warm_basis)
-        self.log = MajorLog(log_major, problem.counters, problem.row_label)
+                                 deadline=deadline, log=self.log.minor(log_minor),
+                                 warm=warm_basis)
         self.progress = Progress(options.progress)
         self._rng = None
         self._start_verdict = start_verdict
@@ -117,6 +118,21 @@ class NMSSolver:
             c = self.counts
             p.show(solve_line(c.nit, c.minor_iterations, fbn, best_fbn, c.restarts,
                               p.elapsed), final=final)
+
+    def watched(self, phase, on_point):
+        """``on_point`` of a pass (the crash, the homotopy) that also redraws the progress
+        line, which otherwise moves only between major iterations."""
+        p = self.progress
+        if not p.enabled:
+            return on_point
+
+        def watch(*point):
+            out = on_point(*point)
+            best = self.best.point
+            if p.due() and best is not None:
+                p.show(pass_line(phase, self.ev.counters.nfev, best.fbn, p.elapsed))
+            return out
+        return watch
 
     def call_back(self, cur: Point):
         """The user's callback at the current iterate (its return or StopIteration ends
@@ -237,9 +253,9 @@ class NMSSolver:
         try:
             out = homotopy_pass(self.ev, self.lb, self.ub, first, opt0,
                                 stats=self.passes.setdefault("homotopy", PassStats()),
-                                on_point=self.best.consider, rng=lambda: self.rng,
-                                deadline=self.deadline, tol=self.tol, polish=polish,
-                                center=start, log=self.log.log,
+                                on_point=self.watched("homotopy", self.best.consider),
+                                rng=lambda: self.rng, deadline=self.deadline, tol=self.tol,
+                                polish=polish, center=start, log=self.log.writer("homotopy"),
                                 compiled=self.routes.homotopy == "compiled")
         finally:
             self.log.homotopy(self.counts.nit, self.best.point.fbn)
@@ -327,8 +343,8 @@ class NMSSolver:
         try:  # (a solution found by the crash stops the solve from inside it)
             cr = crash(self.ev, cur.z, self.lb, self.ub, opt, f0=cur.f, J0=cur.J, tol=self.tol,
                        deadline=self.deadline,
-                       log=self.log.crash_line if self.log.log is not None else None,
-                       on_point=self.best.consider_trial, stats=crash_st,
+                       log=self.log.writer("crash"),
+                       on_point=self.watched("crash", self.best.consider_trial), stats=crash_st,
                        compiled=self.routes.crash == "compiled")
         finally:
             crash_st.time += time.perf_counter() - t0
@@ -336,6 +352,8 @@ class NMSSolver:
             crash_st.njev += counters.njev - nj0
             self.counts.crash_iterations += crash_st.iterations - it0
         crash_st.reason = cr.stop_reason  # (of the last run's crash; a skip's is stale)
+        self.log.note(f"crash: {cr.iterations} step{'' if cr.iterations == 1 else 's'}, "
+                      f"{cr.stop_reason}")
         if cr.iterations > 0 and all_finite(cr.f):
             pt = self.point(cr.z, cr.f)
             self.best.consider(pt.z, pt.f, pt.phi, pt.psi)

@@ -10,8 +10,8 @@ the documentation cannot drift from it:
 * ``.. compass-point-statuses::`` every :class:`compass_sparse.PointStatus`;
 * ``.. compass-step-codes::``    the pivotal path's one-letter codes (``LinearCode``);
 * ``.. compass-benchmark-records::`` every ``benchmarks/*.md``, verbatim;
-* ``.. compass-readme-table:: <text>`` the Markdown table of ``README.md`` that follows the
-  line starting with <text> (one source for the README and these pages).
+* ``.. compass-markdown-table:: <file>`` the Markdown table of a file of the docs (the
+  bad-input table, ``bad_inputs.md``: one source for the page and its tests).
 
 Tables are built from docutils nodes (no RST re-parsing), so option texts need no escaping.
 """
@@ -248,36 +248,42 @@ def _inline(text):
     return para
 
 
-class ReadmeTable(SphinxDirective):
-    """The Markdown table after the README line that starts with the argument."""
+def markdown_table(lines):
+    """The cells of the first Markdown table in ``lines`` (its header row first): the
+    lines before it are skipped (a comment, an introduction), the table ends at the first
+    line that is not a row; ``\\|`` is a literal bar in a cell."""
+    rows = []
+    for line in lines:
+        if not line.startswith("|"):
+            if rows:
+                break
+            continue
+        cells = [c.strip().replace("\\|", "|")
+                 for c in re.split(r"(?<!\\)\|", line.strip())[1:-1]]
+        if not all(re.fullmatch(r":?-+:?", c) for c in cells):
+            rows.append(cells)
+    return rows
+
+
+class MarkdownTable(SphinxDirective):
+    """The Markdown table of a file of the docs (its path relative to ``docs/``): one
+    source that a page shows and the tests read (the bad-input table, docs/bad_inputs.md),
+    easy to extend by a row."""
 
     required_arguments = 1
-    final_argument_whitespace = True
 
     def run(self):
         from pathlib import Path
 
-        readme = Path(self.env.srcdir).parent / "README.md"
-        self.env.note_dependency(str(readme))
-        lines = readme.read_text(encoding="utf-8").splitlines()
-        marker = self.arguments[0]
+        path = Path(self.env.srcdir) / self.arguments[0]
+        self.env.note_dependency(str(path))
         try:
-            start = next(i for i, line in enumerate(lines) if line.startswith(marker))
-        except StopIteration:
-            raise self.error(f"README.md has no line starting with {marker!r}") from None
-        rows = []
-        for line in lines[start + 1:]:
-            if not line.startswith("|"):
-                if rows:
-                    break
-                continue  # the rest of the introducing paragraph
-            cells = [c.strip().replace("\\|", "|")
-                     for c in re.split(r"(?<!\\)\|", line.strip())[1:-1]]
-            if not all(re.fullmatch(r":?-+:?", c) for c in cells):
-                rows.append(cells)
+            rows = markdown_table(path.read_text(encoding="utf-8").splitlines())
+        except OSError as exc:
+            raise self.error(f"cannot read {path}: {exc}") from None
         if len(rows) < 2:
-            raise self.error(f"no Markdown table after {marker!r} in README.md")
-        table = nodes.table(classes=["compass-readme"])
+            raise self.error(f"no Markdown table in {path}")
+        table = nodes.table(classes=["compass-markdown-table"])
         group = nodes.tgroup(cols=len(rows[0]))
         table += group
         for _ in rows[0]:
@@ -300,5 +306,5 @@ def setup(app):
     app.add_directive("compass-point-statuses", PointStatusTable)
     app.add_directive("compass-step-codes", StepCodeTable)
     app.add_directive("compass-benchmark-records", BenchmarkRecords)
-    app.add_directive("compass-readme-table", ReadmeTable)
+    app.add_directive("compass-markdown-table", MarkdownTable)
     return {"version": "1", "parallel_read_safe": True, "parallel_write_safe": True}

@@ -70,7 +70,7 @@ def test_nms_pass_records_its_time():
     r = cs.solve_mcp(g.problem)
     st = r.passes["nms"]
     assert st.ran and st.iterations == r.nit and 0.0 < st.time <= r.time
-    assert f"nms {st.time:.3f}s" in r.summary()
+    assert f"nms {st.time:.3f} s" in r.summary()
 
 
 def _badly_scaled_lcps(count, seed=1):

@@ -218,6 +218,18 @@ def fix_numeraire(lb, ub, x0, num_idx, how, value, names, row_names):
                 f"{row_names[num_idx]} is implied by Walras' law")
 
 
+def quiet(fn):
+    """``fn`` without numpy's floating-point warnings.  At a trial point outside the model's
+    domain (a negative price under a CES power, a zero income) F or J comes out NaN or Inf:
+    the solver rejects such a point and shortens its step, so a warning printed for it
+    (thousands in a hard solve) says nothing to the user but alarms."""
+    def f(z):
+        with np.errstate(all="ignore"):
+            return fn(z)
+    f.__name__ = getattr(fn, "__name__", "f")
+    return f
+
+
 def assemble_model(ev, *, lb, ub, x0, names, row_names, degree, ray, num_idx, info,
                    spec, shock_text) -> CGEModel:
     """The CGEModel of evaluator ``ev`` (static or dynamic) with the given bounds, start,
@@ -225,11 +237,12 @@ def assemble_model(ev, *, lb, ub, x0, names, row_names, degree, ray, num_idx, in
 
     ``ev`` provides ``eval_F``, ``eval_J``, ``pat``, ``blocks``, ``shapes``,
     ``make_model(...)`` and ``after_shock(shock) -> (evaluator, description)``."""
-    problem = MCP(ev.eval_F, ev.eval_J, lb, ub, x0, var_names=names, eqn_names=row_names,
+    F, J = quiet(ev.eval_F), quiet(ev.eval_J)
+    problem = MCP(F, J, lb, ub, x0, var_names=names, eqn_names=row_names,
                   constant_jac=ev.pat.constant_pattern())
     model = CGEModel(problem=problem, benchmark=x0.copy(), names=names, row_names=row_names,
                      blocks=dict(ev.blocks), block_shapes=dict(ev.shapes), degree=degree,
-                     ray=ray, info=info, _jac_fn=ev.eval_J)
+                     ray=ray, info=info, _jac_fn=J)
 
     def rebuild(shock=None, start=None, numeraire="keep", value=None, scale=None):
         text = shock_text
