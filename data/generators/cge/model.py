@@ -52,6 +52,8 @@ class CGEModel:
     info: dict
     _rebuild: Callable = field(repr=False, default=None)
     _jac_fn: Callable = field(repr=False, default=None)
+    #: the model's evaluator (its calibrated data: the GAMSPy writer reads them)
+    evaluator: object = field(repr=False, default=None)
 
     # -- basic access --------------------------------------------------------------------
     @property
@@ -242,7 +244,7 @@ def assemble_model(ev, *, lb, ub, x0, names, row_names, degree, ray, num_idx, in
                   constant_jac=ev.pat.constant_pattern())
     model = CGEModel(problem=problem, benchmark=x0.copy(), names=names, row_names=row_names,
                      blocks=dict(ev.blocks), block_shapes=dict(ev.shapes), degree=degree,
-                     ray=ray, info=info, _jac_fn=J)
+                     ray=ray, info=info, _jac_fn=J, evaluator=ev)
 
     def rebuild(shock=None, start=None, numeraire="keep", value=None, scale=None):
         text = shock_text
