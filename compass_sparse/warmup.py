@@ -62,7 +62,7 @@ def _dense_homotopy():
 
 
 def _sparse():
-    # the route of ``compass-sparse demo`` (n = 1e5): the sparse basis, the Python major
+    # the route of ``compass-sparse demo`` (n = 1e5): the sparse engine, the Python major
     # iterations (n > 5000); its kernels' signatures do not depend on n
     solve_mcp(structured_quadratic(6000, seed=0).problem)
 
@@ -75,7 +75,7 @@ def _medium():
 
 def _small_models():
     # ``compass-sparse demo --problem cge`` and an LCP: the preprocessor on small models,
-    # the pivotal path of solve_lcp on the sparse basis (n = 900)
+    # the pivotal path of solve_lcp on the sparse engine (n = 900)
     solve_mcp(static_cge(seed=0).with_shock(output_tax=0.0).problem)
     M, q, lb, ub = obstacle_problem(30, seed=0).lcp
     solve_lcp(M, q, lb, ub)
@@ -88,7 +88,7 @@ WORKLOADS = {
     "dense paths": ("compiled major iterations, dense engine", 50.0, _dense_paths, ()),
     "dense crash": ("compiled crash", 26.0, _dense_crash, ()),
     "dense homotopy": ("compiled homotopy", 17.0, _dense_homotopy, ()),
-    "sparse": ("sparse basis, Python major iterations", 23.0, _sparse, ()),
+    "sparse": ("sparse engine, Python major iterations", 23.0, _sparse, ()),
     "medium": ("preprocessor, sparse basis with compiled major iterations", 25.0, _medium,
                ("dense paths",)),
     "small models": ("small CGE model, LCP", 10.0, _small_models,
