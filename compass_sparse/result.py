@@ -15,7 +15,7 @@ import numpy as np
 from . import sensitivity as _sensitivity
 from .exceptions import ShapeError
 from .merit import ResidualReport, natural_residual, residual_report
-from .problem.mcp import MCP, as_real
+from .problem.mcp import MCP, as_real, row_label, var_label
 from .status import PointStatus, Status
 
 __all__ = ["NESTED_IN_NMS", "Result"]
@@ -74,15 +74,11 @@ class Result:
 
     def var_label(self, i: int) -> str:
         """The name of variable i (``x[i]`` when the problem has no names)."""
-        return self.var_names[i] if self.var_names is not None else f"x[{i}]"
+        return var_label(self.var_names, i)
 
     def row_label(self, i: int) -> str:
         """The name of row i of F, as the problem names it (:meth:`MCP.row_label`)."""
-        if self.eqn_names is not None:
-            return self.eqn_names[i]
-        if self.var_names is not None:
-            return f"F({self.var_names[i]})"
-        return f"F[{i}]"
+        return row_label(self.var_names, self.eqn_names, i)
 
     def solution(self, as_series: bool | None = None):
         """The point by name: a pandas Series indexed by the variables' names when pandas

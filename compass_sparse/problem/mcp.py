@@ -133,6 +133,21 @@ def _var_label(names, i: int) -> str:
     return f"variable {i}"
 
 
+
+def var_label(var_names, i: int) -> str:
+    """The name of variable i under ``var_names`` (``x[i]`` when there are none)."""
+    return var_names[i] if var_names is not None else f"x[{i}]"
+
+
+def row_label(var_names, eqn_names, i: int) -> str:
+    """The name of row i of F: its equation's name, else ``F(<variable i>)``, else
+    ``F[i]``."""
+    if eqn_names is not None:
+        return eqn_names[i]
+    if var_names is not None:
+        return f"F({var_names[i]})"
+    return f"F[{i}]"
+
 class MCP:
     """A mixed complementarity problem  l <= z <= u  _|_  F(z), with a sparse Jacobian.
 
@@ -282,15 +297,11 @@ class MCP:
     # -- names ----------------------------------------------------------------------
     def var_label(self, i: int) -> str:
         """Name of variable i (its index when unnamed)."""
-        return self.var_names[i] if self.var_names is not None else f"x[{i}]"
+        return var_label(self.var_names, i)
 
     def row_label(self, i: int) -> str:
         """Name of row i of F (paired with variable i)."""
-        if self.eqn_names is not None:
-            return self.eqn_names[i]
-        if self.var_names is not None:
-            return f"F({self.var_names[i]})"
-        return f"F[{i}]"
+        return row_label(self.var_names, self.eqn_names, i)
 
     # -- evaluation (delegated to the evaluation layer) ------------------------------
     @property
