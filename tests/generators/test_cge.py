@@ -433,7 +433,7 @@ def test_output_tax_shock_is_solved_without_the_crash_raising_the_merit():
     ||Phi|| rose above the start's (181 -> 255) and handed on one from which every
     linearization's path walked 1500-4000 pivots; Newton from the start needs no pivot.
     The crash now stops before a step that raises ||Phi|| (crash.RAISED).  Counts, not
-    times: under 2000 pivots (the issue's target; 36 measured), at most 3 per variable,
+    times: under 2000 pivots (the target set for it; 36 measured), at most 3 per variable,
     no restart.  (The time limit only bounds a regression's cost.)"""
     from compass_sparse import solve_mcp
 
