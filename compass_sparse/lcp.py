@@ -201,7 +201,7 @@ def _lcp_data(M, q):
         raise ShapeError(f"q has shape {q.shape}, expected (n,) or (n, 1)")
     n = q.size
     if sp.issparse(M):
-        if np.iscomplexobj(M.data):
+        if M.dtype.kind == "c":  # (the dtype: a dok matrix has no data array)
             raise ProblemError("M is complex; compass_sparse solves real problems")
         M = sp.csc_matrix(M, dtype=float, copy=True)
     else:
