@@ -31,7 +31,7 @@ from .problem.mcp import MCP, as_real
 from .report import judge_on, make_result
 from .result import Result
 from .routes import basis_factory, choose_routes, kernel_route
-from .solve import blas_threads, loggers, solve_without_preprocessor
+from .solve import blas_threads, check_basis, loggers, solve_without_preprocessor
 from .status import PassStats, PointStatus, Status
 
 logger = logging.getLogger("compass_sparse")
@@ -40,7 +40,8 @@ __all__ = ["solve_lcp"]
 
 
 # ---------------------------------------------------------------------------- LCP
-def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None) -> Result:
+def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None,
+              basis=None) -> Result:
     """Solve the (box-constrained) linear complementarity problem
 
         lb <= z <= ub  _|_  M z + q
@@ -49,13 +50,16 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     with a Lemke ray start as the fallback.  Ray termination from the Lemke start is
     reported as ``Status.INFEASIBLE`` (a proof of infeasibility when M is copositive-plus).
     A path that cycles or stalls hands over to the general stabilized Newton method.
+    ``basis``: the ``Result.basis`` of an earlier solve of an LCP of the same size, to
+    warm-start the path (a basis of another size raises ShapeError).
     """
     t0 = time.perf_counter()
     opt = Options.coerce(options)
     M, q = _lcp_data(M, q)
+    basis = check_basis(basis, q.size)
     with kernel_route(q.size) as kernels:
         routes = choose_routes(q.size, opt, kernels=kernels, nnz=M.nnz)
-        res = _solve_lcp(M, q, lb, ub, x0, opt, var_names, routes, t0)
+        res = _solve_lcp(M, q, lb, ub, x0, opt, var_names, routes, t0, basis)
     if not res.routes:
         res.routes = routes.as_dict()
     if opt.verbosity >= 1:  # (a hand-over to the general method logs nothing of its own)
@@ -63,7 +67,7 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     return res
 
 
-def _solve_lcp(M, q, lb, ub, x0, opt, var_names, routes, t0) -> Result:
+def _solve_lcp(M, q, lb, ub, x0, opt, var_names, routes, t0, basis) -> Result:
     n = q.size
 
     def F(z):
@@ -110,7 +114,7 @@ def _solve_lcp(M, q, lb, ub, x0, opt, var_names, routes, t0) -> Result:
             st.reason = f"n < crash_minimum_dimension ({opt.crash_minimum_dimension})"
         passes["crash"] = st
         return _lcp_path(problem, M, q, z, f, x, opt, t0, passes, st, crash_its, log_minor,
-                         routes)
+                         routes, basis)
     except KeyboardInterrupt:
         return make_result(problem, Status.USER_INTERRUPT, "interrupted by the user (Ctrl-C)",
                            z, f, opt, t0, start_z=problem.x0, passes=passes,
@@ -134,7 +138,8 @@ def _crash_progress(opt, problem):
     return on_point
 
 
-def _lcp_path(problem, M, q, z, f, x, opt, t0, passes, st, crash_its, log_minor, routes):
+def _lcp_path(problem, M, q, z, f, x, opt, t0, passes, st, crash_its, log_minor, routes,
+              warm):
     """The pivotal path(s) of :func:`solve_lcp` from the (crashed) point z, x = pi^-1(z)."""
     n = q.size
     lb, ub = problem.lb, problem.ub
@@ -149,7 +154,7 @@ def _lcp_path(problem, M, q, z, f, x, opt, t0, passes, st, crash_its, log_minor,
     # One path solves a linear problem: give it room (a Lemke path may need ~n pivots).
     limit = opt.minor_iteration_limit or max(10 * n, 1000)
     with blas_threads(n):
-        res = solve_linear_mcp(M, q, lb, ub, bm, opt, x,
+        res = solve_linear_mcp(M, q, lb, ub, bm, opt, x, warm=warm,
                                ray_start=opt.lemke_start in ("always", "first"),
                                keep_ray=True, minor_limit=limit, deadline=deadline,
                                log=log_minor)

@@ -45,7 +45,7 @@ from .status import PassStats, Status, WorkCounts
 
 logger = logging.getLogger("compass_sparse")
 
-__all__ = ["MCPSolver", "solve_mcp"]
+__all__ = ["MCPSolver", "check_basis", "solve_mcp"]
 
 WORK_COUNTS = tuple(f.name for f in dataclasses.fields(WorkCounts))
 """Result fields that count work done (summed over a solve and its hand-over)."""
@@ -230,6 +230,7 @@ def solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None,
     ``top``: the user's solve, not a hand-over inside one; it alone checks a failed
     solve's Jacobian and logs the summary (once, at verbosity >= 1)."""
     t0 = time.perf_counter()
+    basis = check_basis(basis, problem.n)  # (bad input: before any evaluation)
     with kernel_route(problem.n) as kernels:
         try:
             if check:
@@ -258,7 +259,6 @@ _SOLVE_PASSES = ("crash", "path", "fallback", "homotopy")
 
 def _solve_evaluated(problem: MCP, opt: Options, kernels: str, *, callback=None,
                      basis=None) -> Result:
-    basis = _check_basis(basis, problem.n)
     t0 = time.perf_counter()
     passes = {}
     # F and J at the start point: one evaluation each (kept from the problem's start check
@@ -391,14 +391,22 @@ def _from_start(problem, pre, work, f0, J0, phi0, verdict0, opt, t0, passes, ker
     return res
 
 
-def _check_basis(basis, n: int) -> WarmBasis | None:
-    """A warm-start basis of the user's problem, or an error naming the mismatch."""
+def check_basis(basis, n: int) -> WarmBasis | None:
+    """A warm-start basis (a :class:`WarmBasis` or its array) of a problem of n variables,
+    or a ShapeError naming both sizes (the basis of another problem is never used
+    silently: its indices would pair with other variables)."""
     if basis is None:
         return None
     b = np.asarray(basis.basic if isinstance(basis, WarmBasis) else basis)
+    integral = b.dtype.kind in "iub" or (b.dtype.kind == "f"
+                                         and bool(np.all(b == np.round(b))))
+    if b.ndim != 1 or not integral:
+        raise ShapeError(f"the warm-start basis is an array of shape {b.shape} and dtype "
+                         f"{b.dtype}: pass the Result.basis of a solve of this problem")
     if b.shape != (n,):
-        raise ShapeError(f"the warm-start basis has shape {b.shape} but the problem has {n} "
-                         "variables: pass the Result.basis of a solve of this problem")
+        raise ShapeError(f"the warm-start basis is of a problem of {b.size} variables but "
+                         f"this problem has {n}: pass the Result.basis of a solve of this "
+                         "problem")
     return WarmBasis(b.astype(np.int8))
 
 
