@@ -36,6 +36,7 @@ from ._options_base import suggest
 from .options import ALIASES, Options
 from .path.outcome import WarmBasis
 from .problem._kernels import any_equal
+from .problem.isolated import isolated_pairs, solved_exactly
 from .problem.mcp import MCP
 from .report import judge_on, lu_report, make_result, postsolve_basis
 from .result import Result
@@ -188,7 +189,7 @@ def _presolve_pass(problem, opt, f0, J0):
     if cache.linear_rows is None:
         cache.linear_rows = count_linear_rows()
     linear_rows = cache.linear_rows
-    if linear_rows == 0 and not has_fixed:
+    if linear_rows == 0 and not has_fixed and not _isolated_pair_solved(problem, f0, cache):
         st.reason = "no linear rows (all entries declared constant) and no fixed variables"
         return None, st
     # (lazy: the preprocessor's 17 modules are a third of the package's import time, 10 ms
@@ -201,6 +202,23 @@ def _presolve_pass(problem, opt, f0, J0):
     st.ran = True
     st.time = time.perf_counter() - t0
     return pre, st
+
+
+def _isolated_pair_solved(problem, f0, cache) -> bool:
+    """Whether the declared pattern has an isolated pair (a variable and its row that
+    nothing else touches, :mod:`compass_sparse.problem.isolated`) that the start point
+    solves exactly: the preprocessor keeps it there (a free variable with F = 0 and a
+    zero row and column of J made every Newton system singular)."""
+    if not problem.pattern_declared:
+        return False
+    if cache.isolated_pairs is None:
+        P = problem.evaluator.pattern_ref
+        cache.isolated_pairs = isolated_pairs(P.indptr, P.indices, problem.n)
+    idx = cache.isolated_pairs
+    if idx.size == 0:
+        return False
+    lb, ub = problem.lb[idx], problem.ub[idx]
+    return bool(solved_exactly(problem.x0[idx], f0[idx], lb, ub)[lb < ub].any())
 
 
 _JACOBIAN_SUSPECT = (Status.NO_PROGRESS, Status.STATIONARY_POINT, Status.MAJOR_ITERATION_LIMIT,
