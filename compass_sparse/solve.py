@@ -26,6 +26,7 @@ import numpy as np
 from .box import float_vector
 from .diagnostics import MISMATCH, directional_mismatch
 from .exceptions import ProblemError, ShapeError
+from .feasibility import STALLED, infeasible_result
 from .linalg._csc_kernels import csc_scaled_all_finite
 from .linalg.blas import BLAS_LIMIT_MIN_N, single_threaded_blas
 from .merit import fb_phi, fb_psi
@@ -221,6 +222,47 @@ def _isolated_pair_solved(problem, f0, cache) -> bool:
     return bool(solved_exactly(problem.x0[idx], f0[idx], lb, ub)[lb < ub].any())
 
 
+def _affine_data(problem: MCP, x):
+    """(M, q) with F(z) = M z + q when every Jacobian entry is declared constant (and a
+    row without entries is one of a declared pattern), checked once more at x (relative
+    1e-8); else None.  Evaluated on a fresh evaluator: outside the solve's counts."""
+    mask = problem.constant_mask
+    P = problem.evaluator.pattern_ref
+    if mask is None or P is None or not mask.all():
+        return None
+    if not problem.pattern_declared and (np.bincount(P.indices, minlength=problem.n) == 0).any():
+        return None
+    ev = problem.evaluator.fresh()
+    try:
+        f0, M = ev.FJ(problem.x0)
+        f1 = ev.F(x)
+    except Exception:  # (the user's F failed: no verdict rests on it)
+        return None
+    q = f0 - M @ problem.x0
+    pred = M @ x + q
+    size = np.abs(f1) + abs(M) @ np.abs(x) + np.abs(q) + 1.0
+    if not np.all(np.abs(f1 - pred) <= 1e-8 * size):
+        return None
+    return M, q
+
+
+def _infeasible_if_affine(problem: MCP, res: Result, opt: Options, t0) -> Result:
+    """A stalled solve of an MCP whose F is affine (every Jacobian entry declared
+    constant) is an LCP: its sign conditions are decided by an LP, and an INFEASIBLE
+    Result with a checked Farkas certificate replaces it when no point of the box meets
+    them (:mod:`compass_sparse.feasibility`)."""
+    data = _affine_data(problem, res.x)
+    if data is None:
+        return res
+    deadline = t0 + opt.time_limit if math.isfinite(opt.time_limit) else None
+    out = infeasible_result(problem, *data, opt, t0, passes=res.passes, deadline=deadline,
+                            failed=res)
+    if out is None:
+        return res
+    out.message += " (F is affine: every Jacobian entry is declared constant)"
+    return out
+
+
 _JACOBIAN_SUSPECT = (Status.NO_PROGRESS, Status.STATIONARY_POINT, Status.MAJOR_ITERATION_LIMIT,
                      Status.MINOR_ITERATION_LIMIT, Status.FLAT_RESIDUAL, Status.ERROR)
 """The failed solves whose message says when J disagrees with F (a wrong Jacobian ends in
@@ -265,6 +307,8 @@ def solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None,
             problem.evaluator.forget()
     if not res.routes:  # no pass ran that has a route
         res.routes = {"kernels": kernels}
+    if top and res.status in STALLED:
+        res = _infeasible_if_affine(problem, res, opt, t0)
     if top:
         jacobian_hint(problem, res)
         if opt.verbosity >= 1:
