@@ -4,9 +4,11 @@ A box-constrained LCP, lb <= z <= ub _|_ M z + q, is solved by one pivotal path 
 §3.3; after a projected-Newton crash for n >= ``crash_minimum_dimension``), with a Lemke ray
 start as the fallback; ray termination from the Lemke start proves infeasibility when M is
 copositive-plus (here: positive semidefinite).  An LCP whose variables are all free is the
-linear system M z + q = 0 (:mod:`compass_sparse.linear_system`).  A path that cycles or
-stalls hands over to the general stabilized Newton method (:func:`compass_sparse.solve_mcp`'s
-pipeline).
+linear system M z + q = 0 (:mod:`compass_sparse.linear_system`).  A path that fails
+otherwise (a ray for a general M, a cycle, a limit) first has the rows' sign conditions
+decided by an LP (:mod:`compass_sparse.feasibility`): when no point of the box meets them
+the problem is INFEASIBLE, with a Farkas certificate; else the general stabilized Newton
+method (:func:`compass_sparse.solve_mcp`'s pipeline) takes over.
 """
 from __future__ import annotations
 
@@ -49,8 +51,10 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None,
 
     by one pivotal path (after a projected-Newton crash for n >= crash_minimum_dimension),
     with a Lemke ray start as the fallback.  Ray termination from the Lemke start is
-    reported as ``Status.INFEASIBLE`` (a proof of infeasibility when M is copositive-plus).
-    A path that cycles or stalls hands over to the general stabilized Newton method.
+    reported as ``Status.INFEASIBLE`` (a proof of infeasibility when M is copositive-plus);
+    so is an LCP none of whose box points meets the rows' sign conditions, decided by an
+    LP when the path fails, with the Farkas certificate in ``Result.certificate``.  A path
+    that fails otherwise hands over to the general stabilized Newton method.
     ``basis``: the ``Result.basis`` of an earlier solve of an LCP of the same size, to
     warm-start the path (a basis of another size raises ShapeError).
     """
