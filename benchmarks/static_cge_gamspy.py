@@ -32,7 +32,8 @@ __all__ = ["static_container", "solve_static_with_path"]
 
 
 def _evaluator(model):
-    ev = getattr(model._jac_fn, "__self__", None)
+    fn = getattr(model._jac_fn, "__wrapped__", model._jac_fn)  # (quiet()'s wrapper)
+    ev = getattr(fn, "__self__", None)
     if ev is None or not hasattr(ev, "cva"):
         raise TypeError("not a static CGE model of compass_sparse.generators.cge")
     return ev
