@@ -8,9 +8,11 @@
     compass-sparse warmup [--jobs J] compile the solver's kernels ahead (set-up runs it)
     compass-sparse --version
 
-A mistake on the command line (a bad number, a missing file, an output folder that does
-not exist) is one line on stderr and exit code 2, found before any solving; Ctrl-C stops
-with exit code 130 (a scenario batch says how many scenarios were saved and how to resume).
+A mistake on the command line (a bad number, a missing file, an output file or folder
+that cannot be written, a scenario parameter the model does not have or a value it
+refuses) is one line on stderr and exit code 2, found before any solving; Ctrl-C stops
+with exit code 130 (a scenario batch says how many scenarios were saved and how to resume;
+a single solve prints its summary first).
 """
 from __future__ import annotations
 
@@ -27,13 +29,15 @@ import numpy as np
 
 from . import __version__
 from . import generators as gen
-from .batch import grid, parse_axis, read_scenarios, solve_batch
+from .batch import CGEScenarioModel, grid, parse_axis, read_scenarios, scenario_key, solve_batch
+from .batch.store import ResultStore
 from .exceptions import CompassError
 from .generators.cge import economics_report, static_cge
 from .lcp import solve_lcp
 from .options import Options
 from .problem.mcp import MCP
 from .solve import solve_mcp
+from .status import Status
 from .warmup import default_jobs, warm_up
 
 EXIT_USAGE = 2
@@ -44,6 +48,19 @@ EXIT_INTERRUPTED = 130
 
 class UsageError(Exception):
     """A mistake on the command line: printed as one line, exit code 2."""
+
+
+SCENARIO_PARAMETERS = ("tariff", "output_tax", "endowment", "balance",
+                       "productivity") + CGEScenarioModel.ELASTICITIES
+"""The parameters a CGE scenario may set (the static model's shocks and elasticities)."""
+
+
+def _exit_code(res) -> int:
+    """0 solved, 130 interrupted by Ctrl-C (the solve returns its best point then), 1
+    not solved."""
+    if res.status is Status.USER_INTERRUPT:
+        return EXIT_INTERRUPTED
+    return 0 if res.success else 1
 
 
 def _opts(args):
@@ -114,12 +131,12 @@ def _demo(args) -> int:
         build = time.perf_counter() - t0
         res = solve_mcp(prob, options=_opts(args))
         _print_result("kojshin", 4, res, prob, build, args.verbose)
-        return 0 if res.success else 1
+        return _exit_code(res)
     prob = g.problem
     _print_result(f"{kind} (seed {args.seed})", prob.n, res, prob, build, args.verbose)
     if getattr(g, "solution", None) is not None:
         print(f"known solution max |x - x*| = {np.max(np.abs(res.x - g.solution)):.3e}")
-    return 0 if res.success else 1
+    return _exit_code(res)
 
 
 def _check_common(args):
@@ -139,14 +156,47 @@ def _check_cge_args(args):
             raise UsageError(f"--{name} must be at least 1 (got {getattr(args, name)})")
     if args.tariff is not None and args.regions < 2:
         raise UsageError("--tariff needs trade between regions: give --regions 2 or more")
+    if args.top < 0:
+        raise UsageError(f"--top must be 0 or more (got {args.top})")
     if args.scenarios_file and not os.path.isfile(args.scenarios_file):
         raise UsageError(f"--scenarios-file {args.scenarios_file}: no such file")
     if args.csv:
-        folder = os.path.dirname(os.path.abspath(args.csv))
-        if not os.path.isdir(folder):
-            raise UsageError(f"--csv {args.csv}: the folder {folder} does not exist")
+        _check_output_file("--csv", args.csv)
+    if args.scenarios or args.scenarios_file:
+        _check_output_folder("--output", args.output)
     if args.workers is not None and args.workers < 0:
         raise UsageError(f"--workers must be 0 or more (got {args.workers})")
+
+
+def _check_output_file(flag, path):
+    """A file the command will write: its folder exists and is writable, and the path is
+    not a folder (found now, not after the solve)."""
+    if os.path.isdir(path):
+        raise UsageError(f"{flag} {path}: is a folder; give a file name")
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise UsageError(f"{flag} {path}: the folder {folder} does not exist")
+    if not os.access(folder, os.W_OK):
+        raise UsageError(f"{flag} {path}: the folder {folder} is not writable")
+
+
+def _check_output_folder(flag, path):
+    """A folder the command will create or write into: a folder if it exists, else its
+    nearest existing parent is a writable folder (it is created with its parents)."""
+    if os.path.exists(path):
+        if not os.path.isdir(path):
+            raise UsageError(f"{flag} {path}: is a file, not a folder")
+        if not os.access(path, os.W_OK):
+            raise UsageError(f"{flag} {path}: the folder is not writable")
+        return
+    parent = os.path.dirname(os.path.abspath(path))
+    while not os.path.exists(parent):
+        parent = os.path.dirname(parent)
+    if not os.path.isdir(parent):
+        raise UsageError(f"{flag} {path}: {parent} is a file, so the folder cannot be "
+                         "created")
+    if not os.access(parent, os.W_OK):
+        raise UsageError(f"{flag} {path}: cannot create it in {parent} (not writable)")
 
 
 def _scenario_list(args):
@@ -160,7 +210,29 @@ def _scenario_list(args):
         raise UsageError(str(exc).splitlines()[0]) from None
     if not scenarios:
         raise UsageError("no scenarios: --scenarios and --scenarios-file give none")
+    unknown = sorted({k for s in scenarios for k in s} - set(SCENARIO_PARAMETERS))
+    if unknown:
+        raise UsageError(f"unknown scenario parameter {', '.join(map(repr, unknown))}: the "
+                         f"parameters are {', '.join(SCENARIO_PARAMETERS)}")
     return scenarios
+
+
+def _check_scenario_values(model, scenarios):
+    """Build the model at the smallest and the largest value of every parameter (the first
+    value of an array-valued one), so that a value the model refuses (a tariff of -1, an
+    output tax of 1) is a mistake found before solving, not a batch of failed rows."""
+    builder = CGEScenarioModel(model)
+    for name in sorted({k for s in scenarios for k in s}):
+        values = [s[name] for s in scenarios if name in s]
+        if all(np.ndim(v) == 0 for v in values):
+            values = sorted({min(values), max(values)})
+        for v in values[:2]:
+            try:
+                builder.cge(**{name: v})
+            except (CompassError, ValueError, TypeError) as exc:
+                shown = v if np.ndim(v) == 0 else "its first value"
+                raise UsageError(f"scenario {name} = {shown}: {str(exc).splitlines()[0]}") \
+                    from None
 
 
 def _cge(args) -> int:
@@ -178,6 +250,7 @@ def _cge(args) -> int:
     print(f"benchmark replication (0 iterations): ||Phi||_2 = {rep.residual.fb_norm:.3e}, "
           f"natural residual = {rep.residual.natural:.3e}")
     if scenarios is not None:
+        _check_scenario_values(model, scenarios)
         return _cge_scenarios(args, model, scenarios)
     shock = {}
     if args.output_tax is not None:
@@ -195,6 +268,8 @@ def _cge(args) -> int:
     res = solve_mcp(shocked.problem, options=_opts(args))
     _print_result("counterfactual", shocked.problem.n, res, shocked.problem,
                   verbose=args.verbose)
+    if res.status is Status.USER_INTERRUPT:
+        return EXIT_INTERRUPTED  # (no report of a point the user stopped)
     econ = economics_report(shocked, shocked.benchmark, res.x)
     print()
     print("economics of the counterfactual" + ("" if res.success else
@@ -203,7 +278,16 @@ def _cge(args) -> int:
     if args.csv:
         econ.to_csv(args.csv)
         print(f"\nwrote every variable and household to {args.csv}")
-    return 0 if res.success else 1
+    return _exit_code(res)
+
+
+def _saved_count(folder, scenarios):
+    """How many of ``scenarios`` have a row in the results folder (None if unreadable)."""
+    try:
+        stored = ResultStore(folder, writer=False).load()
+    except (OSError, ImportError, ValueError, CompassError):  # (only for a message)
+        return None
+    return sum(scenario_key(s) in stored for s in scenarios)
 
 
 def _cge_scenarios(args, model, scenarios) -> int:
@@ -218,8 +302,11 @@ def _cge_scenarios(args, model, scenarios) -> int:
                           output=args.output,
                           on_mismatch="new" if args.fresh else "refuse")
     except KeyboardInterrupt:
-        print(f"\ninterrupted: the scenarios finished so far are saved in {args.output}/; "
-              "run the same command again to resume", file=sys.stderr)
+        saved = _saved_count(args.output, scenarios)
+        what = ("the scenarios finished so far are saved" if saved is None else
+                f"{saved} of {len(scenarios)} scenarios saved")
+        print(f"\ninterrupted: {what} in {args.output}/; run the same command again to "
+              "resume", file=sys.stderr)
         return EXIT_INTERRUPTED
     print(out.summary())
     # Headlines of region r1: mean welfare index of its households, mean Armington price,
@@ -369,6 +456,10 @@ def main(argv=None) -> int:
     except KeyboardInterrupt:
         print(f"\ncompass-sparse {args.cmd}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
+    except MemoryError:
+        print(f"compass-sparse {args.cmd}: not enough memory for a problem of this size "
+              "(give smaller sizes)", file=sys.stderr)
+        return 1
     ap.print_help()
     return 0
 

@@ -4,9 +4,11 @@ A box-constrained LCP, lb <= z <= ub _|_ M z + q, is solved by one pivotal path 
 §3.3; after a projected-Newton crash for n >= ``crash_minimum_dimension``), with a Lemke ray
 start as the fallback; ray termination from the Lemke start proves infeasibility when M is
 copositive-plus (here: positive semidefinite).  An LCP whose variables are all free is the
-linear system M z + q = 0 (:mod:`compass_sparse.linear_system`).  A path that cycles or
-stalls hands over to the general stabilized Newton method (:func:`compass_sparse.solve_mcp`'s
-pipeline).
+linear system M z + q = 0 (:mod:`compass_sparse.linear_system`).  A path that fails
+otherwise (a ray for a general M, a cycle, a limit) first has the rows' sign conditions
+decided by an LP (:mod:`compass_sparse.feasibility`): when no point of the box meets them
+the problem is INFEASIBLE, with a Farkas certificate; else the general stabilized Newton
+method (:func:`compass_sparse.solve_mcp`'s pipeline) takes over.
 """
 from __future__ import annotations
 
@@ -20,6 +22,7 @@ import scipy.sparse as sp
 from .box import dot_norm
 from .crash.driver import crash
 from .exceptions import ProblemError, ShapeError
+from .feasibility import infeasible_result
 from .linear_system import solve_free_lcp
 from .merit import fb_phi, normal_map_at
 from .nms.log import SectionLog
@@ -31,7 +34,7 @@ from .problem.mcp import MCP, as_real
 from .report import judge_on, make_result
 from .result import Result
 from .routes import basis_factory, choose_routes, kernel_route
-from .solve import blas_threads, loggers, solve_without_preprocessor
+from .solve import blas_threads, check_basis, loggers, solve_without_preprocessor
 from .status import PassStats, PointStatus, Status
 
 logger = logging.getLogger("compass_sparse")
@@ -40,22 +43,28 @@ __all__ = ["solve_lcp"]
 
 
 # ---------------------------------------------------------------------------- LCP
-def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None) -> Result:
+def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None,
+              basis=None) -> Result:
     """Solve the (box-constrained) linear complementarity problem
 
         lb <= z <= ub  _|_  M z + q
 
     by one pivotal path (after a projected-Newton crash for n >= crash_minimum_dimension),
     with a Lemke ray start as the fallback.  Ray termination from the Lemke start is
-    reported as ``Status.INFEASIBLE`` (a proof of infeasibility when M is copositive-plus).
-    A path that cycles or stalls hands over to the general stabilized Newton method.
+    reported as ``Status.INFEASIBLE`` (a proof of infeasibility when M is copositive-plus);
+    so is an LCP none of whose box points meets the rows' sign conditions, decided by an
+    LP when the path fails, with the Farkas certificate in ``Result.certificate``.  A path
+    that fails otherwise hands over to the general stabilized Newton method.
+    ``basis``: the ``Result.basis`` of an earlier solve of an LCP of the same size, to
+    warm-start the path (a basis of another size raises ShapeError).
     """
     t0 = time.perf_counter()
     opt = Options.coerce(options)
     M, q = _lcp_data(M, q)
+    basis = check_basis(basis, q.size)
     with kernel_route(q.size) as kernels:
         routes = choose_routes(q.size, opt, kernels=kernels, nnz=M.nnz)
-        res = _solve_lcp(M, q, lb, ub, x0, opt, var_names, routes, t0)
+        res = _solve_lcp(M, q, lb, ub, x0, opt, var_names, routes, t0, basis)
     if not res.routes:
         res.routes = routes.as_dict()
     if opt.verbosity >= 1:  # (a hand-over to the general method logs nothing of its own)
@@ -63,7 +72,7 @@ def solve_lcp(M, q, lb=0.0, ub=np.inf, x0=None, *, options=None, var_names=None)
     return res
 
 
-def _solve_lcp(M, q, lb, ub, x0, opt, var_names, routes, t0) -> Result:
+def _solve_lcp(M, q, lb, ub, x0, opt, var_names, routes, t0, basis) -> Result:
     n = q.size
 
     def F(z):
@@ -110,7 +119,7 @@ def _solve_lcp(M, q, lb, ub, x0, opt, var_names, routes, t0) -> Result:
             st.reason = f"n < crash_minimum_dimension ({opt.crash_minimum_dimension})"
         passes["crash"] = st
         return _lcp_path(problem, M, q, z, f, x, opt, t0, passes, st, crash_its, log_minor,
-                         routes)
+                         routes, basis)
     except KeyboardInterrupt:
         return make_result(problem, Status.USER_INTERRUPT, "interrupted by the user (Ctrl-C)",
                            z, f, opt, t0, start_z=problem.x0, passes=passes,
@@ -134,7 +143,8 @@ def _crash_progress(opt, problem):
     return on_point
 
 
-def _lcp_path(problem, M, q, z, f, x, opt, t0, passes, st, crash_its, log_minor, routes):
+def _lcp_path(problem, M, q, z, f, x, opt, t0, passes, st, crash_its, log_minor, routes,
+              warm):
     """The pivotal path(s) of :func:`solve_lcp` from the (crashed) point z, x = pi^-1(z)."""
     n = q.size
     lb, ub = problem.lb, problem.ub
@@ -149,7 +159,7 @@ def _lcp_path(problem, M, q, z, f, x, opt, t0, passes, st, crash_its, log_minor,
     # One path solves a linear problem: give it room (a Lemke path may need ~n pivots).
     limit = opt.minor_iteration_limit or max(10 * n, 1000)
     with blas_threads(n):
-        res = solve_linear_mcp(M, q, lb, ub, bm, opt, x,
+        res = solve_linear_mcp(M, q, lb, ub, bm, opt, x, warm=warm,
                                ray_start=opt.lemke_start in ("always", "first"),
                                keep_ray=True, minor_limit=limit, deadline=deadline,
                                log=log_minor)
@@ -180,6 +190,15 @@ def _lcp_path(problem, M, q, z, f, x, opt, t0, passes, st, crash_its, log_minor,
                           ray=res.ray.copy(), **counts)
         out.point_status = PointStatus.CERTIFICATE
         return out
+    if not bounded:
+        # The path ended in a ray, which proves nothing for a general M, or failed
+        # otherwise: an empty set of points that meet the rows' sign conditions proves
+        # infeasibility.  One LP, decided before the general method, which would stall on
+        # such a problem (2-4 s at n = 60-150 where the LP takes 0.02 s, measured).
+        out = infeasible_result(problem, M, q, opt, t0, passes=passes, deadline=deadline,
+                                counts=counts)
+        if out is not None:
+            return out
     # The path cycled, hit a limit or lost accuracy: the stabilized Newton method takes over,
     # within what is left of the time limit (the clock does not restart).
     if opt.time_limit - (time.perf_counter() - t0) <= 0:
@@ -201,7 +220,7 @@ def _lcp_data(M, q):
         raise ShapeError(f"q has shape {q.shape}, expected (n,) or (n, 1)")
     n = q.size
     if sp.issparse(M):
-        if np.iscomplexobj(M.data):
+        if M.dtype.kind == "c":  # (the dtype: a dok matrix has no data array)
             raise ProblemError("M is complex; compass_sparse solves real problems")
         M = sp.csc_matrix(M, dtype=float, copy=True)
     else:

@@ -50,6 +50,10 @@ class Result:
     passes: dict = field(default_factory=dict)
     basis: object | None = None  #: final basis (user's index space), for warm starts
     ray: np.ndarray | None = None  #: INFEASIBLE by a Lemke ray: its direction; x its base
+    #: INFEASIBLE by the sign conditions of a linear problem: the Farkas multipliers y, one
+    #: per row, checked from the data (:mod:`compass_sparse.feasibility`); x is the point
+    #: of the box that misses the conditions least
+    certificate: np.ndarray | None = None
     lb: np.ndarray | None = None
     ub: np.ndarray | None = None
     tolerance: float = 1e-6

@@ -53,7 +53,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-from .exceptions import CompassError, ShapeError
+from .exceptions import CompassError, ProblemError, ShapeError
 from .options import Options
 from .path.linear_mcp import solve_linear_mcp
 from .path.outcome import LinearCode
@@ -135,7 +135,14 @@ def classify(x, f, lb, ub, J, active_tol: float = ACTIVE_TOL):
 
 
 def _as_columns(dF_dp, n: int) -> np.ndarray:
-    G = dF_dp.toarray() if sp.issparse(dF_dp) else np.asarray(dF_dp, dtype=float)
+    try:
+        G = dF_dp.toarray() if sp.issparse(dF_dp) else np.asarray(dF_dp, dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ProblemError(f"dF_dp must be an array of shape ({n},) or ({n}, k) of "
+                           f"numbers: {exc}") from None
+    if dF_dp is None:
+        raise ProblemError(f"dF_dp is None: give the derivative of F with respect to the "
+                           f"parameters, of shape ({n},) or ({n}, k)")
     if G.ndim == 1:
         G = G[:, None]
     if G.ndim != 2 or G.shape[0] != n:
@@ -167,10 +174,12 @@ def _solve_inactive(J, idx, rhs):
 
 def _problem_parts(problem, x):
     if not isinstance(problem, MCP):
-        raise TypeError("sensitivity needs the MCP the point solves (compass_sparse.MCP)")
+        raise ProblemError("a sensitivity needs the problem the point solves, as a "
+                           f"compass_sparse.MCP; got {type(problem).__name__}")
     x = np.asarray(x, dtype=float)
     if x.shape != (problem.n,):
-        raise ShapeError(f"x has shape {x.shape}, expected ({problem.n},)")
+        raise ShapeError(f"the point has shape {x.shape} but the problem has {problem.n} "
+                         "variables: pass the MCP this point solves")
     f, J = _values(problem).FJ(x)
     return x, f, J
 

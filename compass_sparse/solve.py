@@ -26,6 +26,7 @@ import numpy as np
 from .box import float_vector
 from .diagnostics import MISMATCH, directional_mismatch
 from .exceptions import ProblemError, ShapeError
+from .feasibility import STALLED, infeasible_result
 from .linalg._csc_kernels import csc_scaled_all_finite
 from .linalg.blas import BLAS_LIMIT_MIN_N, single_threaded_blas
 from .merit import fb_phi, fb_psi
@@ -36,6 +37,7 @@ from ._options_base import suggest
 from .options import ALIASES, Options
 from .path.outcome import WarmBasis
 from .problem._kernels import any_equal
+from .problem.isolated import isolated_pairs, solved_exactly
 from .problem.mcp import MCP
 from .report import judge_on, lu_report, make_result, postsolve_basis
 from .result import Result
@@ -45,7 +47,7 @@ from .status import PassStats, Status, WorkCounts
 
 logger = logging.getLogger("compass_sparse")
 
-__all__ = ["MCPSolver", "solve_mcp"]
+__all__ = ["MCPSolver", "check_basis", "solve_mcp"]
 
 WORK_COUNTS = tuple(f.name for f in dataclasses.fields(WorkCounts))
 """Result fields that count work done (summed over a solve and its hand-over)."""
@@ -188,7 +190,7 @@ def _presolve_pass(problem, opt, f0, J0):
     if cache.linear_rows is None:
         cache.linear_rows = count_linear_rows()
     linear_rows = cache.linear_rows
-    if linear_rows == 0 and not has_fixed:
+    if linear_rows == 0 and not has_fixed and not _isolated_pair_solved(problem, f0, cache):
         st.reason = "no linear rows (all entries declared constant) and no fixed variables"
         return None, st
     # (lazy: the preprocessor's 17 modules are a third of the package's import time, 10 ms
@@ -201,6 +203,64 @@ def _presolve_pass(problem, opt, f0, J0):
     st.ran = True
     st.time = time.perf_counter() - t0
     return pre, st
+
+
+def _isolated_pair_solved(problem, f0, cache) -> bool:
+    """Whether the declared pattern has an isolated pair (a variable and its row that
+    nothing else touches, :mod:`compass_sparse.problem.isolated`) that the start point
+    solves exactly: the preprocessor keeps it there (a free variable with F = 0 and a
+    zero row and column of J made every Newton system singular)."""
+    if not problem.pattern_declared:
+        return False
+    if cache.isolated_pairs is None:
+        P = problem.evaluator.pattern_ref
+        cache.isolated_pairs = isolated_pairs(P.indptr, P.indices, problem.n)
+    idx = cache.isolated_pairs
+    if idx.size == 0:
+        return False
+    lb, ub = problem.lb[idx], problem.ub[idx]
+    return bool(solved_exactly(problem.x0[idx], f0[idx], lb, ub)[lb < ub].any())
+
+
+def _affine_data(problem: MCP, x):
+    """(M, q) with F(z) = M z + q when every Jacobian entry is declared constant (and a
+    row without entries is one of a declared pattern), checked once more at x (relative
+    1e-8); else None.  Evaluated on a fresh evaluator: outside the solve's counts."""
+    mask = problem.constant_mask
+    P = problem.evaluator.pattern_ref
+    if mask is None or P is None or not mask.all():
+        return None
+    if not problem.pattern_declared and (np.bincount(P.indices, minlength=problem.n) == 0).any():
+        return None
+    ev = problem.evaluator.fresh()
+    try:
+        f0, M = ev.FJ(problem.x0)
+        f1 = ev.F(x)
+    except Exception:  # (the user's F failed: no verdict rests on it)
+        return None
+    q = f0 - M @ problem.x0
+    pred = M @ x + q
+    size = np.abs(f1) + abs(M) @ np.abs(x) + np.abs(q) + 1.0
+    if not np.all(np.abs(f1 - pred) <= 1e-8 * size):
+        return None
+    return M, q
+
+
+def _infeasible_if_affine(problem: MCP, res: Result, opt: Options, t0) -> Result:
+    """A stalled solve of an MCP whose F is affine (every Jacobian entry declared
+    constant) is an LCP: its sign conditions are decided by an LP, and an INFEASIBLE
+    Result with a checked Farkas certificate replaces it when no point of the box meets
+    them (:mod:`compass_sparse.feasibility`)."""
+    data = _affine_data(problem, res.x)
+    if data is None:
+        return res
+    deadline = t0 + opt.time_limit if math.isfinite(opt.time_limit) else None
+    out = infeasible_result(problem, *data, opt, t0, passes=res.passes, deadline=deadline,
+                            failed=res)
+    if out is None:
+        return res
+    out.message += " (F is affine: every Jacobian entry is declared constant)"
+    return out
 
 
 _JACOBIAN_SUSPECT = (Status.NO_PROGRESS, Status.STATIONARY_POINT, Status.MAJOR_ITERATION_LIMIT,
@@ -230,6 +290,7 @@ def solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None,
     ``top``: the user's solve, not a hand-over inside one; it alone checks a failed
     solve's Jacobian and logs the summary (once, at verbosity >= 1)."""
     t0 = time.perf_counter()
+    basis = check_basis(basis, problem.n)  # (bad input: before any evaluation)
     with kernel_route(problem.n) as kernels:
         try:
             if check:
@@ -246,6 +307,8 @@ def solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None,
             problem.evaluator.forget()
     if not res.routes:  # no pass ran that has a route
         res.routes = {"kernels": kernels}
+    if top and res.status in STALLED:
+        res = _infeasible_if_affine(problem, res, opt, t0)
     if top:
         jacobian_hint(problem, res)
         if opt.verbosity >= 1:
@@ -258,7 +321,6 @@ _SOLVE_PASSES = ("crash", "path", "fallback", "homotopy")
 
 def _solve_evaluated(problem: MCP, opt: Options, kernels: str, *, callback=None,
                      basis=None) -> Result:
-    basis = _check_basis(basis, problem.n)
     t0 = time.perf_counter()
     passes = {}
     # F and J at the start point: one evaluation each (kept from the problem's start check
@@ -391,14 +453,22 @@ def _from_start(problem, pre, work, f0, J0, phi0, verdict0, opt, t0, passes, ker
     return res
 
 
-def _check_basis(basis, n: int) -> WarmBasis | None:
-    """A warm-start basis of the user's problem, or an error naming the mismatch."""
+def check_basis(basis, n: int) -> WarmBasis | None:
+    """A warm-start basis (a :class:`WarmBasis` or its array) of a problem of n variables,
+    or a ShapeError naming both sizes (the basis of another problem is never used
+    silently: its indices would pair with other variables)."""
     if basis is None:
         return None
     b = np.asarray(basis.basic if isinstance(basis, WarmBasis) else basis)
+    integral = b.dtype.kind in "iub" or (b.dtype.kind == "f"
+                                         and bool(np.all(b == np.round(b))))
+    if b.ndim != 1 or not integral:
+        raise ShapeError(f"the warm-start basis is an array of shape {b.shape} and dtype "
+                         f"{b.dtype}: pass the Result.basis of a solve of this problem")
     if b.shape != (n,):
-        raise ShapeError(f"the warm-start basis has shape {b.shape} but the problem has {n} "
-                         "variables: pass the Result.basis of a solve of this problem")
+        raise ShapeError(f"the warm-start basis is of a problem of {b.size} variables but "
+                         f"this problem has {n}: pass the Result.basis of a solve of this "
+                         "problem")
     return WarmBasis(b.astype(np.int8))
 
 

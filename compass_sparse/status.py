@@ -49,7 +49,9 @@ class Status(_NamedIntEnum):
     USER_INTERRUPT = 6  #: KeyboardInterrupt (Ctrl-C)
     BOUND_ERROR = 7  #: inconsistent bounds (normally raised as BoundsError before solving)
     DOMAIN_ERROR = 8  #: F/J undefined (NaN/Inf or exception) and no progress was possible
-    INFEASIBLE = 9  #: a linear problem proved to have no solution (ray termination)
+    #: a linear problem proved to have no solution (a Lemke ray, or a Farkas certificate
+    #: that no point of the box meets the sign conditions of its rows)
+    INFEASIBLE = 9
     ERROR = 10  #: internal failure (singular basis that could not be repaired, ...)
     MEMORY_LIMIT = 11  #: a factorization was not started: its L + U would exceed the memory
     CALLBACK_STOP = 100  #: the user's callback asked to stop (PATH code 6)
@@ -77,7 +79,7 @@ _STATUS_TEXT = {
     Status.USER_INTERRUPT: "interrupted by the user",
     Status.BOUND_ERROR: "inconsistent bounds",
     Status.DOMAIN_ERROR: "F or J could not be evaluated near the iterates",
-    Status.INFEASIBLE: "the linear problem has no solution (ray termination)",
+    Status.INFEASIBLE: "the linear problem has no solution (ray or Farkas certificate)",
     Status.ERROR: "internal error",
     Status.CALLBACK_STOP: "stopped by the callback",
     Status.FLAT_RESIDUAL: "residual small only because F is flat (not a solution)",
@@ -95,7 +97,9 @@ class PointStatus(_NamedIntEnum):
     SOLUTION = 1  #: meets the convergence tolerance
     BEST_POINT = 2  #: the best point (lowest merit) found; not a solution
     START_POINT = 3  #: the (projected) start point; nothing better was found
-    CERTIFICATE = 4  #: an LCP's ray (x is the ray's base; see Result.ray)
+    #: a proof of infeasibility: an LCP's ray (x is the ray's base; see Result.ray), or a
+    #: Farkas certificate (Result.certificate; x misses the sign conditions least)
+    CERTIFICATE = 4
 
 
 @dataclass

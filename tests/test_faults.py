@@ -189,11 +189,13 @@ def test_time_limit_holds_through_watchdog_and_fallback_loops(clock, searchtype,
 
 
 def test_time_limit_holds_when_solve_lcp_hands_over_to_the_general_method(clock):
-    # M = -I, q = -1 on z >= 0 has no solution and M is not monotone: the path's ray proves
-    # nothing and the general method takes over, within what is left of the limit
-    n = 3
-    Mn = -sp.identity(n, format="csc")
-    qn = -np.ones(n)
+    # w1 = -2 z1 + z2 - 3, w2 = z2 + 2 on z >= 0: the sign conditions can be met (z2 >=
+    # 3 + 2 z1), so the feasibility LP proves nothing, but w2 > 0 forces z2 = 0 and then
+    # w1 < 0: no solution, M is not monotone, and the general method takes over, within
+    # what is left of the limit.  (M = -I, q = -1, used before, is now proved infeasible by
+    # the LP: no z >= 0 has w >= 0.)
+    Mn = sp.csc_matrix(np.array([[-2.0, 1.0], [0.0, 1.0]]))
+    qn = np.array([-3.0, 2.0])
     import compass_sparse.lcp as solve_module
 
     real = solve_module.MCP

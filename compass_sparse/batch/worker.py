@@ -62,6 +62,12 @@ def _solve_one(builder, idx, params, parent, state, task) -> dict:
     except Exception as exc:  # a model that cannot be built is a failed scenario
         return failure_row(row, params, f"building the model failed: {exc!r}", t0)
     x0, basis = None, None
+    if state is not None and np.size(state[0]) != problem.n:
+        # A model whose size depends on its parameters: the parent's point and basis do
+        # not fit this problem, so this scenario starts cold (solve_mcp would refuse them).
+        logger.info("scenario %d: its parent's solution has %d variables and this problem "
+                    "%d: started cold", idx, np.size(state[0]), problem.n)
+        state = None
     if state is not None:
         x0 = state[0]
         basis = WarmBasis(np.frombuffer(state[1], dtype=np.int8).copy()) \

@@ -149,11 +149,13 @@ def dense_csc(A, n: int) -> sp.csc_matrix:
 
 def canonical_csc(J, n: int) -> sp.csc_matrix:
     """J as a canonical (sorted, duplicate-free) float CSC copy; a dense array keeps its
-    full pattern (its zeros stay stored)."""
+    full pattern (its zeros stay stored).  Any scipy.sparse form is accepted, matrix or
+    array (dok, lil, coo, csr, bsr, dia, csc): they all have a ``dtype`` (a dok has no
+    ``data`` array) and scipy converts each to CSC."""
     sparse = sp.issparse(J)
     if not sparse:
         J = np.asarray(J)
-    if (J.data if sparse else J).dtype.kind == "c":
+    if J.dtype.kind == "c":
         raise EvaluationError("the Jacobian has complex entries; J must be real")
     if sparse:
         if J.shape != (n, n):

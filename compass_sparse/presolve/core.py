@@ -22,8 +22,10 @@ import numpy as np
 
 from ..box import all_finite
 from ..merit import natural_residual
+from ..problem.isolated import isolated_pairs as isolated_indices
+from ..problem.isolated import solved_exactly
 from . import (column_singletons, duplicate_rows, empty_columns, empty_rows, fixed, forcing,
-               range_fixing, singleton_rows)
+               isolated_pairs, range_fixing, singleton_rows)
 from ._kernels import simple_reductions_screen
 from ._work import InfeasibilityDiagnostic, PresolveInfeasible, Workspace, pattern_index
 from .linear import declared_constant_mask, empty_row_status, sample_evaluations
@@ -37,8 +39,8 @@ logger = logging.getLogger("compass_sparse.presolve")
 __all__ = ["presolve", "PresolveResult", "PresolveStats", "ReductionStats", "solve_with_presolve",
            "PostsolvedSolution"]
 
-PHASE_ONE = (fixed, empty_rows, empty_columns, singleton_rows, column_singletons, forcing,
-             duplicate_rows)
+PHASE_ONE = (fixed, empty_rows, empty_columns, isolated_pairs, singleton_rows,
+             column_singletons, forcing, duplicate_rows)
 PHASE_TWO = (range_fixing,)
 
 
@@ -144,7 +146,20 @@ def _has_structure(problem, J0) -> bool:
     if problem.constant_mask is not None and problem.constant_mask.any():
         return True
     counts_r = np.bincount(J0.indices, minlength=problem.n)
-    return bool(np.any(counts_r == 0) or np.any(np.diff(J0.indptr) == 0))
+    if np.any(counts_r == 0) or np.any(np.diff(J0.indptr) == 0):
+        return True
+    return problem.pattern_declared and bool(
+        isolated_indices(J0.indptr, J0.indices, problem.n).size)
+
+
+def _solved_isolated_pair(problem, J0, removed, base, f) -> bool:
+    """Whether the declared pattern, without the ``removed`` indices, has an isolated pair
+    that the base point solves exactly (the isolated-pairs pass would fix it)."""
+    if not problem.pattern_declared:
+        return False
+    idx = isolated_indices(J0.indptr, J0.indices, problem.n, removed)
+    idx = idx[problem.lb[idx] < problem.ub[idx]]
+    return bool(solved_exactly(base[idx], f[idx], problem.lb[idx], problem.ub[idx]).any())
 
 
 def presolve(problem, options: PresolveOptions | dict | None = None, *, f0=None,
@@ -268,6 +283,8 @@ def _simple_reductions_only(problem, opts, J0, const):
     f = np.asarray(problem.F(base), dtype=np.float64)
     if not all_finite(f):
         return None
+    if opts.isolated_pairs and _solved_isolated_pair(problem, J0, fixed, base, f):
+        return None  # (a reduction the solver does not make: the passes make it)
     ec, er, col_ptr, row_order, row_ptr = pattern_index(problem, J0)
     w1, w2 = duplicate_rows.hash_weights(problem.n)
     code, rounds, singletons = simple_reductions_screen(

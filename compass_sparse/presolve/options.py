@@ -26,6 +26,8 @@ class PresolveOptions(OptionsMixin):
     ``fixed_variables``   remove z_j with l_j = u_j (no linearity needed).
     ``empty_rows``        a linear row with no remaining entry: F_i is a constant.
     ``empty_columns``     a boxed variable that no remaining row depends on.
+    ``isolated_pairs``    a variable and its row that no other row or variable touches
+                          (declared pattern), solved at the start value: kept there.
     ``singleton_rows``    a linear row with one remaining entry.
     ``column_singletons`` a variable appearing in one row only, with a constant
                           coefficient (covers doubleton rows with a column singleton).
@@ -54,6 +56,7 @@ class PresolveOptions(OptionsMixin):
     fixed_variables: bool = True
     empty_rows: bool = True
     empty_columns: bool = True
+    isolated_pairs: bool = True
     singleton_rows: bool = True
     column_singletons: bool = True
     forcing_rows: bool = True
@@ -97,6 +100,7 @@ PASS_NAMES = (
     "fixed_variables",
     "empty_rows",
     "empty_columns",
+    "isolated_pairs",
     "singleton_rows",
     "column_singletons",
     "forcing_rows",

@@ -18,8 +18,9 @@ entries seen so far: a J built from arrays that drop zeros at one point may add 
 later, and the pattern grows (so nothing is concluded from an entry's absence).  Three
 ways to give J:
 
-* ``jac=callable``: ``jac(x)`` returns any scipy.sparse matrix (or a dense array, which is
-  only sensible for small problems since its pattern is the full matrix);
+* ``jac=callable``: ``jac(x)`` returns any scipy.sparse matrix or array, in any format
+  (csc, csr, coo, dok, lil, bsr, dia: converted to CSC), or a dense array, which is only
+  sensible for small problems since its pattern is the full matrix;
 * ``jac=True``: ``F(x)`` returns the pair ``(f, J)``;
 * ``jac=None`` with ``jac_sparsity``: J is approximated by forward differences, perturbing
   groups of structurally orthogonal columns together (greedy column colouring, as in

@@ -17,7 +17,7 @@ __all__ = ["PatternCache"]
 class PatternCache:
     """The objects of one pattern object, one slot per kind (None: not made yet)."""
 
-    __slots__ = ("linear_rows", "linearizer", "pattern", "presolve_index",
+    __slots__ = ("isolated_pairs", "linear_rows", "linearizer", "pattern", "presolve_index",
                  "structural_reports")
 
     def __init__(self, pattern):
@@ -26,6 +26,10 @@ class PatternCache:
         #: the solve's count of rows whose entries are all declared constant
         #: (:mod:`compass_sparse.solve`, the preprocessor's applicability test)
         self.linear_rows: int | None = None
+        #: the indices whose row and column hold no entry but the diagonal
+        #: (:func:`compass_sparse.problem.isolated.isolated_pairs`; the solve's
+        #: preprocessor applicability test)
+        self.isolated_pairs = None
         #: the Newton linearizer of M = J + eps I on this pattern
         #: (:class:`compass_sparse.path.linearize.Linearizer`)
         self.linearizer = None

@@ -3,7 +3,8 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from compass_sparse.presolve import PresolveOptions, presolve, solve_1d, solve_with_presolve
+from compass_sparse.presolve import (PASS_NAMES, PresolveOptions, presolve, solve_1d,
+                                     solve_with_presolve)
 from compass_sparse.problem import MCP
 
 from ._problems import linear_mcp
@@ -289,10 +290,7 @@ def test_pass_switches_and_counters():
     M = np.array([[2.0, 0.0, 0.0], [1.0, 3.0, 0.5], [0.0, 1.0, 4.0]])
     q = np.array([-3.0, -1.0, -2.0])
     p = linear_mcp(M, q, [0, 0, 1], [INF, INF, 1])
-    off = PresolveOptions(**{k: False for k in ("fixed_variables", "empty_rows",
-                                                 "empty_columns", "singleton_rows",
-                                                 "column_singletons", "forcing_rows",
-                                                 "duplicate_rows", "range_fixing")})
+    off = PresolveOptions(**{k: False for k in PASS_NAMES})
     res = presolve(p, off)
     assert res.stats.removed == 0 and all(not s.enabled for s in res.stats.passes.values())
     res = presolve(p, PresolveOptions(singleton_rows=False))

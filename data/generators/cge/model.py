@@ -1,6 +1,7 @@
 """The :class:`CGEModel` container returned by the CGE generators, and model diagnostics."""
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -225,10 +226,10 @@ def quiet(fn):
     domain (a negative price under a CES power, a zero income) F or J comes out NaN or Inf:
     the solver rejects such a point and shortens its step, so a warning printed for it
     (thousands in a hard solve) says nothing to the user but alarms."""
+    @functools.wraps(fn)
     def f(z):
         with np.errstate(all="ignore"):
             return fn(z)
-    f.__name__ = getattr(fn, "__name__", "f")
     return f
 
 
