@@ -23,6 +23,7 @@ import time
 
 import numpy as np
 
+from ._jit import stop_compiling
 from .box import float_vector
 from .diagnostics import MISMATCH, directional_mismatch
 from .exceptions import ProblemError, ShapeError
@@ -237,7 +238,9 @@ def solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None,
             res = _solve_evaluated(problem, opt, kernels, callback=callback, basis=basis)
         except KeyboardInterrupt:
             # Ctrl-C outside the major iterations (the start point, the preprocessor): the
-            # start point is the best point known.
+            # start point is the best point known.  Its Result compiles nothing (numba may
+            # have been loading: compass_sparse._jit).
+            stop_compiling()
             res = make_result(problem, Status.USER_INTERRUPT,
                               "interrupted by the user (Ctrl-C)", problem.x0,
                               np.full(problem.n, np.nan), opt, t0, start_z=problem.x0)

@@ -15,6 +15,7 @@ import time
 
 import numpy as np
 
+from .._jit import stop_compiling
 from ..box import all_finite, max_abs_diff, near_point, project, random_point
 from ..crash.driver import crash
 from ..exceptions import FactorBudgetError
@@ -192,6 +193,9 @@ class NMSSolver:
             status = Status.TIME_LIMIT if exc.kind == "time" else Status.MEMORY_LIMIT
             message = f"factorization not started: {exc}"
         except KeyboardInterrupt:
+            # The Result is built without compiling (numba may have been compiling a
+            # kernel: compass_sparse._jit), the compiled kernels run as they are.
+            stop_compiling()
             status, message = Status.USER_INTERRUPT, "interrupted by the user (Ctrl-C)"
         status, message = self._diagnose(status, message)
         best = self.best.point
