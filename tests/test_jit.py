@@ -17,6 +17,7 @@ from pathlib import Path
 
 import known_problems as kp
 import numpy as np
+import pytest
 
 from compass_sparse import solve_mcp
 from compass_sparse.generators import thesis_family
@@ -323,3 +324,44 @@ def test_ctrl_c_at_any_moment_of_the_first_solve_is_a_user_interrupt_and_the_cac
     _ready(proc)
     lines = _finish_child(proc)
     assert lines[0][:4] == ["END", "SOLVED", "SOLUTION", "0.0"], lines
+
+
+def test_a_sigint_held_while_numba_loads_is_delivered_once_at_the_end_or_at_a_safe_point():
+    """Inside nested held sections a SIGINT is recorded, not raised; it is delivered once:
+    when the outermost section ends, or earlier at an interrupt point (a kernel's
+    compilation or compiler pass starting), to the handler that was in place (Python's
+    raises KeyboardInterrupt, a user's is called).  An ignored SIGINT stays ignored."""
+    from compass_sparse._jit import interrupt_point, interrupts_held
+
+    reached = []
+    with pytest.raises(KeyboardInterrupt):
+        with interrupts_held():
+            with interrupts_held():
+                signal.raise_signal(signal.SIGINT)
+                sum(range(1000))  # (bytecodes where Python would have raised)
+                reached.append("inner")
+            reached.append("outer")
+    assert reached == ["inner", "outer"]
+    with pytest.raises(KeyboardInterrupt):
+        with interrupts_held():
+            signal.raise_signal(signal.SIGINT)
+            sum(range(1000))
+            reached.append("before the point")
+            interrupt_point()
+            reached.append("after the point")  # (not reached)
+    assert reached[-1] == "before the point"
+    calls = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: calls.append(signum))
+    try:
+        with interrupts_held():
+            signal.raise_signal(signal.SIGINT)
+            sum(range(1000))
+            assert calls == []
+        assert calls == [signal.SIGINT]
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        with interrupts_held():
+            signal.raise_signal(signal.SIGINT)
+        assert calls == [signal.SIGINT]
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert signal.getsignal(signal.SIGINT) is previous
