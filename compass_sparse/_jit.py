@@ -425,8 +425,8 @@ def _dispatcher_class(base):
     """numba's dispatcher class ``base`` with two changes.  Its compilations hold SIGINT
     (:class:`interrupts_held`; in a solve that was interrupted, a call without compiled
     code runs the Python body instead: :func:`stop_compiling`).  And a call from compiled
-    code compiles its callee for the arguments' plain types, not their literal values.  numba types a
-    module constant passed as an argument (``_copy(W, W_CZ, W_TZ)``, a reason code, a
+    code compiles its callee for the arguments' plain types, not their literal values.
+    numba types a module constant passed as an argument (``_copy(W, W_CZ, W_TZ)``, a reason code, a
     ``True``) as a literal and compiles the callee once per distinct value: 17 copies of
     a three-line kernel, 9 of the crash's exit, 218 compilations in the small-problem
     route where 170 suffice (benchmarks/first_run.md).  No kernel of the package asks for
