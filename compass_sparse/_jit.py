@@ -11,8 +11,8 @@ Kernels call each other inside compiled code, where numba resolves a callee thro
 caller's module globals at compile time and must find a dispatcher there, not a stand-in.
 So the first call of any kernel replaces EVERY stand-in found in its module's globals
 (its own and those imported from other kernel modules) by its dispatcher before numba
-compiles anything.  Python callers that imported a stand-in by name get the dispatcher too: the first build
-also rebinds the built stand-ins in the package's loaded modules, since a forwarded call
+compiles anything.  Python callers that imported a stand-in by name get the dispatcher
+too: the first build also rebinds the built stand-ins in the package's loaded modules, since a forwarded call
 costs an extra Python frame (~0.4 us) and a small solve makes hundreds of kernel calls.
 A module loaded later keeps its stand-in, which forwards each call to the dispatcher.
 
@@ -426,11 +426,12 @@ def _dispatcher_class(base):
     (:class:`interrupts_held`; in a solve that was interrupted, a call without compiled
     code runs the Python body instead: :func:`stop_compiling`).  And a call from compiled
     code compiles its callee for the arguments' plain types, not their literal values.
-    numba types a module constant passed as an argument (``_copy(W, W_CZ, W_TZ)``, a reason code, a
-    ``True``) as a literal and compiles the callee once per distinct value: 17 copies of
-    a three-line kernel, 9 of the crash's exit, 218 compilations in the small-problem
-    route where 170 suffice (benchmarks/first_run.md).  No kernel of the package asks for
-    a literal; the arithmetic is the same (the constants only stop being folded)."""
+    numba types a module constant passed as an argument (``_copy(W, W_CZ, W_TZ)``, a
+    reason code, a ``True``) as a literal and compiles the callee once per distinct value:
+    17 copies of a three-line kernel, 9 of the crash's exit, 218 compilations in the
+    small-problem route where 170 suffice (benchmarks/first_run.md).  No kernel of the
+    package asks for a literal; the arithmetic is the same (the constants only stop being
+    folded)."""
     cls = _DISPATCHER_CLASSES.get(base)
     if cls is None:
         from numba.core import types  # (numba is loaded: a dispatcher is being built)
