@@ -12,8 +12,9 @@ caller's module globals at compile time and must find a dispatcher there, not a 
 So the first call of any kernel replaces EVERY stand-in found in its module's globals
 (its own and those imported from other kernel modules) by its dispatcher before numba
 compiles anything.  Python callers that imported a stand-in by name get the dispatcher
-too: the first build also rebinds the built stand-ins in the package's loaded modules, since a forwarded call
-costs an extra Python frame (~0.4 us) and a small solve makes hundreds of kernel calls.
+too: the first build also rebinds the built stand-ins in the package's loaded modules,
+since a forwarded call costs an extra Python frame (~0.4 us) and a small solve makes
+hundreds of kernel calls.
 A module loaded later keeps its stand-in, which forwards each call to the dispatcher.
 
 Cold start.  Loading numba and its first kernel costs 0.5-0.8 s (its import, then the set-up
