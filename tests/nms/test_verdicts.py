@@ -253,7 +253,7 @@ def test_scaled_solve_takes_the_solvers_verdict_for_its_result(monkeypatch):
         (r2.status, r2.nit, r2.nfev, r2.njev, r2.domain_errors, r2.point_status)
 
 
-# ------------------------------------------------- defect: blind at a bound (issue 38, item 2)
+# ------------------------------------------------- defect: blind at a bound
 def _scaled_linear(n=5, s=1e-9):
     """F = s (A x - 1) on x >= 0, A = diag(1..n): the solution x_i = 1/i, where F is flat
     (s = 1e-9): every point of small residual is in a flat region of F."""
@@ -295,7 +295,7 @@ def test_flat_step_at_a_bound_reads_the_natural_maps_F_row(scale, accepted):
     assert v.solved
 
 
-# ----------------------------------------------- defect: underflowed tails (issue 38, item 4)
+# ----------------------------------------------- defect: underflowed tails
 def _flat_tail_ncp(seed=5, n=20, a=1.0):
     """F = a exp(-z) (M z + q), an NCP with a planted solution zs (some components 0)."""
     rng = np.random.default_rng(seed)
