@@ -103,12 +103,15 @@ class NMSSolver:
     def check_limits(self, opt):
         """Stop before a major iteration past a limit, or when the factorization it makes
         (of order n: :func:`~compass_sparse.basis.backends.factor_seconds`, its work per
-        column alone) cannot finish in the time left."""
+        column alone) cannot finish in the time left -- twice that for the first, which
+        also orders the pattern (a column order costs about a factorization's work per
+        column: the sparse engine's first path at n = 1e6 took 1.8 s, 0.9 s of them
+        ordering)."""
         if self.deadline is not None:
             left = self.deadline - time.perf_counter()
             if left < 0.0:
                 raise NMSStop(Status.TIME_LIMIT, "time limit reached")
-            need = factor_seconds(self.n, -1.0)
+            need = factor_seconds(self.n, -1.0) * (2.0 if self.newton.basis is None else 1.0)
             if need > left:
                 raise NMSStop(Status.TIME_LIMIT, "time limit reached: a major iteration "
                               f"factors a matrix of order {self.n} (~{need:.2g} s) and "
