@@ -133,3 +133,19 @@ def test_moved_indices_by_masks_count_the_symmetric_difference(seed):
         new = np.flatnonzero(rng.random(n) < density)
         for a, b in ((old, new), (old, old), (new, old)):
             assert projected_newton._moved(a, b, n) == np.setxor1d(a, b).size
+
+
+def test_the_passes_stop_early_enough_for_the_result_to_be_built(monkeypatch):
+    """The passes stop FINISH_SECONDS_PER_VARIABLE * n before the limit, the time the
+    Result's construction takes (0.1-0.15 s at n = 1e6): at 1 s per variable a problem of
+    order 300 gets no pass in a 100 s limit.  The old passes ran to the limit itself and
+    the Result was built after it."""
+    from compass_sparse import solve as solve_module
+
+    monkeypatch.setattr(solve_module, "FINISH_SECONDS_PER_VARIABLE", 1.0, raising=False)
+    p = thesis_family(300, 1, 2).problem
+    r = cs.solve_mcp(p, options={"time_limit": 100.0})
+    assert r.status is Status.TIME_LIMIT and r.nit == 0 and r.crash_iterations == 0
+    monkeypatch.setattr(solve_module, "FINISH_SECONDS_PER_VARIABLE", 2e-7)
+    r = cs.solve_mcp(p, options={"time_limit": 100.0})
+    assert r.status is Status.SOLVED
