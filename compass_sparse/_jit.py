@@ -207,9 +207,10 @@ def _record(signum, frame):
 
 def _deliver(handler):
     """Run the interrupt handler that was in place for a held SIGINT: Python's default
-    raises KeyboardInterrupt; a solve in progress then compiles nothing more."""
-    stop_compiling()
+    raises KeyboardInterrupt, and a solve in progress then compiles nothing more (a
+    handler of the user's decides for itself)."""
     if handler is signal.default_int_handler:
+        stop_compiling()
         raise KeyboardInterrupt
     handler(signal.SIGINT, None)
 
