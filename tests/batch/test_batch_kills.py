@@ -133,10 +133,13 @@ def _start(files, out, scenarios, *, k=0, sig="KILL", workers=0, chunk=1, wait=0
 def _end(proc):
     """(how the child ended, its stderr): DONE, REFUSED <error>, INTERRUPTED or KILLED."""
     try:
-        out, err = proc.communicate("\n", timeout=300)
+        proc.stdin.write("\n")  # (the child waits for it after its batch)
+        proc.stdin.close()
     except BrokenPipeError:  # (killed before it read its stdin)
-        out, err = proc.stdout.read(), proc.stderr.read()
-        proc.wait()
+        pass
+    # (not communicate: the read of READY may have buffered the lines after it)
+    out, err = proc.stdout.read(), proc.stderr.read()
+    proc.wait(timeout=300)
     if proc.returncode == -signal.SIGKILL:
         return "KILLED", err
     # a child that was not killed ends in one of its own lines, never in a traceback
