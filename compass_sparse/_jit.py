@@ -11,9 +11,10 @@ Kernels call each other inside compiled code, where numba resolves a callee thro
 caller's module globals at compile time and must find a dispatcher there, not a stand-in.
 So the first call of any kernel replaces EVERY stand-in found in its module's globals
 (its own and those imported from other kernel modules) by its dispatcher before numba
-compiles anything.  Python callers that imported a stand-in by name get the dispatcher too: the first build
-also rebinds the built stand-ins in the package's loaded modules, since a forwarded call
-costs an extra Python frame (~0.4 us) and a small solve makes hundreds of kernel calls.
+compiles anything.  Python callers that imported a stand-in by name get the dispatcher
+too: the first build also rebinds the built stand-ins in the package's loaded modules,
+since a forwarded call costs an extra Python frame (~0.4 us) and a small solve makes
+hundreds of kernel calls.
 A module loaded later keeps its stand-in, which forwards each call to the dispatcher.
 
 Cold start.  Loading numba and its first kernel costs 0.5-0.8 s (its import, then the set-up
@@ -39,10 +40,23 @@ environment variable ``COMPASS_SPARSE_JIT`` (read at import) changes the rule: `
 compiles from the first call (runs that must repeat bit for bit set it); ``interpret``
 interprets every solve of a problem of at most ``INTERPRET_MAX_N`` variables, however many
 came before (the tests of the interpreted route).
+
+Ctrl-C while numba loads.  An interrupt is raised between any two bytecodes of the main
+thread; inside numba's import it leaves a half-imported ``numba`` (later calls fail with
+``module 'numba' has no attribute 'core'``), inside LLVM's callbacks (ctypes) it is printed
+and lost while numba goes on with a half-built library (``no compiled object yet``), and a
+Result built afterwards compiles again in that state.  So numba's import, the building of
+the dispatchers and every compilation or load of one of the package's kernels run with
+SIGINT held (:class:`interrupts_held`): the signal is recorded, and delivered (the handler
+that was in place runs: Python's raises KeyboardInterrupt) at the next point where numba's
+state is whole -- the start of a kernel's compilation or of one of its compiler passes, or
+the end of the held section.  A solve interrupted there builds its Result without compiling
+(:func:`stop_compiling`): a kernel not compiled yet for its arguments runs its Python body.
 """
 from __future__ import annotations
 
 import os
+import signal
 import sys
 import threading
 
@@ -63,11 +77,13 @@ __all__ = [
     "cold_start",
     "compilations",
     "end_cold_start",
+    "interrupts_held",
     "kernels_interpreted",
     "materialize",
     "may_interpret",
     "njit",
     "quiet_compile_notice",
+    "stop_compiling",
 ]
 
 NO_VALUES = np.zeros(0)
@@ -158,7 +174,89 @@ class kernels_interpreted:
         _COLD.local.mode = self._outer
         if self._outer is None:
             _COLD.local.estimate = None
+            _COLD.local.no_compile = False  # (stop_compiling holds to the solve's end)
         return False
+
+
+def stop_compiling():
+    """Compile nothing more in this thread's solve (its handler of Ctrl-C calls this): a
+    kernel without compiled code for its arguments runs its Python body until the solve
+    ends, so that the Result of an interrupted solve is built at once, without numba's
+    compiler (a minute on a cold cache, and a second Ctrl-C there would be a traceback).
+    Outside a solve it does nothing."""
+    if getattr(_COLD.local, "mode", None) is not None:
+        _COLD.local.no_compile = True
+
+
+class _Held:
+    """SIGINT held while numba loads or compiles (main thread only: Python runs signal
+    handlers there and nowhere else)."""
+
+    def __init__(self):
+        self.depth = 0  # nested held sections
+        self.previous = None  # the handler replaced while held (None: nothing held)
+        self.pending = False  # a SIGINT came while held, not delivered yet
+
+
+_HELD = _Held()
+
+
+def _record(signum, frame):
+    _HELD.pending = True
+
+
+def _deliver(handler):
+    """Run the interrupt handler that was in place for a held SIGINT: Python's default
+    raises KeyboardInterrupt, and a solve in progress then compiles nothing more (a
+    handler of the user's decides for itself)."""
+    if handler is signal.default_int_handler:
+        stop_compiling()
+        raise KeyboardInterrupt
+    handler(signal.SIGINT, None)
+
+
+def _main_thread() -> bool:
+    return threading.current_thread() is threading.main_thread()
+
+
+class interrupts_held:
+    """``with interrupts_held():`` SIGINT is recorded, not raised, inside the block (and
+    delivered when the outermost such block ends, or earlier at :func:`interrupt_point`).
+    Numba's import, the building of dispatchers and the compilation or load of a kernel run
+    inside one: an interrupt there would leave numba half-imported or half-compiled.  Where
+    SIGINT is ignored or left to the system (SIG_IGN, SIG_DFL), and in other threads, it
+    does nothing."""
+
+    def __enter__(self):
+        self._active = _main_thread()
+        if self._active:
+            if _HELD.depth == 0:
+                handler = signal.getsignal(signal.SIGINT)
+                if callable(handler):
+                    _HELD.previous = handler
+                    signal.signal(signal.SIGINT, _record)
+            _HELD.depth += 1
+        return self
+
+    def __exit__(self, *exc):
+        if self._active:
+            _HELD.depth -= 1
+            if _HELD.depth == 0 and _HELD.previous is not None:
+                handler, _HELD.previous = _HELD.previous, None
+                signal.signal(signal.SIGINT, handler)
+                if _HELD.pending:
+                    _HELD.pending = False
+                    _deliver(handler)
+        return False
+
+
+def interrupt_point():
+    """Deliver a held SIGINT now: called where numba's state is whole, at the start of a
+    kernel's compilation and of each of its compiler passes, so that Ctrl-C during a
+    minute of compiling is answered within a pass, not at the minute's end."""
+    if _HELD.pending and _HELD.previous is not None and _main_thread():
+        _HELD.pending = False
+        _deliver(_HELD.previous)
 
 
 def may_interpret() -> bool:
@@ -220,25 +318,30 @@ class LazyKernel:
     def dispatcher(self):
         """The numba dispatcher (built, with its module's other kernels, on first access)."""
         if self._dispatcher is None:
-            materialize(sys.modules[self.__module__].__dict__)
-            if self._dispatcher is None:
-                # not in its module's globals any more (a test's wrapper took its name
-                # there): built alone, its callees built above
-                self._build()
+            with interrupts_held():  # (numba's import, its compiler's set-up)
+                materialize(sys.modules[self.__module__].__dict__)
+                if self._dispatcher is None:
+                    # not in its module's globals any more (a test's wrapper took its name
+                    # there): built alone, its callees built above
+                    self._build()
         return self._dispatcher
 
     def _build(self):
         if self._dispatcher is None:
-            import numba  # (lazy: 0.2-0.4 s that a solve which never compiles should not pay)
-
-            if not _COLD.built:
-                _listen_to_compilations()
-            _COLD.built = True  # numba is loaded: later solves compile
-            d = numba.njit(**self.options)(self.py_func)
-            d.__class__ = _dispatcher_class(d.__class__)
-            _lock_cache(d)
-            self._dispatcher = d
+            with interrupts_held():
+                self._dispatcher = self._new_dispatcher()
         return self._dispatcher
+
+    def _new_dispatcher(self):
+        import numba  # (lazy: 0.2-0.4 s that a solve which never compiles should not pay)
+
+        if not _COLD.built:
+            _listen_to_compilations()
+        _COLD.built = True  # numba is loaded: later solves compile
+        d = numba.njit(**self.options)(self.py_func)
+        d.__class__ = _dispatcher_class(d.__class__)
+        _lock_cache(d)
+        return d
 
     def __call__(self, *args):
         mode = getattr(_COLD.local, "mode", None)
@@ -248,6 +351,8 @@ class LazyKernel:
         if d is None:
             if mode is None and _COLD.may_interpret() and _small(args):
                 return _interpret(self.py_func, args)  # outside a solve, small arrays
+            if getattr(_COLD.local, "no_compile", False):
+                return _interpret(self.py_func, args)  # an interrupted solve's Result
             d = self.dispatcher
         return d(*args)
 
@@ -291,7 +396,18 @@ def _listen_to_compilations():
         def on_end(self, ev):
             pass
 
+    class Passes(event.Listener):
+        # A compiler pass of one of the package's kernels starts: a held Ctrl-C is
+        # delivered here (numba's own helpers compiled inside one are left alone).
+        def on_start(self, ev):
+            if ev.data["module"].startswith(package):
+                interrupt_point()
+
+        def on_end(self, ev):
+            pass
+
     event.register("numba:compile", Listener())
+    event.register("numba:run_pass", Passes())
 
 
 def _announce(estimate):
@@ -308,13 +424,16 @@ _DISPATCHER_CLASSES = {}
 
 
 def _dispatcher_class(base):
-    """numba's dispatcher class ``base`` with one change: a call from compiled code compiles
-    its callee for the arguments' plain types, not their literal values.  numba types a
-    module constant passed as an argument (``_copy(W, W_CZ, W_TZ)``, a reason code, a
-    ``True``) as a literal and compiles the callee once per distinct value: 17 copies of
-    a three-line kernel, 9 of the crash's exit, 218 compilations in the small-problem
-    route where 170 suffice (benchmarks/first_run.md).  No kernel of the package asks for
-    a literal; the arithmetic is the same (the constants only stop being folded)."""
+    """numba's dispatcher class ``base`` with two changes.  Its compilations hold SIGINT
+    (:class:`interrupts_held`; in a solve that was interrupted, a call without compiled
+    code runs the Python body instead: :func:`stop_compiling`).  And a call from compiled
+    code compiles its callee for the arguments' plain types, not their literal values.
+    numba types a module constant passed as an argument (``_copy(W, W_CZ, W_TZ)``, a
+    reason code, a ``True``) as a literal and compiles the callee once per distinct value:
+    17 copies of a three-line kernel, 9 of the crash's exit, 218 compilations in the
+    small-problem route where 170 suffice (benchmarks/first_run.md).  No kernel of the
+    package asks for a literal; the arithmetic is the same (the constants only stop being
+    folded)."""
     cls = _DISPATCHER_CLASSES.get(base)
     if cls is None:
         from numba.core import types  # (numba is loaded: a dispatcher is being built)
@@ -324,7 +443,24 @@ def _dispatcher_class(base):
             kws = {k: types.unliteral(v) for k, v in kws.items()}
             return base.get_call_template(self, args, kws)
 
+        def _compile_for_args(self, *args, **kws):
+            # A call from Python found no compiled code for its arguments' types.
+            if getattr(_COLD.local, "no_compile", False):
+                # (numba calls the callable returned here with the call's arguments)
+                return lambda *a: _interpret(self.py_func, a)
+            with interrupts_held():
+                return base._compile_for_args(self, *args, **kws)
+
+        def compile(self, sig):
+            # Compile or load from the cache (a Python call, or a compiled caller being
+            # typed): with SIGINT held, one held before delivered now, at its start.
+            with interrupts_held():
+                interrupt_point()
+                return base.compile(self, sig)
+
         cls = type(base.__name__, (base,), {"get_call_template": get_call_template,
+                                            "_compile_for_args": _compile_for_args,
+                                            "compile": compile,
                                             "__module__": base.__module__})
         _DISPATCHER_CLASSES[base] = cls
     return cls

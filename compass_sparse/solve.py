@@ -23,6 +23,7 @@ import time
 
 import numpy as np
 
+from ._jit import stop_compiling
 from .box import float_vector
 from .diagnostics import MISMATCH, directional_mismatch
 from .exceptions import ProblemError, ShapeError
@@ -142,6 +143,7 @@ def solve_mcp(F, jac=None, lb=0.0, ub=np.inf, x0=None, *, options=None, callback
     Result
         Always holds a point: the solution, or the best point found with the reason.
     """
+    t0 = time.perf_counter()  # (the time limit counts from the call)
     opt = Options.coerce(options)
     if isinstance(F, MCP):
         # Built earlier: the data its functions read may have changed since the start
@@ -151,7 +153,14 @@ def solve_mcp(F, jac=None, lb=0.0, ub=np.inf, x0=None, *, options=None, callback
         F.evaluator.forget()
         F.evaluator.counters.reset()
     problem, check = _as_problem(F, jac, lb, ub, x0, problem_kwargs)
-    return solve_problem(problem, opt, callback=callback, basis=basis, check=check)
+    return solve_problem(problem, opt, callback=callback, basis=basis, check=check, t0=t0)
+
+
+FINISH_SECONDS_PER_VARIABLE = 2.0e-7
+"""Seconds per variable the passes leave of the time limit for what follows them: the
+best point's diagnosis, the history, the Result's residual report and verdict (0.1-0.15 s
+at n = 1e6, measured: benchmarks/time_limit.md), so that a solve stopped by its limit
+returns within it."""
 
 
 LEAVE_SIMPLE_MAX_N = 2000
@@ -284,21 +293,26 @@ def jacobian_hint(problem: MCP, res: Result):
 
 
 def solve_problem(problem: MCP, opt: Options, *, callback=None, basis=None,
-                  check=False, top=True) -> Result:
+                  check=False, top=True, t0=None) -> Result:
     """The pass pipeline on a built problem (``check``: its start point is still to be
     checked), inside the solve's kernel route (:func:`compass_sparse.routes.kernel_route`).
     ``top``: the user's solve, not a hand-over inside one; it alone checks a failed
-    solve's Jacobian and logs the summary (once, at verbosity >= 1)."""
-    t0 = time.perf_counter()
+    solve's Jacobian and logs the summary (once, at verbosity >= 1).  ``t0``: when the
+    solve began (``time.perf_counter()``; default now): its time and limit count from it,
+    the start point's check included (0.3 s at n = 1e6)."""
+    t0 = time.perf_counter() if t0 is None else t0
     basis = check_basis(basis, problem.n)  # (bad input: before any evaluation)
     with kernel_route(problem.n) as kernels:
         try:
             if check:
                 problem.check_start()
-            res = _solve_evaluated(problem, opt, kernels, callback=callback, basis=basis)
+            res = _solve_evaluated(problem, opt, kernels, callback=callback, basis=basis,
+                                   t0=t0)
         except KeyboardInterrupt:
             # Ctrl-C outside the major iterations (the start point, the preprocessor): the
-            # start point is the best point known.
+            # start point is the best point known.  Its Result compiles nothing (numba may
+            # have been loading: compass_sparse._jit).
+            stop_compiling()
             res = make_result(problem, Status.USER_INTERRUPT,
                               "interrupted by the user (Ctrl-C)", problem.x0,
                               np.full(problem.n, np.nan), opt, t0, start_z=problem.x0)
@@ -320,8 +334,8 @@ _SOLVE_PASSES = ("crash", "path", "fallback", "homotopy")
 
 
 def _solve_evaluated(problem: MCP, opt: Options, kernels: str, *, callback=None,
-                     basis=None) -> Result:
-    t0 = time.perf_counter()
+                     basis=None, t0=None) -> Result:
+    t0 = time.perf_counter() if t0 is None else t0
     passes = {}
     # F and J at the start point: one evaluation each (kept from the problem's start check
     # when it ran), handed down to the preprocessor, the crash and the first iteration.
@@ -415,7 +429,9 @@ def _from_start(problem, pre, work, f0, J0, phi0, verdict0, opt, t0, passes, ker
     if sc is not None:
         z0, f0, J0 = z0 / sc.col, sc.row * f0, sc.scale_jacobian(J0)
         phi0 = fb_phi(z0, f0, inner.lb, inner.ub)
-    deadline = t0 + opt.time_limit if math.isfinite(opt.time_limit) else None
+    # (the passes stop early enough for the Result to be built within the limit)
+    deadline = (t0 + opt.time_limit - FINISH_SECONDS_PER_VARIABLE * work.n
+                if math.isfinite(opt.time_limit) else None)
     routes = choose_routes(inner.n, opt, kernels=kernels, scaled=sc is not None,
                            nnz=J0.nnz)
     log_major, log_minor = loggers(opt)

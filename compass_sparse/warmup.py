@@ -17,6 +17,10 @@ the cache.  The dense route (a small problem's crash, major iterations and pivot
 and homotopy) is most of the work, so it is split into three workloads that each compile
 one of its big kernels.  A last check in this process runs the demos' solves and reports
 what they still had to compile (nothing, when the workloads cover their routes).
+
+Ctrl-C stops the warm-up: its workers run in sessions of their own, so that the terminal's
+interrupt reaches the warm-up alone, which stops them (no worker prints a traceback); the
+cache keeps the kernels they finished.
 """
 from __future__ import annotations
 
@@ -137,30 +141,21 @@ def run_workloads(names, stream=sys.stdout):
         stream.flush()
 
 
-def warm_up(jobs: int | None = None, stream=sys.stdout) -> int:
-    """Compile every kernel the solver's routes use: each workload in a process of its own,
-    up to ``jobs`` at a time (default :func:`default_jobs`), the longest ready one first;
-    then check the demos' solves.  Says what it did on ``stream``.  Returns the number of
-    kernels the check still had to compile (0 when the cache covers the demos), or -1 when
-    a workload failed."""
-    jobs = default_jobs() if jobs is None else max(1, int(jobs))
-    t0 = time.perf_counter()
-    total = sum(w[1] for w in WORKLOADS.values())
-    stream.write(f"compiling the solver's kernels, {jobs} process{'es' if jobs > 1 else ''} "
-                 f"at a time (~{total:.0f} s of one core on an idle machine; nothing to do "
-                 "when they are cached already)\n")
-    stream.flush()
-    env = {**os.environ, "COMPASS_SPARSE_JIT": "always"}
-    pending, running, done, failed = list(WORKLOADS), {}, set(), []
+def _run_all(jobs, env, running, stream) -> list:
+    """The workloads in worker processes, ``jobs`` at a time (``running``: name -> the
+    running process, for :func:`_stop`); returns the names of those that failed."""
+    pending, done, failed = list(WORKLOADS), set(), []
     while pending or running:
         while len(running) < jobs:
             name = _next(pending, done)
             if name is None:
                 break
             pending.remove(name)
+            # (a session of its own: Ctrl-C on the terminal reaches the warm-up alone,
+            # which stops its workers itself, without a worker's traceback)
             running[name] = subprocess.Popen(
                 [sys.executable, "-m", "compass_sparse.warmup", name], stdout=subprocess.PIPE,
-                text=True, env=env)
+                text=True, env=env, start_new_session=True)
         time.sleep(0.1)
         for name, proc in list(running.items()):
             if proc.poll() is None:
@@ -179,6 +174,50 @@ def warm_up(jobs: int | None = None, stream=sys.stdout) -> int:
                         else "all from the cache")
                 stream.write(f"  {r['workload']:15s} {r['seconds']:7.1f} s  {what}\n")
             stream.flush()
+    return failed
+
+
+STOP_WAIT = 10.0
+"""Seconds the warm-up waits for its stopped workers before it kills them."""
+
+
+def _stop(running):
+    """Stop the running workers (Ctrl-C in the warm-up): SIGTERM, then SIGKILL after
+    ``STOP_WAIT`` seconds.  The on-disk cache stays whole: numba writes a kernel's data file
+    and then its index, each under a temporary name renamed into place, and the cache's
+    lock (compass_sparse._jit) is released when its holder dies."""
+    for proc in running.values():
+        proc.terminate()
+    for proc in running.values():
+        try:
+            proc.wait(timeout=STOP_WAIT)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        proc.stdout.close()
+    running.clear()
+
+
+def warm_up(jobs: int | None = None, stream=sys.stdout) -> int:
+    """Compile every kernel the solver's routes use: each workload in a process of its own,
+    up to ``jobs`` at a time (default :func:`default_jobs`), the longest ready one first;
+    then check the demos' solves.  Says what it did on ``stream``.  Returns the number of
+    kernels the check still had to compile (0 when the cache covers the demos), or -1 when
+    a workload failed."""
+    jobs = default_jobs() if jobs is None else max(1, int(jobs))
+    t0 = time.perf_counter()
+    total = sum(w[1] for w in WORKLOADS.values())
+    stream.write(f"compiling the solver's kernels, {jobs} process{'es' if jobs > 1 else ''} "
+                 f"at a time (~{total:.0f} s of one core on an idle machine; nothing to do "
+                 "when they are cached already)\n")
+    stream.flush()
+    env = {**os.environ, "COMPASS_SPARSE_JIT": "always"}
+    running = {}
+    try:
+        failed = _run_all(jobs, env, running, stream)
+    except KeyboardInterrupt:
+        _stop(running)
+        raise
     if failed:
         stream.write(f"the warm-up failed: {', '.join(failed)}\n")
         return -1

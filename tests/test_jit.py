@@ -8,13 +8,16 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 import textwrap
+import time
 from pathlib import Path
 
 import known_problems as kp
 import numpy as np
+import pytest
 
 from compass_sparse import solve_mcp
 from compass_sparse.generators import thesis_family
@@ -189,3 +192,176 @@ def test_interpreted_kernels_solve_the_small_problems_as_the_compiled_ones():
         if r.success:
             assert natural <= 1e-6 and r.residual.natural <= 1e-6, key
 
+
+
+# A child's first solve, interrupted: F(x) = x - c on x >= 0 at n = 30 (above the cold
+# start's INTERPRET_MAX_N: the solve loads numba and compiles), solution max(c, 0).  It
+# prints READY before the solve, END with the Result after it, then waits for a line on
+# stdin; AFTER when SIGINT came after the solve, ESCAPED (with the traceback's last file)
+# when a KeyboardInterrupt left solve_mcp.  ``mode k``: SIGINT raised by the child itself
+# at the k-th event of a kind ("import": a module of numba or llvmlite imported; "notify":
+# LLVM's object-code callback, a ctypes callback), or "signal 0": sent by the parent.
+_INTERRUPTED_CHILD = textwrap.dedent("""
+    import signal, sys, traceback
+    import numpy as np
+    import scipy.sparse as sp
+    import compass_sparse as cs
+    mode, k = sys.argv[1], int(sys.argv[2])
+    fired = [0]
+    def fire():
+        fired[0] += 1
+        if fired[0] == k:
+            signal.raise_signal(signal.SIGINT)
+    if mode == "import":
+        class Finder:
+            def find_spec(self, name, path=None, target=None):
+                if name.split(".")[0] in ("numba", "llvmlite"):
+                    fire()
+        sys.meta_path.insert(0, Finder())
+    elif mode == "notify":
+        from numba.core import codegen
+        hook = codegen.CPUCodeLibrary._object_compiled_hook.__func__
+        def notify(cls, *args):
+            fire()
+            return hook(cls, *args)
+        codegen.CPUCodeLibrary._object_compiled_hook = classmethod(notify)
+    n = 30
+    c = np.linspace(-1.0, 2.0, n)
+    x_star = np.maximum(c, 0.0)
+    problem = cs.MCP(lambda x: x - c, lambda x: sp.identity(n, format="csc"),
+                     np.zeros(n), np.full(n, np.inf), x_star if mode == "signal" else c + 1.0)
+    print("READY", flush=True)
+    try:
+        res = cs.solve_mcp(problem, options={"verbosity": 0})
+    except KeyboardInterrupt as exc:
+        print("ESCAPED", traceback.extract_tb(exc.__traceback__)[-1].filename, flush=True)
+        sys.exit(0)
+    try:
+        print("END", res.status.name, res.point_status.name,
+              float(np.max(np.abs(res.x - x_star))), float(np.max(np.abs(res.x - problem.x0))),
+              flush=True)
+        sys.stdin.readline()
+    except KeyboardInterrupt:
+        print("AFTER", flush=True)
+    """)
+
+
+def _start_child(mode, k, cache):
+    env = _cold_env(NUMBA_CACHE_DIR=str(cache), PYTHONPATH=str(ROOT))
+    return subprocess.Popen([sys.executable, "-c", _INTERRUPTED_CHILD, mode, str(k)],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT)
+
+
+def _finish_child(proc):
+    """The child's lines after READY, split in words, once it exited."""
+    try:
+        proc.stdin.write("\n")  # (the child waits for it after the solve)
+        proc.stdin.close()
+    except BrokenPipeError:  # the child is gone: its exit code and stderr say why
+        pass
+    out, err = proc.stdout.read(), proc.stderr.read()  # (not communicate: READY's read
+    proc.wait()  # may have buffered the next line in proc.stdout)
+    assert proc.returncode == 0, err
+    # No traceback of numba's (a half-imported numba, a half-built library), and no
+    # interrupt printed and dropped inside one of LLVM's ctypes callbacks.
+    assert "Traceback" not in err and "Exception ignored" not in err, err
+    return [line.split() for line in out.splitlines()]
+
+
+def _ready(proc) -> float:
+    assert proc.stdout.readline().split() == ["READY"]
+    return time.perf_counter()
+
+
+def test_ctrl_c_while_numba_imports_is_a_user_interrupt_not_a_half_imported_numba(tmp_path):
+    """Ctrl-C while the first solve imports numba (SIGINT at the 80th module of numba or
+    llvmlite imported) ends in USER_INTERRUPT at the start point.  The old code let the
+    KeyboardInterrupt cut numba's import short; the solve's handler then built its Result
+    with kernels that imported numba again: ``AttributeError: module 'numba' has no
+    attribute 'core'``, a traceback and exit code 1."""
+    proc = _start_child("import", 80, tmp_path)
+    _ready(proc)
+    status, point, _, from_x0 = _finish_child(proc)[0][1:]
+    assert (status, point, float(from_x0)) == ("USER_INTERRUPT", "START_POINT", 0.0)
+
+
+def test_ctrl_c_inside_an_llvm_callback_is_neither_lost_nor_a_raw_error(tmp_path):
+    """Ctrl-C while LLVM emits a kernel's object code (SIGINT inside its ctypes callback,
+    at the 1st and the 3rd kernel compiled, empty cache) ends in USER_INTERRUPT.  The old
+    code's KeyboardInterrupt was raised inside the callback, where ctypes prints and drops
+    it: the solve went on and answered SOLVED as if no Ctrl-C had come (1st), or numba
+    went on with a half-built library and the solve died with ``RuntimeError: no compiled
+    object yet for <Library 'memo_key_kernel'>`` (3rd)."""
+    children = [_start_child("notify", k, tmp_path / f"cache{k}") for k in (1, 3)]
+    for proc in children:
+        _ready(proc)
+        assert _finish_child(proc)[0][1] == "USER_INTERRUPT"
+
+
+def test_ctrl_c_at_any_moment_of_the_first_solve_is_a_user_interrupt_and_the_cache_stays_sound(
+        tmp_path):
+    """SIGINT sent to fresh processes at several delays after their first solve started
+    (a solve at the solution: numba's import and the compilation of the start point's
+    kernels, on an empty cache that all of them share): each ends in USER_INTERRUPT (or,
+    when the solve was over, a KeyboardInterrupt after it), never in a traceback of
+    numba's, never with the interrupt lost.  A fresh process then solves from the cache
+    they wrote: the solution, exactly."""
+    cache = tmp_path / "cache"
+    delays = (0.1, 0.8, 2.5)  # numba's import, the first kernels, later ones
+    children = [_start_child("signal", 0, cache) for _ in delays]
+    ready = [_ready(proc) for proc in children]
+    for proc, t, d in sorted(zip(children, ready, delays), key=lambda c: c[1] + c[2]):
+        # (where the signal falls in the solve, not a limit on time)
+        time.sleep(max(0.0, t + d - time.perf_counter()))
+        proc.send_signal(signal.SIGINT)
+    outcomes = [_finish_child(proc) for proc in children]
+    for lines in outcomes:
+        # the interrupt is never lost: a solve that ended otherwise saw it afterwards
+        assert lines[0][:2] == ["END", "USER_INTERRUPT"] or lines[-1] == ["AFTER"], outcomes
+    assert sum(lines[0][1] == "USER_INTERRUPT" for lines in outcomes) >= 2, outcomes
+    proc = _start_child("signal", 0, cache)
+    _ready(proc)
+    lines = _finish_child(proc)
+    assert lines[0][:4] == ["END", "SOLVED", "SOLUTION", "0.0"], lines
+
+
+def test_a_sigint_held_while_numba_loads_is_delivered_once_at_the_end_or_at_a_safe_point():
+    """Inside nested held sections a SIGINT is recorded, not raised; it is delivered once:
+    when the outermost section ends, or earlier at an interrupt point (a kernel's
+    compilation or compiler pass starting), to the handler that was in place (Python's
+    raises KeyboardInterrupt, a user's is called).  An ignored SIGINT stays ignored."""
+    from compass_sparse._jit import interrupt_point, interrupts_held
+
+    reached = []
+    with pytest.raises(KeyboardInterrupt):
+        with interrupts_held():
+            with interrupts_held():
+                signal.raise_signal(signal.SIGINT)
+                sum(range(1000))  # (bytecodes where Python would have raised)
+                reached.append("inner")
+            reached.append("outer")
+    assert reached == ["inner", "outer"]
+    with pytest.raises(KeyboardInterrupt):
+        with interrupts_held():
+            signal.raise_signal(signal.SIGINT)
+            sum(range(1000))
+            reached.append("before the point")
+            interrupt_point()
+            reached.append("after the point")  # (not reached)
+    assert reached[-1] == "before the point"
+    calls = []
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: calls.append(signum))
+    try:
+        with interrupts_held():
+            signal.raise_signal(signal.SIGINT)
+            sum(range(1000))
+            assert calls == []
+        assert calls == [signal.SIGINT]
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        with interrupts_held():
+            signal.raise_signal(signal.SIGINT)
+        assert calls == [signal.SIGINT]
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert signal.getsignal(signal.SIGINT) is previous

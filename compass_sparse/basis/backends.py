@@ -34,7 +34,12 @@ The ordering (and the symbolic analysis) is computed once per sparsity pattern a
 Budget: before a factorization the backend compares the symbolic estimate of the ordering
 (flops, bytes of L + U) with the limits of a :class:`FactorBudget` and raises
 :class:`FactorBudgetError` instead of starting a factorization that cannot finish in the
-time left or would not fit in memory.
+time left or would not fit in memory.  Its seconds are predicted as
+``n FACTOR_SECONDS_PER_COLUMN + flops / FLOP_RATE`` (:func:`factor_seconds`): SuperLU's
+work per column bounds a factorization that fills little (0.74 s for a tridiagonal block
+of order 7e5, whose 3.5e6 flops take 2 ms), its flops one that fills.  The ordering is
+computed under the same deadline (:mod:`compass_sparse.basis.ordering`: none is started
+past it, METIS and AMD only where they and the factorization fit in the time left).
 """
 
 from __future__ import annotations
@@ -62,6 +67,19 @@ FLOP_RATE = 2.0e9
 """Flops per second assumed by the time check (a fast single core on the supernodal
 kernels: the check must never stop a factorization that would have finished).  Measured
 rates on the CGE Jacobians were 0.5-2e9 (SuperLU with nested dissection, one core)."""
+
+FACTOR_SECONDS_PER_COLUMN = 6.0e-7
+"""Seconds per column of a SuperLU factorization that fills little (symbolic work, the
+column's panel and its solves).  Measured 0.6-1.05e-6 on tridiagonal blocks of order 1e5
+and 7e5 under AMD, METIS and COLAMD (one core of a shared two-core machine): the low end,
+so that the check stops no factorization that would have finished."""
+
+
+def factor_seconds(n: int, flops: float) -> float:
+    """Predicted seconds of a factorization of order n whose symbolic estimate is
+    ``flops`` (negative: none, e.g. COLAMD: the work per column alone)."""
+    return n * FACTOR_SECONDS_PER_COLUMN + max(flops, 0.0) / FLOP_RATE
+
 
 BYTES_PER_ENTRY = 16.0
 """Bytes per stored entry of L + U (value + index), plus the manager's copies: x 2."""
@@ -201,14 +219,15 @@ def _check_budget(info: FactorInfo, budget: FactorBudget | None):
         raise FactorBudgetError(
             "time", f"a {info.order} x {info.order} factorization (ordering "
             f"{info.ordering}) after the time limit")
-    if budget.deadline is not None and info.est_flops >= 0:
+    if budget.deadline is not None:
         left = budget.deadline - time.perf_counter()
-        need = info.est_flops / FLOP_RATE
+        need = factor_seconds(info.order, info.est_flops)
         if need > left:
+            flops = f"{info.est_flops:.3g} flops, " if info.est_flops >= 0 else ""
             raise FactorBudgetError(
                 "time", f"a {info.order} x {info.order} factorization needs about "
-                f"{need:.0f} s ({info.est_flops:.3g} flops, ordering {info.ordering}); "
-                f"{max(left, 0.0):.0f} s left")
+                f"{need:.2g} s ({flops}ordering {info.ordering}); "
+                f"{max(left, 0.0):.2g} s left")
 
 
 def _inverse(p):
@@ -232,7 +251,7 @@ class SuperLUBackend:
     name = "superlu"
 
     def __init__(self, ordering="auto", diag_pivot_thresh=None, budget=None):
-        self.orderings = OrderingCache(ordering)
+        self.orderings = OrderingCache(ordering, factor_seconds=factor_seconds)
         self.diag_pivot_thresh = diag_pivot_thresh
         self.budget = budget
         self.last = FactorInfo(backend=self.name)
@@ -251,7 +270,9 @@ class SuperLUBackend:
         # rank detection keeps to COLAMD with partial pivoting: with a symmetric ordering
         # (fixed column order) the tiny pivots of a singular block marked more columns
         # than its rank deficiency (measured on the rank-repair tests)
-        o = Ordering("colamd") if strict else self.orderings.get(K, labels=labels)
+        deadline = None if self.budget is None else self.budget.deadline
+        o = (Ordering("colamd") if strict
+             else self.orderings.get(K, labels=labels, deadline=deadline))
         fresh = self.orderings.computed > before
         info = FactorInfo(self.name, o.method, n, int(K.nnz), o.nnz_lu, o.flops,
                           time_ordering=o.time if fresh else 0.0, ordering_reused=not fresh)

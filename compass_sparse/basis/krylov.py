@@ -20,6 +20,8 @@ problem is re-solved every step (m is at most a few dozen).
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 
@@ -32,7 +34,7 @@ def _ps(psolve, cols):
     return psolve(np.column_stack(cols))
 
 
-def preconditioned_gmres(matvec, psolve, b, tol, maxiter):
+def preconditioned_gmres(matvec, psolve, b, tol, maxiter, deadline=None):
     """(x, steps, residual): GMRES on ``B x = b`` right-preconditioned by ``psolve``
     (``psolve(v) ~ B^{-1} v``), started from ``psolve(b)``.
 
@@ -47,6 +49,8 @@ def preconditioned_gmres(matvec, psolve, b, tol, maxiter):
     the solution's size) or after ``maxiter`` steps; ``residual`` is that estimate (the caller
     checks the true residual of x).  ``steps`` counts the Krylov steps, each one product
     with B and one preconditioner solve (plus the solve of ``x0`` and of the correction).
+    No step is started after ``deadline`` (a ``time.perf_counter()`` value): x is then the
+    correction of the steps made.
     """
     b = np.asarray(b, dtype=np.float64)
     single = b.ndim == 1
@@ -68,7 +72,7 @@ def preconditioned_gmres(matvec, psolve, b, tol, maxiter):
         V[c][0] = R[c] / beta[c]
     lock = 0
     for j in range(maxiter):
-        if not active:
+        if not active or (deadline is not None and time.perf_counter() > deadline):
             break
         lock = j + 1
         Z = _ps(psolve, [V[c][j] for c in active])

@@ -32,6 +32,17 @@ nested dissection of the symmetrized pattern is still 2-10x cheaper there, measu
 The estimate overstates the fill of an unsymmetric K (measured 1.5x on CGE Jacobians) but
 ranks the orderings correctly.
 
+Time.  Every ordering is started only with the time to finish it and the factorization
+after it (a ``deadline``; :func:`compute_ordering`): past the deadline none is started, the
+costs are predicted from the pattern (seconds per entry of ``n + nnz``, measured:
+:data:`PREPARE_SECONDS_PER_ENTRY`, :data:`AMD_SECONDS_PER_ENTRY`,
+:data:`METIS_SECONDS_PER_ENTRY`; the factorization's from the backend), nested dissection
+is passed over where it would not fit in the time left or could not pay for itself (its
+cost above the predicted factorization under AMD: banded and other patterns that AMD
+orders with little fill, where METIS took 2.5 s and saved nothing on a tridiagonal block
+of order 7e5), and AMD where it would not fit (SuperLU's COLAMD then orders inside the
+factorization).  An ordering chosen for lack of time is used once and not kept.
+
 An :class:`OrderingCache` keeps the result per numerical pattern (a hash of the positions
 of the nonzero values), shared within the process: every factorization of the same pattern
 (crash steps, Newton steps, refactorizations after updates) reuses it, and only the numeric
@@ -52,6 +63,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
+import math
 import time
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -60,6 +72,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .._jit import njit
+from ..exceptions import FactorBudgetError
 from ..linalg.matching import column_matching
 
 log = logging.getLogger(__name__)
@@ -71,7 +84,29 @@ METIS_MIN_N = 2000
 """Below this order ``auto`` does not try nested dissection (its setup costs more than it
 saves on small blocks, measured on the CGE Jacobians)."""
 
+PREPARE_SECONDS_PER_ENTRY = 1.0e-7
+"""Seconds per entry of ``n + nnz(K)`` that a symmetric ordering spends before ordering:
+the pattern's key, the matching to a zero-free diagonal, the symmetrized pattern.
+Measured 0.7-1.1e-7 (tridiagonal blocks of order 1e5 and 7e5, a 2-D grid of 1e5, CGE
+blocks of 1e4 and 3e4; one core of a shared two-core machine)."""
+
+AMD_SECONDS_PER_ENTRY = 2.0e-7
+"""Seconds per entry of ``n + nnz(S)`` (S the symmetrized pattern) of AMD.  Measured
+1.2e-7 (tridiagonal), 1.5e-7 (2-D grid), 2.2-2.5e-7 (CGE), 4.4e-7 (a random pattern that
+fills: AMD's cost grows with the fill)."""
+
+METIS_SECONDS_PER_ENTRY = 1.0e-6
+"""Seconds per entry of ``n + nnz(S)`` of METIS' nested dissection.  Measured 0.8e-6 (CGE,
+tridiagonal of order 1e5), 1.2-1.3e-6 (tridiagonal of 7e5, 2-D grid), 1.6e-6 (random)."""
+
 _I = np.int64
+
+
+def ordering_seconds(method: str, n: int, nnz_s: int) -> float:
+    """Predicted seconds of the ordering ``method`` ("amd" or "metis") of a symmetric
+    pattern of order n with ``nnz_s`` off-diagonal entries (its preparation apart)."""
+    rate = AMD_SECONDS_PER_ENTRY if method == "amd" else METIS_SECONDS_PER_ENTRY
+    return rate * (n + nnz_s)
 
 
 @dataclass
@@ -82,6 +117,8 @@ class Ordering:
     "amd" / "metis" (``rows`` and ``cols`` are the symmetric pre-permutation: the backend
     factors ``K[rows, :][:, cols]`` without reordering its columns).  ``nnz_lu`` and
     ``flops`` are the symbolic estimates (-1 when not computed), ``time`` the seconds spent.
+    ``hurried``: a cheaper ordering taken for lack of time (not kept for later solves);
+    ``passed_over``: why an ordering that was a candidate was not computed ("" if none).
     """
 
     method: str
@@ -91,6 +128,8 @@ class Ordering:
     flops: float = -1.0
     time: float = 0.0
     symmetry: float = -1.0
+    hurried: bool = False
+    passed_over: str = ""
 
 
 def _has_metis():
@@ -263,12 +302,35 @@ def cholesky_estimate(S, perm, cap=np.inf):
     return int(2.0 * c.sum() - n), float(np.sum((c - 1.0) * (2.0 * c + 1.0)))
 
 
-def compute_ordering(K, method="auto") -> Ordering:
-    """Ordering of the square CSC block K by ``method`` (one of :data:`ORDERINGS`)."""
+def compute_ordering(K, method="auto", deadline=None, factor_seconds=None) -> Ordering:
+    """Ordering of the square CSC block K by ``method`` (one of :data:`ORDERINGS`).
+
+    ``deadline`` (a ``time.perf_counter()`` value, None: none) and ``factor_seconds(n,
+    flops)``, the backend's prediction of a factorization's seconds (None: not known), keep
+    the ordering within the time left (see the module docstring): past the deadline, or
+    when the ordering asked for (``amd``, ``metis``) and its factorization cannot finish
+    in the time left, :class:`~compass_sparse.exceptions.FactorBudgetError` (kind "time")
+    is raised; under ``auto`` the cheaper orderings are taken instead."""
     t0 = time.perf_counter()
     n = K.shape[0]
+    if deadline is not None and t0 > deadline:
+        raise FactorBudgetError("time", f"an ordering of a {n} x {n} block after the time "
+                                "limit")
     if method == "colamd" or n <= 2:
         return Ordering("colamd", time=time.perf_counter() - t0)
+    left = math.inf if deadline is None else deadline - t0
+    floor = 0.0 if factor_seconds is None else factor_seconds(n, -1.0)
+    first = "metis" if method == "metis" else "amd"
+    need = (PREPARE_SECONDS_PER_ENTRY * (n + K.nnz) + ordering_seconds(first, n, 2 * K.nnz)
+            + floor)
+    if need > left:
+        why = (f"{first} of a {n} x {n} block and its factorization need about {need:.2g} s; "
+               f"{max(left, 0.0):.2g} s left")
+        if method != "auto":
+            raise FactorBudgetError("time", f"not started: {why}")
+        log.debug("ordering: colamd, %s", why)
+        return Ordering("colamd", time=time.perf_counter() - t0, hurried=True,
+                        passed_over=why)
     match = zero_free_diagonal(K)
     if match is None:
         if method != "auto":
@@ -277,20 +339,42 @@ def compute_ordering(K, method="auto") -> Ordering:
     Km = sp.csc_matrix(K[match, :])
     Km.eliminate_zeros()
     S, sym = symmetrized(Km)
-    candidates = ("amd", "metis") if method == "auto" else (method,)
-    if method == "auto" and (n < METIS_MIN_N or not _has_metis()):
-        candidates = ("amd",)
-    best = None
-    for m in candidates:
-        p = amd_order(S) if m == "amd" else metis_order(S)
-        # an ordering with three times the fill of the best one cannot win on flops
-        cap = np.inf if best is None else 3 * (best[1] + n) // 2
-        est = cholesky_estimate(S, p, cap=cap)
-        if est is not None and (best is None or est[1] < best[2]):
-            best = (m, est[0], est[1], p)
-    m, nnz_lu, flops, p = best
+    p = amd_order(S) if first == "amd" else metis_order(S)
+    nnz_lu, flops = cholesky_estimate(S, p)
+    m, hurried, passed_over = first, False, ""
+    if method == "auto" and n >= METIS_MIN_N and _has_metis():
+        passed_over, hurried = _metis_passed_over(n, S.nnz, flops, deadline, factor_seconds)
+        if not passed_over:
+            p2 = metis_order(S)
+            # an ordering with three times the fill of the best one cannot win on flops
+            est = cholesky_estimate(S, p2, cap=3 * (nnz_lu + n) // 2)
+            if est is not None and est[1] < flops:
+                m, p, (nnz_lu, flops) = "metis", p2, est
+        else:
+            log.debug("ordering: metis passed over, %s", passed_over)
     return Ordering(m, rows=match[p], cols=p, nnz_lu=nnz_lu, flops=flops,
-                    time=time.perf_counter() - t0, symmetry=sym)
+                    time=time.perf_counter() - t0, symmetry=sym, hurried=hurried,
+                    passed_over=passed_over)
+
+
+def _metis_passed_over(n, nnz_s, amd_flops, deadline, factor_seconds):
+    """(why nested dissection is not computed, or "", whether for lack of time): when its
+    predicted cost exceeds that of the factorization under AMD, which it could at best
+    save (banded patterns: no fill to save), or when it and that factorization would not
+    finish by the deadline."""
+    if factor_seconds is None:
+        return "", False
+    t_metis = ordering_seconds("metis", n, nnz_s)
+    t_factor = factor_seconds(n, amd_flops)
+    if t_metis >= t_factor:
+        return (f"its ~{t_metis:.2g} s would cost more than the factorization under amd "
+                f"(~{t_factor:.2g} s)"), False
+    if deadline is not None:
+        left = deadline - time.perf_counter()
+        if t_metis + t_factor > left:
+            return (f"it and the factorization need ~{t_metis + t_factor:.2g} s; "
+                    f"{max(left, 0.0):.2g} s left"), True
+    return "", False
 
 
 _SHARED: OrderedDict[tuple, Ordering] = OrderedDict()
@@ -387,16 +471,22 @@ class OrderingCache:
     recently used patterns are kept.  ``computed`` / ``reused`` / ``carried`` (from a
     neighbouring index set) count this cache's calls."""
 
-    def __init__(self, method="auto"):
+    def __init__(self, method="auto", factor_seconds=None):
         self.method = method
+        self.factor_seconds = factor_seconds  # (n, flops) -> predicted seconds, or None
         self.computed = 0
         self.reused = 0
         self.carried = 0
 
-    def get(self, K, key=None, labels=None) -> Ordering:
+    def get(self, K, key=None, labels=None, deadline=None) -> Ordering:
         """The ordering of K.  ``labels`` (optional, increasing): K is the principal
         submatrix of a larger matrix on these indices, so that the ordering of a
-        neighbouring index set may be carried over (see the module docstring)."""
+        neighbouring index set may be carried over (see the module docstring).
+        ``deadline``: see :func:`compute_ordering`; an ordering to be made is not started
+        past it (:class:`~compass_sparse.exceptions.FactorBudgetError`)."""
+        if deadline is not None and time.perf_counter() > deadline:
+            raise FactorBudgetError("time", f"an ordering of a {K.shape[0]} x {K.shape[1]} "
+                                    "block after the time limit")
         key = (self.method, pattern_key(K) if key is None else key)
         o = _SHARED.get(key)
         if o is not None:
@@ -413,11 +503,13 @@ class OrderingCache:
             log.debug("ordering of a %d x %d block carried over from a neighbouring index "
                       "set (%.3f s)", K.shape[0], K.shape[1], o.time)
         else:
-            o = compute_ordering(K, self.method)
+            o = compute_ordering(K, self.method, deadline, self.factor_seconds)
             self.computed += 1
             log.debug("ordering of a %d x %d block (nnz %d): %s, estimated nnz(L+U) %d, "
                       "%.3g flops, %.3f s", K.shape[0], K.shape[1], K.nnz, o.method,
                       o.nnz_lu, o.flops, o.time)
+            if o.hurried:
+                return o  # (for lack of time: a later solve with time orders afresh)
         _remember(self.method, labels, o)
         _SHARED[key] = o
         while len(_SHARED) > _SHARED_SIZE:

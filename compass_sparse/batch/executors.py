@@ -11,10 +11,12 @@ loaded (numba's on-disk cache), so the first scenario of a worker does not pay f
 from __future__ import annotations
 
 import concurrent.futures as cf
+import functools
 import multiprocessing
 import os
 import sys
 import threading
+import time
 
 import numpy as np
 from threadpoolctl import threadpool_limits
@@ -36,6 +38,26 @@ def prepare_worker() -> int:
     # A 3 x 3 LCP touches the crash, the path and its numba kernels.
     solve_lcp(np.array([[2.0, 1, 0], [1, 2, 1], [0, 1, 2]]), np.array([-1.0, 1, -1]))
     return os.getpid()
+
+
+PARENT_POLL = 0.5
+"""Seconds between a local pool worker's checks that the batch's process is alive."""
+
+
+def _pool_worker(parent: int):
+    """A local pool's worker: prepared (:func:`prepare_worker`), and ended when the batch's
+    process ``parent`` is gone.  A batch that is killed (SIGKILL, a crash) cannot shut its
+    pool down, and its workers waited for tasks forever, holding their memory and the
+    killed batch's output pipes (a caller reading its output hung)."""
+    prepare_worker()
+    threading.Thread(target=_watch_parent, args=(parent,), daemon=True,
+                     name="compass-sparse-batch-parent").start()
+
+
+def _watch_parent(parent: int):
+    while os.getppid() == parent:
+        time.sleep(PARENT_POLL)
+    os._exit(1)  # (the batch is gone: nobody waits for this worker's results)
 
 
 class InProcessExecutor:
@@ -65,7 +87,8 @@ class InProcessExecutor:
 
 
 class LocalPoolExecutor(InProcessExecutor):
-    """A process pool over ``workers`` processes (default: every core).
+    """A process pool over ``workers`` processes (default: every core); a worker ends
+    itself when the batch's process is gone (killed).
 
     Workers are forked on Linux when the caller runs a single thread (they inherit the
     compiled kernels and need no ``if __name__ == "__main__"`` guard in scripts), spawned
@@ -89,7 +112,7 @@ class LocalPoolExecutor(InProcessExecutor):
     def _new_pool(self):
         return cf.ProcessPoolExecutor(max_workers=self.workers,
                                       mp_context=multiprocessing.get_context(self._method),
-                                      initializer=prepare_worker)
+                                      initializer=functools.partial(_pool_worker, os.getpid()))
 
     def submit(self, fn, *args):
         try:

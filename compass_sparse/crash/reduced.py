@@ -104,9 +104,10 @@ REUSE_ITERATIONS = 40
 """GMRES steps allowed on reused factors before the crash factors afresh."""
 
 
-def reuse_solve(J, inact, rhs, prev, nm_norm):
+def reuse_solve(J, inact, rhs, prev, nm_norm, deadline=None):
     """d with J_II d = rhs by GMRES preconditioned with the held factors of the previous
-    crash step's J_I'I' (I' the previous inactive set), or None when it does not converge.
+    crash step's J_I'I' (I' the previous inactive set), or None when it does not converge
+    (or the ``deadline`` passed: no GMRES step is started after it).
 
     The system is posed on U = I u I': rows and columns of I' - I are identity (those d
     are 0), so that it differs from the factored matrix by the moved Jacobian values and
@@ -137,7 +138,7 @@ def reuse_solve(J, inact, rhs, prev, nm_norm):
     eta = max(1e-10, min(1e-4, nm_norm))
     with single_threaded_blas():   # level-1 vector work: threads only slow it
         x, steps, _ = preconditioned_gmres(lambda v: B @ v, psolve, b, 0.5 * eta * bn,
-                                           REUSE_ITERATIONS)
+                                           REUSE_ITERATIONS, deadline=deadline)
     if not np.all(np.isfinite(x)) or np.linalg.norm(B @ x - b) > eta * bn:
         return None, steps
     return x[in_new], steps

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from .._jit import njit
+from .._jit import interrupts_held, njit
 from ..linalg._csc_kernels import csc_matvec
 from .._merit_kernels import max_abs_kernel
 
@@ -225,11 +225,13 @@ def bind_lapack() -> bool:
     global _XXGETRF
     if _XXGETRF is None:
         try:
-            # (lazy: numba costs 0.2-0.4 s of import; see compass_sparse._jit)
-            import numba
-            from numba.np.linalg import _LAPACK
+            # (with Ctrl-C held: an import it cuts short leaves numba half-imported)
+            with interrupts_held():
+                # (lazy: numba costs 0.2-0.4 s of import; see compass_sparse._jit)
+                import numba
+                from numba.np.linalg import _LAPACK
 
-            _XXGETRF = _LAPACK().numba_xxgetrf(numba.types.float64)
+                _XXGETRF = _LAPACK().numba_xxgetrf(numba.types.float64)
         except Exception:  # (ImportError, AttributeError, ... of another numba)
             return False
     return True

@@ -15,6 +15,8 @@ import time
 
 import numpy as np
 
+from .._jit import stop_compiling
+from ..basis.backends import factor_seconds
 from ..box import all_finite, max_abs_diff, near_point, project, random_point
 from ..crash.driver import crash
 from ..exceptions import FactorBudgetError
@@ -34,7 +36,7 @@ from .newton import NewtonStep
 from .restarts import FROM_RANDOM, FROM_START, RestartSchedule
 from .state import (REFERENCE_PROGRESS, NMSState, NMSStop, Outcome, Point, below_reference,
                     classify_step, reference_value, stall_update)
-from .stationarity import stationarity, worst_rows
+from .stationarity import Stationarity, stationarity, worst_rows
 
 __all__ = ["NMSSolver"]
 
@@ -99,8 +101,21 @@ class NMSSolver:
         return Point(z, f, phi, fb_psi(phi), J)
 
     def check_limits(self, opt):
-        if self.deadline is not None and time.perf_counter() > self.deadline:
-            raise NMSStop(Status.TIME_LIMIT, "time limit reached")
+        """Stop before a major iteration past a limit, or when the factorization it makes
+        (of order n: :func:`~compass_sparse.basis.backends.factor_seconds`, its work per
+        column alone) cannot finish in the time left -- twice that for the first, which
+        also orders the pattern (a column order costs about a factorization's work per
+        column: the sparse engine's first path at n = 1e6 took 1.8 s, 0.9 s of them
+        ordering)."""
+        if self.deadline is not None:
+            left = self.deadline - time.perf_counter()
+            if left < 0.0:
+                raise NMSStop(Status.TIME_LIMIT, "time limit reached")
+            need = factor_seconds(self.n, -1.0) * (2.0 if self.newton.basis is None else 1.0)
+            if need > left:
+                raise NMSStop(Status.TIME_LIMIT, "time limit reached: a major iteration "
+                              f"factors a matrix of order {self.n} (~{need:.2g} s) and "
+                              f"{left:.2g} s are left")
         if self.counts.nit >= opt.major_iteration_limit:
             raise NMSStop(Status.MAJOR_ITERATION_LIMIT,
                           f"major iteration limit ({opt.major_iteration_limit}) reached")
@@ -192,6 +207,9 @@ class NMSSolver:
             status = Status.TIME_LIMIT if exc.kind == "time" else Status.MEMORY_LIMIT
             message = f"factorization not started: {exc}"
         except KeyboardInterrupt:
+            # The Result is built without compiling (numba may have been compiling a
+            # kernel: compass_sparse._jit), the compiled kernels run as they are.
+            stop_compiling()
             status, message = Status.USER_INTERRUPT, "interrupted by the user (Ctrl-C)"
         status, message = self._diagnose(status, message)
         best = self.best.point
@@ -266,15 +284,21 @@ class NMSSolver:
     def _diagnose(self, status, message):
         """A failed solve names the rows that keep the merit up; one that converged to a
         stationary point of the merit function says so (see
-        :mod:`compass_sparse.nms.stationarity`)."""
+        :mod:`compass_sparse.nms.stationarity`; not tested after a time limit)."""
         best = self.best.point
         if status not in _DIAGNOSED or best is None:
             return status, message
-        try:
-            J = self.ev.jac(best.z, best.f)
-        except KeyboardInterrupt:
-            return status, message
-        st = stationarity(best.z, best.f, J, self.lb, self.ub)
+        J = None
+        if status is not Status.TIME_LIMIT:
+            # (a solve the clock stopped names its rows only: past its limit it evaluates
+            # no J -- with the products of the test, 0.3 s at n = 1e6 -- and a run cut
+            # short has not converged anywhere)
+            try:
+                J = self.ev.jac(best.z, best.f)
+            except KeyboardInterrupt:
+                return status, message
+        st = (Stationarity(False, np.inf, worst_rows(best.phi)) if J is None
+              else stationarity(best.z, best.f, J, self.lb, self.ub))
         a = self.acceptance
         if a.row is not None:
             # The verdict is the scaled problem's (better conditioned); the rows are named

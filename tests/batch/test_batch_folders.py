@@ -1,7 +1,6 @@
-"""Results folders that lose nothing and mix nothing (issue 38, items 1, 5, 6): the model's
-fingerprint, the folder's lock, per-writer temporary names, fsync around renames, and
-damaged parts quarantined and solved again.  The kill-and-resume property test is in
-test_batch_kills.py."""
+"""Results folders that lose nothing and mix nothing: the model's fingerprint, the folder's
+lock, per-writer temporary names, fsync around renames, and damaged parts quarantined and
+solved again.  The kill-and-resume property test is in test_batch_kills.py."""
 from __future__ import annotations
 
 import json
