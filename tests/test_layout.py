@@ -31,9 +31,10 @@ KERNELS_EXEMPT = {("path/_path_kernels.py", "path_loop"),
                   ("presolve/_kernels.py", "simple_reductions_screen")}
 """Compiled kernels whose length is the algorithm (their docstrings say so)."""
 
-FOREIGN_PRIVATE = {("interfaces/gamspy.py", "_gmo")}
+FOREIGN_PRIVATE = {("interfaces/gamspy.py", "_gmo"), ("batch/executors.py", "_exit")}
 """Private names of other libraries read on purpose (GAMSPy gives a model's GMO handle
-only as ``model.instance._gmo``)."""
+only as ``model.instance._gmo``; ``os._exit`` is the documented way for a pool worker
+whose batch is gone to end without running its parent's clean-up)."""
 
 
 def _modules():
