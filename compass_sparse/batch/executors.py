@@ -14,6 +14,7 @@ import concurrent.futures as cf
 import functools
 import multiprocessing
 import os
+import signal
 import sys
 import threading
 import time
@@ -57,7 +58,9 @@ def _pool_worker(parent: int):
 def _watch_parent(parent: int):
     while os.getppid() == parent:
         time.sleep(PARENT_POLL)
-    os._exit(1)  # (the batch is gone: nobody waits for this worker's results)
+    # the batch is gone, and nobody waits for this worker's results (a signal: a thread
+    # cannot end its process by an exception)
+    os.kill(os.getpid(), signal.SIGKILL)
 
 
 class InProcessExecutor:
