@@ -31,10 +31,9 @@ KERNELS_EXEMPT = {("path/_path_kernels.py", "path_loop"),
                   ("presolve/_kernels.py", "simple_reductions_screen")}
 """Compiled kernels whose length is the algorithm (their docstrings say so)."""
 
-FOREIGN_PRIVATE = {("interfaces/gamspy.py", "_gmo"), ("batch/executors.py", "_exit")}
+FOREIGN_PRIVATE = {("interfaces/gamspy.py", "_gmo")}
 """Private names of other libraries read on purpose (GAMSPy gives a model's GMO handle
-only as ``model.instance._gmo``; ``os._exit`` is the documented way for a pool worker
-whose batch is gone to end without running its parent's clean-up)."""
+only as ``model.instance._gmo``)."""
 
 
 def _modules():
