@@ -219,7 +219,7 @@ def test_no_direct_step_after_a_path_that_pivoted_on_the_sparse_engine(monkeypat
     """Regression: on the sparse engine every Newton path first tried the direct step,
     and where the active set still changes from one major iteration to the next the step
     failed and the path pivoted from the same start: traffic n = 912 factored M_FF (KLU
-    or SuperLU) in vain before 6 of its 9 paths, 7 ms of a 74 ms solve.  Now a path that
+    or SuperLU) in vain before 8 of its 9 paths, 7 ms of an 81 ms solve.  Now a path that
     follows one that pivoted goes to the engine at once; the same pivots, the same
     answer.  A model whose Newton steps need no pivot (Ramsey, n = 993, on the engine)
     still ends every one by the direct step."""
