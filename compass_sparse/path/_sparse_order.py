@@ -290,12 +290,9 @@ def _bucket_insert(i, d, head, nxt, prv):
 
 
 @njit(cache=True)
-def _compress(nb, P, iw, pfree):
+def _compress(nb, pe, ln, stat, iw):
     """Garbage collection of the list storage: the lists of live variables and elements
     moved down in storage order.  Returns the new end of the used storage."""
-    pe = P[W_PE]
-    ln = P[W_LEN]
-    stat = P[W_STAT]
     live = np.empty(nb, dtype=np.int64)
     m = 0
     for i in range(nb):
@@ -317,16 +314,11 @@ def _compress(nb, P, iw, pfree):
     return f
 
 
-@njit(cache=True)
-def _new_element(p, P, iw, pfree, stamp):
+@njit(cache=True, inline="always")
+def _new_element(p, pe, ln, elen, stat, lpm, iw, pfree, stamp):
     """Eliminate p: its element list L_p (the live variables adjacent to p or to one of
     its elements, which are absorbed) appended at iw[pfree:]; p becomes an element.
     Returns the new end of storage."""
-    pe = P[W_PE]
-    ln = P[W_LEN]
-    elen = P[W_ELEN]
-    stat = P[W_STAT]
-    lpm = P[W_LPM]
     start = pfree
     lpm[p] = stamp
     for t in range(pe[p], pe[p] + elen[p]):
@@ -353,19 +345,12 @@ def _new_element(p, P, iw, pfree, stamp):
     return pfree
 
 
-@njit(cache=True)
-def _update(p, P, iw, wflg, left):
+@njit(cache=True, inline="always")
+def _update(p, pe, ln, elen, stat, lpm, deg, w, iw, wflg, left):
     """The lists and approximate degrees of the variables of the new element L_p
     (Amestoy-Davis-Duff: d_i = min(left - 1, d_i + |L_p| - 1, |A_i| + |L_p| - 1 +
     sum over the other elements e of i of |L_e \\ L_p|)); elements inside L_p are
     absorbed.  ``left``: live variables after p."""
-    pe = P[W_PE]
-    ln = P[W_LEN]
-    elen = P[W_ELEN]
-    stat = P[W_STAT]
-    lpm = P[W_LPM]
-    deg = P[W_DEG]
-    w = P[W_WGT]
     stamp = lpm[p]
     lp = ln[p]
     for t in range(pe[p], pe[p] + lp):  # w[e] - wflg = |L_e \ L_p|
@@ -407,6 +392,32 @@ def _update(p, P, iw, wflg, left):
         elen[i] = ne + 1
         ln[i] = k + 1 - pe[i]
         deg[i] = min(left - 1, deg[i] + lp - 1, ext + lp - 1)
+
+
+@njit(cache=True, inline="always")
+def _mass_eliminate(p, pe, ln, elen, stat, deg, iw, order, k):
+    """Mass elimination: a variable of L_p adjacent to nothing but the new element p
+    (its list is p alone) would be eliminated next at no fill, so all such go now, after
+    p (order[k:]); they leave L_p and the degrees of its other variables.  Returns the
+    new k.  (In the dense block that ends most orders this orders the block at once.)"""
+    q = pe[p]
+    c = 0
+    for t in range(pe[p], pe[p] + ln[p]):
+        i = iw[t]
+        if elen[i] == 1 and ln[i] == 1:
+            order[k] = i
+            k += 1
+            stat[i] = _GONE
+            c += 1
+        else:
+            iw[q] = i
+            q += 1
+    ln[p] = q - pe[p]
+    if c > 0:
+        for t in range(pe[p], q):
+            i = iw[t]
+            deg[i] = max(0, deg[i] - c)
+    return k
 
 
 @njit(cache=True)
@@ -462,15 +473,16 @@ def min_degree(nb, P, iw, used):
         order[k] = p
         k += 1
         if pfree + deg[p] + 1 > cap:
-            pfree = _compress(nb, P, iw, pfree)
+            pfree = _compress(nb, pe, ln, stat, iw)
             if pfree + deg[p] + 1 > cap:
                 return -1
-        pfree = _new_element(p, P, iw, pfree, k)
+        pfree = _new_element(p, pe, ln, elen, stat, lpm, iw, pfree, k)
         for t in range(pe[p], pe[p] + ln[p]):
             i = iw[t]
             _bucket_remove(i, deg[i], head, nxt, prv)
-        _update(p, P, iw, wflg, live - k)
+        _update(p, pe, ln, elen, stat, lpm, deg, w, iw, wflg, live - k)
         wflg += nb + 1
+        k = _mass_eliminate(p, pe, ln, elen, stat, deg, iw, order, k)
         for t in range(pe[p], pe[p] + ln[p]):
             i = iw[t]
             _bucket_insert(i, deg[i], head, nxt, prv)
