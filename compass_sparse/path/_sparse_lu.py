@@ -553,8 +553,12 @@ def replace_column(S, nupd, slot, d, update_tol, stab_tol, growth_limit, fill_fa
     upp = Ud[p]
     d1 = alpha * upp
     snorm = 0.0
+    nc = 0  # the spike's entries but row p (the new column of U)
     for i in range(N):
-        snorm = max(snorm, abs(spike[i]))
+        a = abs(spike[i])
+        snorm = max(snorm, a)
+        if a != 0.0 and i != p:
+            nc += 1
     dnorm = 0.0
     for i in range(n):
         dnorm = max(dnorm, abs(d[i]))
@@ -565,27 +569,21 @@ def replace_column(S, nupd, slot, d, update_tol, stab_tol, growth_limit, fill_fa
         y[i] = 0.0
     y[p] = 1.0
     _utsolve(S, y, p, N)
-    d2 = 0.0
-    for i in range(p, N):
+    d2 = y[p] * spike[p] if y[p] != 0.0 else 0.0
+    ne = 0  # the row eta's entries and its largest multiplier
+    gmax = 0.0
+    for i in range(p + 1, N):
         if y[i] != 0.0:
             d2 += y[i] * spike[i]
+            ne += 1
+            gmax = max(gmax, abs(upp * y[i]))
     d2 *= upp
     if not np.isfinite(d2) or abs(d1 - d2) > stab_tol * abs(d1):
         return UPD_UNSTABLE
     if abs(d2) <= update_tol * snorm:
         return UPD_REFUSED
-    ne = 0
-    gmax = 0.0
-    for i in range(p + 1, N):
-        if y[i] != 0.0:
-            ne += 1
-            gmax = max(gmax, abs(upp * y[i]))
     if not gmax <= growth_limit:
         return UPD_GROWTH
-    nc = 0
-    for i in range(N):
-        if spike[i] != 0.0 and i != p:
-            nc += 1
     old_len = Ue[p] - Us[p]
     if (h[H_NNZL] + h[H_NNZU] - old_len + nc + h[H_NNZR] + ne > fill_factor * h[H_BASE]
             or h[H_UFREE] + nc > Ui.shape[0] or Rs[nupd] + ne > Ri.shape[0]):
