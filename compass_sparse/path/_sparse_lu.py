@@ -91,8 +91,15 @@ GROW = -1
 grows it and runs the path again)."""
 
 # the header array h (int64) of the factors
-H_M1, H_NNZL, H_UFREE, H_NNZU, H_NNZR, H_BASE, H_N = range(7)
-N_HEADER = 8
+H_M1, H_NNZL, H_UFREE, H_NNZU, H_NNZR, H_BASE, H_N, H_FRESH, H_LAST = range(9)
+N_HEADER = 10
+
+REORDER_FILL = 1.2
+"""A factorization computes a fresh elimination order when the last one's L + U held
+more than REORDER_FILL times the entries of the last factorization in a fresh order
+(or when many basic columns are new: :data:`compass_sparse.path._sparse_order.
+REUSE_NEW_SHARE`); else it reuses that order.  ``h[H_FRESH] = 0`` forces a fresh one (a
+path's first factorization)."""
 
 
 def _capacities(n: int, update_limit: int, nnz_guess: int):
@@ -244,11 +251,13 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh
     k = 0
     nrep = 0
     ufree = 0
+    fresh = False
     Lp[0] = 0
     for t in range(n):
         if t == nunit:
-            block_order(sk, si, Mp, Mi, Mx, pinv, colkey, order, nunit, pref, ow, fw[2],
-                        MATCH_TOL)
+            reuse = h[H_FRESH] > 0 and h[H_LAST] <= REORDER_FILL * h[H_FRESH]
+            fresh = block_order(sk, si, Mp, Mi, Mx, pinv, colkey, order, nunit, pref, ow,
+                                fw[2], MATCH_TOL, reuse)[1]
         s = order[t]
         kind = sk[s]
         if t < nunit:
@@ -390,6 +399,9 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh
     for j in range(n):
         pos_of[slot_at[j]] = j
     h[H_M1] = nunit
+    h[H_LAST] = Lp[n] + ufree
+    if fresh:
+        h[H_FRESH] = max(Lp[n] + ufree, 1)
     h[H_NNZL] = Lp[n]
     h[H_UFREE] = ufree
     h[H_NNZU] = ufree + n

@@ -50,8 +50,8 @@ import numpy as np
 from .._jit import njit
 from ._kernels import VAR_T, VAR_Z
 
-__all__ = ["DENSE_DEGREE", "MATCH_TOL", "block_order", "match_columns", "min_degree",
-           "work_size"]
+__all__ = ["DENSE_DEGREE", "MATCH_TOL", "REUSE_NEW_MIN", "REUSE_NEW_SHARE", "block_order",
+           "match_columns", "min_degree", "work_size"]
 
 MATCH_TOL = 0.1
 """An entry a_ic may match column c when ``|a_ic| >= MATCH_TOL * max_k |a_kc|`` (over the
@@ -59,14 +59,19 @@ block's rows): the pivoting threshold of the factorization
 (:data:`compass_sparse.path._sparse_lu.PIVOT_THRESHOLD`), so that a matched row is a pivot
 the factorization is likely to accept."""
 
+REUSE_NEW_SHARE = 16
+REUSE_NEW_MIN = 4
+"""A factorization reuses the last fresh order (its caller allowing it) while at most
+nb / REUSE_NEW_SHARE + REUSE_NEW_MIN of the nb basic z columns have entered since."""
+
 DENSE_DEGREE = 16
 """A node whose degree exceeds max(DENSE_DEGREE, 10 sqrt(nodes)) is ordered last (AMD's
 rule: a dense row or column would make every degree large and the order meaningless)."""
 
 # the work space's parts (each n entries but the quotient graph's list storage)
 (W_ZSLOT, W_ZCOL, W_ROWM, W_COLM, W_STACK, W_PTR, W_RPATH, W_VISIT, W_PE, W_LEN, W_ELEN,
- W_DEG, W_HEAD, W_NEXT, W_PREV, W_WGT, W_STAT, W_LPM, W_ORDER) = range(19)
-N_PARTS = 19
+ W_DEG, W_HEAD, W_NEXT, W_PREV, W_WGT, W_STAT, W_LPM, W_ORDER, W_RANK, W_MROW) = range(21)
+N_PARTS = 21
 
 # node status in the quotient graph
 _ALIVE, _ELEMENT, _GONE, _DENSE = 0, 1, 2, 3
@@ -495,17 +500,21 @@ def min_degree(nb, P, iw, used):
 
 
 @njit(cache=True)
-def block_order(sk, si, Mp, Mi, Mx, pinv, colkey, order, m, pref, ow, cmax, tol):
+def block_order(sk, si, Mp, Mi, Mx, pinv, colkey, order, m, pref, ow, cmax, tol, reuse):
     """The elimination order of the basis' non-unit columns, after the unit columns took
     the rows with ``pinv >= 0``: order[m:] receives the basic z slots -- the matched ones
     in minimum degree order, then the unmatched ones by ``colkey`` -- and the covering
-    vector's slot last; pref[s] the matched row of slot s (-1: none).  Returns the new
-    end of ``order`` (n when every slot is ordered)."""
+    vector's slot last; pref[s] the matched row of slot s (-1: none).  With ``reuse``,
+    the order and matching of the last fresh call serve again (:func:`_reused_order`)
+    when few of the basic z are new since.  Returns (the new end of ``order``, n when
+    every slot is ordered; whether the order is fresh)."""
     n = sk.shape[0]
     P, iw = parts(ow, n)
     zslot = P[W_ZSLOT]
     zcol = P[W_ZCOL]
+    rank = P[W_RANK]
     nb = 0
+    new = 0
     for j in range(n):
         zcol[j] = -1
     for s in range(n):
@@ -514,6 +523,9 @@ def block_order(sk, si, Mp, Mi, Mx, pinv, colkey, order, m, pref, ow, cmax, tol)
             zslot[nb] = s
             zcol[si[s]] = nb
             nb += 1
+            new += rank[si[s]] < 0
+    if reuse and new <= nb // REUSE_NEW_SHARE + REUSE_NEW_MIN:
+        return _reused_order(sk, si, colkey, order, m, pref, P, nb), False
     k = -1
     if nb > 0:
         match_columns(nb, zslot, si, Mp, Mi, Mx, pinv, P, cmax, tol)
@@ -521,12 +533,17 @@ def block_order(sk, si, Mp, Mi, Mx, pinv, colkey, order, m, pref, ow, cmax, tol)
         if used >= 0:
             k = min_degree(nb, P, iw, used)
     colm = P[W_COLM]
+    mrow = P[W_MROW]
+    for j in range(n):
+        rank[j] = -1
     for c in range(nb):
         pref[zslot[c]] = colm[c]
+        mrow[si[zslot[c]]] = colm[c]
     if k >= 0:
         ordered = P[W_ORDER]
         for t in range(k):
             order[m] = zslot[ordered[t]]
+            rank[si[zslot[ordered[t]]]] = t
             m += 1
     # the unmatched columns (or all, when the graph did not fit) by colkey
     mark = P[W_LPM]
@@ -539,7 +556,47 @@ def block_order(sk, si, Mp, Mi, Mx, pinv, colkey, order, m, pref, ow, cmax, tol)
         if mark[j] >= 0:
             order[m] = mark[j]
             m += 1
-    for s in range(n):
+    return _t_last(sk, order, m), True
+
+
+@njit(cache=True)
+def _reused_order(sk, si, colkey, order, m, pref, P, nb):
+    """The z slots in the rank of their column in the last fresh order, each preferring
+    its matched row then; the columns new since (no rank) after them by ``colkey``,
+    preferring their own row; t last.  Returns the new end of ``order``."""
+    n = sk.shape[0]
+    rank = P[W_RANK]
+    mrow = P[W_MROW]
+    zslot = P[W_ZSLOT]
+    at = P[W_LPM]
+    for j in range(n):
+        at[j] = -1
+    for c in range(nb):
+        j = si[zslot[c]]
+        if rank[j] >= 0:
+            at[rank[j]] = zslot[c]
+            pref[zslot[c]] = mrow[j]
+    for t in range(n):
+        if at[t] >= 0:
+            order[m] = at[t]
+            m += 1
+    for j in range(n):
+        at[j] = -1
+    for c in range(nb):
+        j = si[zslot[c]]
+        if rank[j] < 0:
+            at[colkey[j]] = zslot[c]
+            pref[zslot[c]] = j
+    for t in range(n):
+        if at[t] >= 0:
+            order[m] = at[t]
+            m += 1
+    return _t_last(sk, order, m)
+
+
+@njit(cache=True, inline="always")
+def _t_last(sk, order, m):
+    for s in range(sk.shape[0]):
         if sk[s] == VAR_T:
             order[m] = s
             m += 1

@@ -249,3 +249,70 @@ def test_saddle_point_basis_factors_without_the_fill_of_a_column_order_of_m(traf
     x = np.zeros(n)
     SL.ftran_dense(S, 0, b, x)
     assert np.max(np.abs(B @ x - b)) <= 1e-10 * (1.0 + np.abs(B).max() * np.abs(x).max())
+
+
+# ------------------------------------------------------------------ reused orders
+def _grid_lcp_factor(n_side=20):
+    """The grid LCP's M (n = 400) and factor(z_basic): the LU of the basis of those basic
+    z (w basic elsewhere), checked to solve B x = b; returns the factors' header and the
+    rank of each column in the last fresh order (-1: none)."""
+    g = gen.p_matrix_lcp(n_side * n_side, "grid", 0)
+    M = sp.csc_matrix(g.lcp[0], dtype=float)
+    M.sort_indices()
+    n = M.shape[0]
+    Mp, Mi = M.indptr.astype(np.int64), M.indices.astype(np.int64)
+    S = SL.allocate(n, 50, 2 * M.nnz + 8 * n)
+    perm = np.zeros((N_PERM, n), dtype=np.int64)
+    rank = SO.parts(S[22], n)[0][SO.W_RANK]
+
+    def factor(z_basic):
+        sk = np.full(n, VAR_W, dtype=np.int64)
+        sk[np.asarray(z_basic)] = VAR_Z
+        nrep = SL.factor(Mp, Mi, M.data, np.zeros(0, np.int64), np.zeros(0),
+                         np.arange(n, dtype=np.int64), sk, np.arange(n, dtype=np.int64),
+                         np.ones(n, dtype=np.int64), S, 1e-11, SL.PIVOT_THRESHOLD,
+                         perm[W_REP_SLOT], perm[W_REP_ROW])
+        assert nrep == 0
+        z = (sk == VAR_Z).astype(float)
+        B = sp.csc_matrix(M @ sp.diags(z) - sp.diags(1.0 - z))
+        b = np.arange(1.0, n + 1.0)
+        x = np.zeros(n)
+        SL.ftran_dense(S, 0, b, x)
+        assert np.max(np.abs(B @ x - b)) <= 1e-10 * np.abs(b).max()
+        return S[0], rank
+
+    return n, factor
+
+
+def test_few_new_columns_reuse_the_last_order_and_many_take_a_fresh_one():
+    """A factorization whose basic z are those of the last fresh order but at most
+    nb / REUSE_NEW_SHARE + REUSE_NEW_MIN new ones eliminates in that order (no matching,
+    no minimum degree: the new columns get no rank); one more new column orders afresh
+    (every basic column ranked), and so does a basis whose last factorization held more
+    than REORDER_FILL times the fresh order's entries (to the entry: a column that left
+    keeps its rank only when the order is reused), or a caller's H_FRESH = 0.  Every
+    factorization solves B x = b."""
+    n, factor = _grid_lcp_factor()
+    rng = np.random.default_rng(0)
+    base = rng.choice(n, 240, replace=False)
+    others = np.setdiff1d(np.arange(n), base)
+    h, rank = factor(base)
+    assert h[SL.H_FRESH] == h[SL.H_LAST] > 0 and np.all(rank[base] >= 0)
+    limit = base.size // SO.REUSE_NEW_SHARE + SO.REUSE_NEW_MIN
+    factor(np.r_[base[limit:], others[:limit]])  # `limit` new columns: reused
+    assert np.all(rank[others[:limit]] < 0)
+    more = np.r_[base[limit + 1:], others[:limit + 1]]
+    factor(more)  # one more: fresh
+    assert np.all(rank[more] >= 0) and np.all(rank[base[:limit + 1]] < 0)
+    fresh = int(h[SL.H_FRESH])
+    left = more[0]
+    for last, reused in ((int(SL.REORDER_FILL * fresh), True),
+                         (int(SL.REORDER_FILL * fresh) + 1, False)):
+        factor(more)  # (the order's own basis: a reuse)
+        h[SL.H_LAST] = last
+        factor(more[1:])  # a column fewer, none new
+        assert bool(rank[left] >= 0) is reused, (last, fresh)
+        factor(more)
+    h[SL.H_FRESH] = 0
+    factor(more[1:])
+    assert rank[left] < 0
