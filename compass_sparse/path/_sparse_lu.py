@@ -9,7 +9,8 @@ The basis B (n x n) has one column per slot, as in :mod:`compass_sparse.path._de
 Factorization: left-looking LU (Gilbert-Peierls) with threshold partial pivoting
 ---------------------------------------------------------------------------------
 Columns are eliminated in the order :func:`compass_sparse.path._sparse_order.block_order`
-computes for each basis: the unit columns first (each pivots on its own row and
+computes for each basis (or reuses from an earlier one of the path, see
+``REORDER_FILL``): the unit columns first (each pivots on its own row and
 eliminates nothing), then the basic z columns, matched to rows of large entries and
 ordered by minimum degree on the matched block's pattern, then r.  Step k takes the
 column b = B[:, s] and solves ``L_k x = b`` with the k columns of L made so far: the rows
