@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._jit import njit
-from ._sparse_lu import GROW as SP_GROW, H_FRESH, UPD_FILL
+from ._sparse_lu import GROW as SP_GROW, UPD_FILL
 from ._sparse_lu import factor as sp_factor, ftran_column as sp_ftran_column
 from ._sparse_lu import ftran_dense as sp_ftran_dense, replace_column as sp_replace_column
 from ._dense_lu import (P_ROW, P_SLOT, UPD_GROWTH, UPD_OK, UPD_REFUSED, UPD_UNSTABLE,
@@ -550,7 +550,6 @@ def start_path(fk, prob, tab, state, D, S, tol, lim, slack, use_slack, z, w, v, 
     istate[I_BELOW] = -1
     for i in range(n):
         displaced[i] = -1
-    S[0][H_FRESH] = 0  # (a new linear MCP: the sparse LU orders its basis afresh)
     msg = refactor(fk, prob, tab, state, D, S, tol, 0.0)
     if use_slack and msg != MSG_GROW:
         artificial = False

@@ -39,8 +39,9 @@ Measured on the traffic model (n = 2452, late bases of a solve): L + U 22-26e3 e
 0.2-0.3e6 multiply-adds against 94-102e3 and 4.3-5.0e6 in COLAMD's order of M with partial
 pivoting; and on the late bases at n = 912, 6-8e3 against 13-15e3.
 
-Within a path, consecutive factorizations see bases that differ by the few columns the
-pivots since exchanged: a factorization reuses the last fresh order -- each column's rank
+Consecutive factorizations (within a path, and from one path to the next, which starts
+from the last one's basis) see bases that differ by the few columns the pivots since
+exchanged: a factorization reuses the last fresh order -- each column's rank
 in it and its matched row, the columns new since ordered after the others and preferring
 their own row -- while few of its columns are new (``REUSE_NEW_SHARE``) and the last
 factors did not fill much beyond the fresh order's (the caller's rule,
