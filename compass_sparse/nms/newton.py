@@ -14,7 +14,8 @@ from __future__ import annotations
 import time
 
 from ..linalg.direct import DirectFactors
-from ..path.direct_step import DIRECT_MIN_N, REUSE_BEATS_REFACTOR_NNZ, direct_step_applies
+from ..path.direct_step import (DIRECT_MIN_N, REUSE_BEATS_REFACTOR_NNZ, direct_step_applies,
+                                direct_step_worth_trying)
 from ..path.linear_mcp import dense_newton_result, solve_linear_mcp
 from ..path.linearize import Linearizer, linearizer_for
 from ..path.outcome import DIRECT_STEP_LINE, LinearCode, WarmBasis
@@ -45,6 +46,7 @@ class NewtonStep:
         self.linearizer = None
         self.basis = None  #: the paths' basis (engine or manager), made on the first path
         self.direct = None  #: DirectFactors when Newton paths try the direct step
+        self.last_pivots = None  #: the pivots of the last path (None before the first)
         self.crash_factors = None  #: the crash's last LU, offered to the next basis
         self.last_J = None  #: J of the last major iteration (the descent test's)
 
@@ -121,6 +123,7 @@ class NewtonStep:
         st.factorizations += res.factorizations
         st.iterations += 1
         self.counts.minor_iterations += res.pivots
+        self.last_pivots = res.pivots
         if res.code is LinearCode.SOLVED or res.t > 0:
             self.warm = res.basis
 
@@ -164,8 +167,10 @@ class NewtonStep:
                 # step's factorization, and reuse its own factors after that
                 self.direct = None
         self.crash_factors = None
+        direct = self.direct if direct_step_worth_trying(self.direct, self.basis,
+                                                         self.last_pivots) else None
         # A warm path that stalls before half-way is retried from the Lemke start.
         return solve_linear_mcp(M, q, self.lb, self.ub, self.basis, opt, x, warm=self.warm,
                                 r=r, ray_start=start_ray, retry_below=0.5,
                                 minor_limit=opt.minor_limit(self.n), deadline=self.deadline,
-                                log=self.log, direct=self.direct, dense_start=dense_start)
+                                log=self.log, direct=direct, dense_start=dense_start)

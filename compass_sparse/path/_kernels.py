@@ -60,13 +60,22 @@ def _room(kind, idx, val, r, lb, ub, t_lower):
     return max(val - lo, 0.0), lo
 
 
+_CLEARLY = 1.0 + 8.0 * np.finfo(np.float64).eps
+"""A ratio a / |r| is certainly above theta when a > theta * |r| * _CLEARLY: the product
+and the quotient are each within half a unit in the last place, so the test by a
+multiplication skips only slots the division would skip too (:func:`ratio_test` takes
+the same slot, bit for bit, and divides only where the answer is in doubt)."""
+
+
 @njit(cache=True)
 def ratio_test(sk, si, xb, rate, lb, ub, piv_tol, tol, t_lower):
     """Harris two-pass ratio test.  Returns (slot, theta, leaves_at_upper) or (-1, inf, 0).
 
     Pass 1: theta1 = min over blocking slots of (room + tol*max(1,|bound|)) / |rate|.
     Pass 2: among slots with room/|rate| <= theta1 pick t at a bound (priority 2), then
-    artificials (priority 1), then the largest |rate|."""
+    artificials (priority 1), then the largest |rate|.  Slots whose ratio is clearly
+    above the current minimum (pass 1) or theta1 (pass 2) are passed over without a
+    division (``_CLEARLY``): a dense rate vector costs two passes of multiplications."""
     n = sk.shape[0]
     theta1 = np.inf
     for k in range(n):
@@ -75,9 +84,13 @@ def ratio_test(sk, si, xb, rate, lb, ub, piv_tol, tol, t_lower):
             continue
         room, bnd = _room(sk[k], si[k], xb[k], r, lb, ub, t_lower)
         if np.isfinite(bnd):
-            theta1 = min(theta1, (room + tol * max(1.0, abs(bnd))) / abs(r))
+            a = room + tol * max(1.0, abs(bnd))
+            if a > theta1 * abs(r) * _CLEARLY:
+                continue
+            theta1 = min(theta1, a / abs(r))
     if not np.isfinite(theta1):
         return -1, np.inf, 0
+    bound = theta1 * _CLEARLY
     best = -1
     best_pri = -1
     best_piv = -1.0
@@ -88,7 +101,7 @@ def ratio_test(sk, si, xb, rate, lb, ub, piv_tol, tol, t_lower):
         if -piv_tol <= r <= piv_tol:
             continue
         room, bnd = _room(sk[k], si[k], xb[k], r, lb, ub, t_lower)
-        if not np.isfinite(bnd) or room / abs(r) > theta1:
+        if not np.isfinite(bnd) or room > bound * abs(r) or room / abs(r) > theta1:
             continue
         kind = sk[k]
         pri = 2 if kind == VAR_T else (1 if kind == VAR_A else 0)

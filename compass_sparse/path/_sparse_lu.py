@@ -8,18 +8,20 @@ The basis B (n x n) has one column per slot, as in :mod:`compass_sparse.path._de
 
 Factorization: left-looking LU (Gilbert-Peierls) with threshold partial pivoting
 ---------------------------------------------------------------------------------
-Columns are eliminated in a fixed order: the unit columns first (each pivots on its own
-row and eliminates nothing), then the z columns in the order ``colkey`` of M's columns
-(COLAMD's, computed once per pattern by the engine), then r.  Step k takes the column
-b = B[:, s] and solves ``L_k x = b`` with the k columns of L made so far: the rows
+Columns are eliminated in the order :func:`compass_sparse.path._sparse_order.block_order`
+computes for each basis (or reuses from an earlier one of the path, see
+``REORDER_FILL``): the unit columns first (each pivots on its own row and
+eliminates nothing), then the basic z columns, matched to rows of large entries and
+ordered by minimum degree on the matched block's pattern, then r.  Step k takes the
+column b = B[:, s] and solves ``L_k x = b`` with the k columns of L made so far: the rows
 reached from b's nonzeros in the graph of L (depth-first search, Gilbert and Peierls
 1988) in topological order, so a step costs its flops, not n.  The entries of x on
-pivoted rows are column k of U; among the rest the pivot row is z_j's own row j when
-``|x_j| >= piv_thresh * max |x_i|``, else the row of largest |x_i| (threshold partial
-pivoting, multipliers at most 1 / piv_thresh; the engine uses ``PIVOT_THRESHOLD`` = 1:
-partial pivoting, the diagonal kept on ties only).  L's column k is x / pivot on the
-remaining rows.  So ``P B Q = L U`` over *positions* (step indices), with L and U held in CSC
-arrays over positions after the factorization.
+pivoted rows are column k of U; among the rest the pivot row is the column's matched row
+r when ``|x_r| >= piv_thresh * max |x_i|``, else the row of largest |x_i| (threshold
+partial pivoting, multipliers at most 1 / piv_thresh; the engine uses
+``PIVOT_THRESHOLD`` = 1: partial pivoting, the matched row kept on ties).  L's column k
+is x / pivot on the remaining rows.  So ``P B Q = L U`` over *positions* (step indices),
+with L and U held in CSC arrays over positions after the factorization.
 
 Rank repair (thesis §3.3.1, as the basis manager and the dense engine do): a column
 whose largest remaining entry is at most ``rank_tol * ||B[:, s]||_inf`` (or a second unit
@@ -34,12 +36,10 @@ communication: measured on the traffic model (n = 912), the Python around a back
 factorization of the basis -- the slot table's column assembly, the non-unit block's
 extraction, an ordering of its pattern, the triangular factors' conversion -- cost
 1-3 ms per factorization against 0.05-0.4 ms for the numeric LU itself, and a path
-refactorizes every 50 updates and at every declined update.  The compiled LU reuses the
-ordering of M for every basis of a linearization (and of the next ones: the pattern of
-M does not change) and costs its flops.  Bases that fill much factor more slowly here
-than by a supernodal LU: dense Jacobians (the thesis families, n >= 600) stay on the
-manager (see sparse_engine.py), and on traffic n = 2452 (L + U ~1e5 entries from M's
-1.3e4) a factorization costs ~20-50 ms here against ~10 ms for SuperLU's numeric LU.
+refactorizes every 50 updates and at every declined update.  The compiled LU orders and
+factors a basis in one call and costs its flops.  Bases that fill much factor more
+slowly here than by a supernodal LU: dense Jacobians (the thesis families, n >= 600)
+stay on the manager (see sparse_engine.py).
 
 FTRAN, BTRAN and the Forrest-Tomlin update
 ------------------------------------------
@@ -60,7 +60,8 @@ Safeguards (each declines the update: the path refactorizes, with the repair):
   ``|d2| <= update_tol ||s||_inf`` (d = B^{-1} a);
 * ``stab_tol`` (1e-8): ``|d1 - d2| > stab_tol |d1|`` with ``d1 = d_p u_pp`` (the two
   computations of the new diagonal disagree);
-* ``growth_limit`` (100, as the dense engine): a row-eta multiplier ``|c_i|`` above it;
+* ``growth_limit`` (the engine's ``GROWTH_LIMIT``, 1e8): a row-eta multiplier ``|c_i|``
+  above it;
 * fill (the manager's ``fill_factor``, 2): L, U and the etas would hold more than
   ``fill_factor`` times the fresh factorization's entries, or the preallocated storage
   is full;
@@ -74,22 +75,35 @@ import numpy as np
 from .._jit import njit
 from ._dense_lu import UPD_GROWTH, UPD_LIMIT, UPD_OK, UPD_REFUSED, UPD_UNSTABLE
 from ._kernels import VAR_A, VAR_T, VAR_V, VAR_W, VAR_S, VAR_Z
+from ._sparse_order import MATCH_TOL, block_order, work_size
 
 UPD_FILL = 5
 """replace_column's outcome when the update would exceed the fill limit or the storage."""
 
 PIVOT_THRESHOLD = 1.0
-"""The sparse engine's pivoting threshold: partial pivoting (multipliers at most 1), as
-COLAMD's column order is made for.  A diagonal preference at 0.1 with AMD's symmetric
-order (the manager's choice) filled more on the traffic model's bases (sparse_engine.py)."""
+"""The sparse engine's pivoting threshold: partial pivoting (multipliers at most 1); a
+column's matched row (:mod:`compass_sparse.path._sparse_order`) is kept on ties.  A
+threshold of 0.1 (multipliers up to 10, the matched row kept more often) took 3.5% off
+the entries of L + U on the bases of a traffic solve at n = 2452 (1.037e6 against
+1.075e6 over its 53 factorizations) and 6% off their time: not worth the growth."""
 
 GROW = -1
 """factor()'s return when L or U did not fit in the preallocated storage (the engine
 grows it and runs the path again)."""
 
 # the header array h (int64) of the factors
-H_M1, H_NNZL, H_UFREE, H_NNZU, H_NNZR, H_BASE, H_N = range(7)
-N_HEADER = 8
+H_M1, H_NNZL, H_UFREE, H_NNZU, H_NNZR, H_BASE, H_N, H_FRESH, H_LAST = range(9)
+N_HEADER = 10
+
+REORDER_FILL = 1.2
+"""A factorization computes a fresh elimination order when the last one's L + U held
+more than REORDER_FILL times the entries of the last factorization in a fresh order
+(or when many basic columns are new: :data:`compass_sparse.path._sparse_order.
+REUSE_NEW_SHARE`); else it reuses that order, also from one path to the next (the next
+path starts from the last one's basis, and M keeps its pattern).  ``h[H_FRESH] = 0``
+(new factors) forces a fresh one.  Measured (the paths of a traffic solve replayed, one
+process per tree, interleaved): reusing across paths took 6% off the path kernels at
+n = 912 and 20% at n = 2452 against a fresh order at each path's start."""
 
 
 def _capacities(n: int, update_limit: int, nnz_guess: int):
@@ -103,7 +117,7 @@ def storage_bytes(n: int, update_limit: int, nnz_guess: int) -> int:
     against the memory budget before allocating)."""
     lim, N, capL, capU, capR = _capacities(n, update_limit, nnz_guess)
     ints = N_HEADER + (n + 1) + capL + 2 * N + capU + (n + 1) + capU + N \
-        + 2 * (lim + 1) + capR + 2 * n + N + 5 * n + 4
+        + 2 * (lim + 1) + capR + 2 * n + N + 6 * n + 4 + work_size(n, nnz_guess)
     floats = capL + capU + N + capU + capR + 3 * N
     return 8 * (ints + floats)
 
@@ -125,8 +139,9 @@ def allocate(n: int, update_limit: int, nnz_guess: int):
             np.zeros(lim + 1, i64), np.zeros(capR, i64), np.zeros(capR),
             np.zeros(lim + 1, i64),                                             # R
             np.zeros(n, i64), np.zeros(N, i64), np.zeros(n, i64),   # pinv, slot_at, pos_of
-            np.zeros(5 * n + 4, i64),                                           # int work
-            np.zeros((3, N)))                                                   # float work
+            np.zeros(6 * n + 4, i64),                                           # int work
+            np.zeros((3, N)),                                                   # float work
+            np.zeros(work_size(n, nnz_guess), i64))                             # ordering
 
 
 def grown_size(S, factor: float = 2.0):
@@ -213,7 +228,7 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh
     row assignment and the conversion to positions): exempt from the package's limit of
     100 lines per function."""
     (h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead, Rs, Ri, Rx, Rpos, pinv,
-     slot_at, pos_of, iw, fw) = S
+     slot_at, pos_of, iw, fw, ow) = S
     n = sk.shape[0]
     capL = Li.shape[0]
     capU = Ui.shape[0]
@@ -222,9 +237,11 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh
     pstack = iw[2 * n:3 * n]
     mark = iw[3 * n:4 * n]
     crow = iw[4 * n:5 * n]
+    pref = iw[5 * n:6 * n]
     x = fw[0]
     cval = fw[1]
-    # elimination order: unit slots in slot order, z slots by colkey, t last
+    # elimination order: unit slots in slot order, then (once their rows are known) the
+    # z slots and t by block_order
     m = 0
     for s in range(n):
         if sk[s] != VAR_Z and sk[s] != VAR_T:
@@ -232,27 +249,19 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh
             m += 1
     nunit = m
     for i in range(n):
-        mark[i] = -1
-    for s in range(n):
-        if sk[s] == VAR_Z:
-            mark[colkey[si[s]]] = s
-    for i in range(n):
-        if mark[i] >= 0:
-            order[m] = mark[i]
-            m += 1
-    for s in range(n):
-        if sk[s] == VAR_T:
-            order[m] = s
-            m += 1
-    for i in range(n):
         mark[i] = 0
         pinv[i] = -1
         x[i] = 0.0
     k = 0
     nrep = 0
     ufree = 0
+    fresh = False
     Lp[0] = 0
     for t in range(n):
+        if t == nunit:
+            reuse = h[H_FRESH] > 0 and h[H_LAST] <= REORDER_FILL * h[H_FRESH]
+            fresh = block_order(sk, si, Mp, Mi, Mx, pinv, colkey, order, nunit, pref, ow,
+                                fw[2], MATCH_TOL, reuse)[1]
         s = order[t]
         kind = sk[s]
         if t < nunit:
@@ -296,9 +305,9 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh
                 if a > amax or (a == amax and piv >= 0 and i < piv):
                     amax = a
                     piv = i
-        if kind == VAR_Z and pinv[si[s]] < 0 and mark[si[s]] == 1 \
-                and abs(x[si[s]]) >= piv_thresh * amax:
-            piv = si[s]
+        pr = pref[s] if kind == VAR_Z else -1
+        if pr >= 0 and pinv[pr] < 0 and mark[pr] == 1 and abs(x[pr]) >= piv_thresh * amax:
+            piv = pr
         if not (amax > rank_tol * cmax) or piv < 0:
             rep_slot[nrep] = s
             nrep += 1
@@ -394,6 +403,9 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh
     for j in range(n):
         pos_of[slot_at[j]] = j
     h[H_M1] = nunit
+    h[H_LAST] = Lp[n] + ufree
+    if fresh:
+        h[H_FRESH] = max(Lp[n] + ufree, 1)
     h[H_NNZL] = Lp[n]
     h[H_UFREE] = ufree
     h[H_NNZU] = ufree + n
@@ -409,7 +421,7 @@ def solve(S, nupd, w, out, keep):
     the scattered entries, overwritten); with ``keep`` the spike (the vector before the U
     solve) is left in fw[2]."""
     (h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead, Rs, Ri, Rx, Rpos, pinv,
-     slot_at, pos_of, iw, fw) = S
+     slot_at, pos_of, iw, fw, ow) = S
     n = out.shape[0]
     m1 = h[H_M1]
     for j in range(m1, n):
@@ -478,7 +490,7 @@ def ftran_dense(S, nupd, b, out):
 def btran(S, nupd, c, out):
     """out = B^{-T} c (c by slot, out by row): U^{-T}, the etas' transposes, L^{-T}."""
     (h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead, Rs, Ri, Rx, Rpos, pinv,
-     slot_at, pos_of, iw, fw) = S
+     slot_at, pos_of, iw, fw, ow) = S
     n = c.shape[0]
     N = n + nupd
     w = fw[0]
@@ -510,7 +522,7 @@ def _utsolve(S, w, start, N):
     """In place w <- U^{-T} w over positions start..N-1 (w[:start] zero): the fresh U by
     its row form skipping dead positions, the appended columns in dot-product form."""
     (h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead, Rs, Ri, Rx, Rpos, pinv,
-     slot_at, pos_of, iw, fw) = S
+     slot_at, pos_of, iw, fw, ow) = S
     n = pinv.shape[0]
     for j in range(start, min(n, N)):
         if dead[j] != 0:
@@ -545,7 +557,7 @@ def replace_column(S, nupd, slot, d, update_tol, stab_tol, growth_limit, fill_fa
     and the commit of the row eta and the spike column): exempt from the package's limit
     of 100 lines per function."""
     (h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead, Rs, Ri, Rx, Rpos, pinv,
-     slot_at, pos_of, iw, fw) = S
+     slot_at, pos_of, iw, fw, ow) = S
     n = d.shape[0]
     if nupd >= Rpos.shape[0] - 1:
         return UPD_LIMIT
@@ -557,8 +569,12 @@ def replace_column(S, nupd, slot, d, update_tol, stab_tol, growth_limit, fill_fa
     upp = Ud[p]
     d1 = alpha * upp
     snorm = 0.0
+    nc = 0  # the spike's entries but row p (the new column of U)
     for i in range(N):
-        snorm = max(snorm, abs(spike[i]))
+        a = abs(spike[i])
+        snorm = max(snorm, a)
+        if a != 0.0 and i != p:
+            nc += 1
     dnorm = 0.0
     for i in range(n):
         dnorm = max(dnorm, abs(d[i]))
@@ -569,27 +585,21 @@ def replace_column(S, nupd, slot, d, update_tol, stab_tol, growth_limit, fill_fa
         y[i] = 0.0
     y[p] = 1.0
     _utsolve(S, y, p, N)
-    d2 = 0.0
-    for i in range(p, N):
+    d2 = y[p] * spike[p] if y[p] != 0.0 else 0.0
+    ne = 0  # the row eta's entries and its largest multiplier
+    gmax = 0.0
+    for i in range(p + 1, N):
         if y[i] != 0.0:
             d2 += y[i] * spike[i]
+            ne += 1
+            gmax = max(gmax, abs(upp * y[i]))
     d2 *= upp
     if not np.isfinite(d2) or abs(d1 - d2) > stab_tol * abs(d1):
         return UPD_UNSTABLE
     if abs(d2) <= update_tol * snorm:
         return UPD_REFUSED
-    ne = 0
-    gmax = 0.0
-    for i in range(p + 1, N):
-        if y[i] != 0.0:
-            ne += 1
-            gmax = max(gmax, abs(upp * y[i]))
     if not gmax <= growth_limit:
         return UPD_GROWTH
-    nc = 0
-    for i in range(N):
-        if spike[i] != 0.0 and i != p:
-            nc += 1
     old_len = Ue[p] - Us[p]
     if (h[H_NNZL] + h[H_NNZU] - old_len + nc + h[H_NNZR] + ne > fill_factor * h[H_BASE]
             or h[H_UFREE] + nc > Ui.shape[0] or Rs[nupd] + ne > Ri.shape[0]):

@@ -13,16 +13,19 @@ manager's safeguards.  No Python runs per pivot, nor per refactorization: the pa
 its factorization from compiled code (see the LU module's docstring for why this, and not
 a backend called back from Python, was chosen).
 
-The LU's column order is COLAMD's order of M's columns, computed once per pattern of M
-(the pattern does not change between the linearizations of a solve): a basis' non-unit
-columns are a subset of M's columns (and r, last), and COLAMD's order of a matrix is a
-fill-reducing order of any subset of its columns under partial pivoting (it bounds the
-fill by that of the Cholesky factor of A^T A, which a subset of columns only thins).
-Measured on traffic n = 2452 against AMD on M + M^T with a diagonal preference (the
-manager's symmetric ordering): L + U 108e3 against 177e3 entries, 1.36 s against 1.74 s a
-solve; on traffic n = 912, 0.086 s against 0.106 s.  The factors' storage is preallocated from M's entries; a
-factorization that does not fit returns to Python, which doubles the storage and runs
-the path again from its start (it is deterministic: the same pivots).
+The LU's elimination order is computed at every factorization from the basis itself
+(:mod:`compass_sparse.path._sparse_order`): the unit columns first, then the basic z
+columns, each matched to a row where it has a large entry and ordered by minimum degree
+on the pattern of the matched block, then r.  Measured on the bases a traffic solve
+factorizes (one process, before / after; the same pivots): n = 2452, 64 / 53
+factorizations, L + U 56.5e3 / 19.6e3 entries on average, 9.8 / 4.0 ms each; n = 912,
+7.6e3 / 4.7e3 entries, 0.78 ms each both (the order's own cost eats the gain there).
+The order before this one, COLAMD's order of M's columns computed once per pattern with
+partial pivoting, cannot see that a saddle-point block paired with its large entries is
+as cheap to factor as a symmetric one (see the ordering module).
+The factors' storage is preallocated from M's entries; a factorization that does not fit
+returns to Python, which doubles the storage and runs the path again from its start (it
+is deterministic: the same pivots).
 
 Tolerances (the basis manager's defaults, :class:`compass_sparse.basis.types.BasisOptions`):
 ``rank_tolerance`` 1e-11 relative to the column's inf-norm (a dependent column is repaired
@@ -35,8 +38,6 @@ basis manager, whose supernodal LU factors a dense block faster.
 """
 from __future__ import annotations
 
-import hashlib
-
 import numpy as np
 import scipy.sparse as sp
 
@@ -46,9 +47,9 @@ from .engine import PIVOT_CHUNK, PathEngine
 from ._dense_lu import N_PERM
 from ..basis.backends import MEMORY_SHARE, FactorBudget
 from ..exceptions import FactorBudgetError
-from ..linalg._csc_kernels import csc_is_canonical, csc_same_pattern
+from ..linalg._csc_kernels import csc_is_canonical
 
-__all__ = ["SPARSE_ENGINE_MAX_DENSITY", "SparsePathEngine"]
+__all__ = ["ORDERING", "SPARSE_ENGINE_MAX_DENSITY", "SparsePathEngine"]
 
 _I = np.int64
 
@@ -72,15 +73,12 @@ on these bases (variables of different units: flows and potentials) and harmless
 d1 / d2 stability test and the final residual check guard the accuracy, as in the basis
 manager, which has no growth test."""
 
+ORDERING = "matching, minimum degree"
+"""The engine's ordering as ``Result.lu`` reports it (see the module docstring)."""
+
 CHUNK_WORK = 2_000_000
 """Pivots per compiled call are at most CHUNK_WORK / n (and PIVOT_CHUNK): a pivot costs
 O(n) at least, so the time limit is checked about every few milliseconds."""
-
-ORDER_CACHE_SIZE = 8
-"""Column orders of recent patterns of M kept for later solves (a solve makes its own
-engine: the same model solved again reuses its order, ~12 ms at n = 912)."""
-
-_ORDERS: list = []  # (pattern digest, colkey), newest last
 
 _DENSE_PLACEHOLDERS = (np.zeros((2, 2), order="F"), np.zeros((2, 2), order="F"),
                        np.zeros((2, 2)))
@@ -101,8 +99,6 @@ class SparsePathEngine(PathEngine):
             growth_limit = GROWTH_LIMIT
         if update_limit is None:
             update_limit = options.factorization_update_limit if options is not None else 50
-        self._pattern = None  # (indptr, indices) of the ordering's pattern
-        self.colkey = None
         self.n = M.shape[0]
         self.set_matrix(M)
         self.init_common(update_limit, pivot_tolerance, rank_tolerance,
@@ -125,35 +121,8 @@ class SparsePathEngine(PathEngine):
         self._Mp = M.indptr.astype(_I, copy=False)
         self._Mi = M.indices.astype(_I, copy=False)
         self._Mx = M.data
-        pat = self._pattern
-        if pat is None or not (pat[0].size == self._Mp.size and pat[1].size == self._Mi.size
-                               and csc_same_pattern(self._Mp, self._Mi, pat[0], pat[1])):
-            self._pattern = None  # the column order follows on the first path
-
-    def _order(self):
-        """colkey[j]: the position of column j in COLAMD's column order of M's pattern
-        (SuperLU's, on a diagonally dominant matrix of M's pattern: only its column
-        permutation is kept)."""
-        # (lazy: scipy's sparse linalg is a heavy import that small solves skip)
-        from scipy.sparse.linalg import splu
-
-        M = self._M
-        key = (self.n, hashlib.sha1(self._Mp.tobytes() + self._Mi.tobytes()).digest())
-        for k, colkey in _ORDERS:
-            if k == key:
-                self.colkey = colkey
-                self._pattern = (self._Mp.copy(), self._Mi.copy())
-                return
-        A = sp.csc_matrix((np.ones(M.nnz), M.indices, M.indptr), shape=M.shape)
-        A = sp.csc_matrix(A + sp.identity(self.n, format="csc") * (self.n + 1.0))
-        perm_c = splu(A, permc_spec="COLAMD", diag_pivot_thresh=0.0).perm_c
-        perm = np.argsort(perm_c).astype(_I)  # (perm_c[j]: the position of column j)
-        colkey = np.empty(self.n, dtype=_I)
-        colkey[perm] = np.arange(self.n, dtype=_I)
-        self.colkey = colkey
-        _ORDERS.append((key, colkey))
-        del _ORDERS[:-ORDER_CACHE_SIZE]
-        self._pattern = (self._Mp.copy(), self._Mi.copy())
+        # (the order of the columns left unmatched by the factorization's matching)
+        self.colkey = np.arange(self.n, dtype=_I)
 
     def _allocate(self, nnz_guess=None):
         n = self.n
@@ -162,7 +131,7 @@ class SparsePathEngine(PathEngine):
         self._S = self._within_budget(n, self.update_limit, nnz_guess)
         perm = np.zeros((N_PERM, max(n, 2)), dtype=_I)  # (its repair rows serve the LU)
         self._D = (*_DENSE_PLACEHOLDERS, perm, np.zeros((3, 2)))
-        self.stats.backend, self.stats.ordering = "sparse engine", "colamd"
+        self.stats.backend, self.stats.ordering = "sparse engine", ORDERING
 
     def _grow(self):
         size = SL.grown_size(self._S)
@@ -188,8 +157,6 @@ class SparsePathEngine(PathEngine):
         self.stats.max_nnz_lu = max(self.stats.max_nnz_lu, int(h[SL.H_BASE]))
 
     def prepare(self, q, lb, ub):
-        if self._pattern is None:
-            self._order()
         if self._S is None:
             self._allocate()
         r = self.r

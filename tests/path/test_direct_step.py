@@ -192,6 +192,55 @@ def test_newton_steps_without_pivots_take_no_dense_factorization(monkeypatch):
     np.testing.assert_allclose(r.x, ref.x, rtol=1e-9, atol=1e-9)
 
 
+def _direct_steps_and_paths(monkeypatch, problem):
+    """The solve's sequence of direct step attempts ("D", whether it ended the path) and
+    paths ("P", pivots), and its Result."""
+    import compass_sparse.nms.newton as newton
+    import compass_sparse.path.pivotal as pivotal
+
+    events = []
+    step, done = pivotal.direct_step, newton.NewtonStep.path_done
+
+    def spy_step(*a, **kw):
+        out = step(*a, **kw)
+        events.append(("D", out[0] is not None))
+        return out
+
+    def spy_done(self, res, t0, opt):
+        events.append(("P", res.pivots))
+        return done(self, res, t0, opt)
+
+    monkeypatch.setattr(pivotal, "direct_step", spy_step)
+    monkeypatch.setattr(newton.NewtonStep, "path_done", spy_done)
+    return events, solve_mcp(problem)
+
+
+def test_no_direct_step_after_a_path_that_pivoted_on_the_sparse_engine(monkeypatch):
+    """Regression: on the sparse engine every Newton path first tried the direct step,
+    and where the active set still changes from one major iteration to the next the step
+    failed and the path pivoted from the same start: traffic n = 912 factored M_FF (KLU
+    or SuperLU) in vain before 8 of its 9 paths, 7 ms of an 81 ms solve.  Now a path that
+    follows one that pivoted goes to the engine at once; the same pivots, the same
+    answer.  A model whose Newton steps need no pivot (Ramsey, n = 993, on the engine)
+    still ends every one by the direct step."""
+    monkeypatch.delenv("COMPASS_SPARSE_LU", raising=False)
+    events, r = _direct_steps_and_paths(monkeypatch, gen.traffic_equilibrium(8).problem)
+    assert r.routes["path"] == "sparse engine" and r.success
+    assert r.minor_iterations == 586
+    last = None
+    for kind, value in events:
+        if kind == "D":
+            assert not last, events  # the first path, or one after a path without pivots
+        else:
+            last = value
+    assert sum(1 for k, v in events if k == "P" and v) >= 5
+    events, r = _direct_steps_and_paths(monkeypatch, _ramsey(110))
+    assert r.routes["path"] == "sparse engine" and r.success and r.minor_iterations == 0
+    paths = [v for k, v in events if k == "P"]
+    steps = [v for k, v in events if k == "D"]
+    assert len(paths) >= 2 and steps == [True] * len(paths)
+
+
 def test_direct_step_leaves_large_factors_to_reuse():
     """The static CGE model at n = 759 fills its LU to ~1.3e5 entries: on the basis
     manager (the Python loop's route: the factor reuse is the manager's), the crash's
