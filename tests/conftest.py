@@ -9,6 +9,7 @@ bring their own OpenBLAS).
 """
 import os
 import sys
+import time
 from pathlib import Path
 
 # The shared test problems (known_problems.py) import by name from every folder of tests/.
@@ -21,6 +22,7 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")
 os.environ.setdefault("COMPASS_SPARSE_JIT", "always")
 
 import numpy  # noqa: E402,F401
+import pytest  # noqa: E402
 import scipy.linalg  # noqa: E402,F401
 import scipy.sparse.linalg  # noqa: E402,F401
 from threadpoolctl import threadpool_limits  # noqa: E402
@@ -58,3 +60,22 @@ def pytest_collection_modifyitems(config, items):
     skip = pytest.mark.skip(reason=f"GAMS cannot run: {state.reason}")
     for item in marked:
         item.add_marker(skip)
+
+
+class SimulatedClock:
+    """A simulated ``time.perf_counter`` for time-limit tests: the test's costly functions
+    advance ``now``; nothing reads the wall clock."""
+
+    def __init__(self):
+        self.now = 1000.0
+
+    def __call__(self):
+        return self.now
+
+
+@pytest.fixture
+def clock(monkeypatch):
+    """``time.perf_counter`` replaced by a :class:`SimulatedClock` for the test."""
+    c = SimulatedClock()
+    monkeypatch.setattr(time, "perf_counter", c)
+    return c

@@ -7,8 +7,6 @@ limit plus one evaluation, whatever the machine's load.
 """
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -140,23 +138,6 @@ def test_point_status_says_start_point_when_nothing_better_was_found():
 
 # ------------------------------------------------------------------ time limits
 COST = 0.05
-
-
-class Clock:
-    """A simulated clock: F evaluations advance it."""
-
-    def __init__(self):
-        self.now = 1000.0
-
-    def __call__(self):
-        return self.now
-
-
-@pytest.fixture
-def clock(monkeypatch):
-    c = Clock()
-    monkeypatch.setattr(time, "perf_counter", c)
-    return c
 
 
 def _costly(F, clock):

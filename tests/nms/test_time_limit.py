@@ -5,34 +5,16 @@ that keep the merit up without evaluating J after its limit, and claims no conve
 Time is a simulated clock (every F evaluation advances it) or a factorization cost
 patched to be prohibitive; no test reads the wall clock."""
 
-import time
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
+from compass_sparse.generators import thesis_family
 
 import compass_sparse as cs
 from compass_sparse import Status
 from compass_sparse.basis import backends
 from compass_sparse.crash import projected_newton
-from compass_sparse.generators import thesis_family
-
-
-class Clock:
-    """A simulated ``time.perf_counter``: the costly functions below advance it."""
-
-    def __init__(self):
-        self.now = 1000.0
-
-    def __call__(self):
-        return self.now
-
-
-@pytest.fixture
-def clock(monkeypatch):
-    c = Clock()
-    monkeypatch.setattr(time, "perf_counter", c)
-    return c
 
 
 def test_the_time_limit_counts_from_the_call_with_the_start_points_check(clock):
