@@ -240,38 +240,31 @@ def block_graph(nb, zslot, si, Mp, Mi, Mx, pinv, P, iw):
     mark = P[W_LPM]
     for c in range(nb):
         ln[c] = 0
-    for c in range(nb):  # count, with duplicates
-        if colm[c] < 0:
-            continue
-        j = si[zslot[c]]
-        for e in range(Mp[j], Mp[j + 1]):
-            i = Mi[e]
-            if pinv[i] < 0 and Mx[e] != 0.0:
-                c2 = rowm[i]
-                if c2 >= 0 and c2 != c:
-                    ln[c] += 1
-                    ln[c2] += 1
     total = 0
-    for c in range(nb):
-        pe[c] = total
-        total += ln[c]
-        ln[c] = 0
-        mark[c] = -1
-    if total > iw.shape[0]:
-        return -1
-    for c in range(nb):  # fill
-        if colm[c] < 0:
-            continue
-        j = si[zslot[c]]
-        for e in range(Mp[j], Mp[j + 1]):
-            i = Mi[e]
-            if pinv[i] < 0 and Mx[e] != 0.0:
-                c2 = rowm[i]
-                if c2 >= 0 and c2 != c:
-                    iw[pe[c] + ln[c]] = c2
-                    ln[c] += 1
-                    iw[pe[c2] + ln[c2]] = c
-                    ln[c2] += 1
+    for fill in (False, True):  # count the edges (with duplicates), then store them
+        if fill:
+            total = 0
+            for c in range(nb):
+                pe[c] = total
+                total += ln[c]
+                ln[c] = 0
+                mark[c] = -1
+            if total > iw.shape[0]:
+                return -1
+        for c in range(nb):
+            if colm[c] < 0:
+                continue
+            j = si[zslot[c]]
+            for e in range(Mp[j], Mp[j + 1]):
+                i = Mi[e]
+                if pinv[i] < 0 and Mx[e] != 0.0:
+                    c2 = rowm[i]
+                    if c2 >= 0 and c2 != c:
+                        if fill:
+                            iw[pe[c] + ln[c]] = c2
+                            iw[pe[c2] + ln[c2]] = c
+                        ln[c] += 1
+                        ln[c2] += 1
     for c in range(nb):  # remove duplicates in place
         k = pe[c]
         for t in range(pe[c], pe[c] + ln[c]):
