@@ -54,6 +54,7 @@ os.environ.setdefault("COMPASS_SPARSE_JIT", "always")
 import numpy as np  # noqa: E402
 
 from compass_sparse import solve_mcp  # noqa: E402
+from _revision import git_revision  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results"
@@ -201,17 +202,6 @@ FIELDS = ["tree", "problem", "n", "status", "success", "natural", "pivots", "fac
           "restarts", "crash", "nfev", "njev", "domain_errors", "cpu", "wall", "user_cpu",
           "net_cpu", "us_per_pivot", "pivots_per_var", "repeats", "counts_repeat",
           "path_pivots", "path_time", "path_source"]
-
-
-def git_revision():
-    try:
-        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=HERE,
-                             capture_output=True, text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
-                               cwd=HERE, capture_output=True, text=True).stdout.strip()
-        return rev + ("+dirty" if dirty else "")
-    except Exception:
-        return "unknown"
 
 
 def run_child(name, tree, repeats, time_limit):

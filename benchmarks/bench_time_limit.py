@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
+from _revision import git_revision
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results"
@@ -113,17 +114,6 @@ def summary(runs, n, limit):
                load=statistics.median(r["load"] for r in runs))
     out["status"] = "/".join(sorted({r["status"] for r in runs}))
     return out
-
-
-def git_revision():
-    try:
-        rev = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=HERE,
-                             capture_output=True, text=True, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"],
-                               cwd=HERE, capture_output=True, text=True).stdout.strip()
-        return rev + ("+dirty" if dirty else "")
-    except Exception:
-        return "unknown"
 
 
 def main(argv=None):
