@@ -76,7 +76,7 @@ class PathEngine:
         """The path's work areas, once per engine: a solve whose paths all end by the
         direct step (direct_step.py) never needs them."""
         n = self.n
-        self.work = np.zeros((8, n))
+        self.work = np.zeros((10, n))  # (rows 8, 9: the slots' bounds)
         self.n_breakpoints = max(1, min(200, 5_000_000 // max(n, 1)))
         self.bp_t = np.zeros(self.n_breakpoints)
         self.bp_x = np.zeros((self.n_breakpoints, n))
