@@ -29,7 +29,8 @@ from ._sparse_lu import ftran_dense as sp_ftran_dense, replace_column as sp_repl
 from ._dense_lu import (P_ROW, P_SLOT, UPD_GROWTH, UPD_OK, UPD_REFUSED, UPD_UNSTABLE,
                         W_FACTOR, W_REP_ROW, W_REP_SLOT, basis_column, factor, ftran,
                         lu_factor, replace_column)
-from ._kernels import VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_slots, ratio_test
+from ._kernels import (VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_bounds,
+                       ratio_test_bounds, set_slot_bounds, slot_bounds)
 from ._slot_kernels import slot_table
 
 FAC_DENSE, FAC_SPARSE = 0, 1
@@ -156,7 +157,7 @@ def _times_m(fk, prob, x, out):
 
 # ------------------------------------------------------------------ values, factorization, check
 @njit(cache=True)
-def _recompute(fk, prob, tab, D, S, t, t_slot, nupd, rhs, w, t_lower):
+def _recompute(fk, prob, tab, D, S, t, t_slot, nupd, rhs, w, t_lower, lo, hi):
     """x_B = B^{-1}(r (1 - t_nb) - q - M z_N) (PivotalPath._recompute_values); returns t.
     (The sparse kind subtracts M z_N as one product, as the Python loop does.)"""
     M, Mp, Mi, Mx, q, r, rI, rX, lb, ub, colkey = prob
@@ -185,7 +186,7 @@ def _recompute(fk, prob, tab, D, S, t, t_slot, nupd, rhs, w, t_lower):
         if sk[k] == VAR_T:
             t = xb[k]
             break
-    project_slots(sk, si, xb, lb, ub, t_lower)
+    project_bounds(sk, si, xb, lb, ub, lo, hi, t_lower)
     return t
 
 
@@ -235,8 +236,11 @@ def refactor(fk, prob, tab, state, D, S, tol, t_lower):
         if nrep > 0:
             return MSG_SING_FACTOR
     istate[I_NETA] = 0
+    # the slots' bounds (work[8], work[9]) for the ratio tests and projections: after the
+    # repair, which makes artificials of dependent slots
+    slot_bounds(sk, si, prob[8], prob[9], work[8], work[9])
     fstate[F_T] = _recompute(fk, prob, tab, D, S, fstate[F_T], istate[I_TSLOT], 0,
-                             work[0], work[1], t_lower)
+                             work[0], work[1], t_lower, work[8], work[9])
     return 0
 
 
@@ -392,6 +396,8 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
     n = sk.shape[0]
     d = work[5]
     col = work[6]
+    slo = work[8]  # the slots' bounds (refactor sets them; each exchange its slot's)
+    shi = work[9]
     start = istate[I_PIV]
     t_progress = tol[T_PROGRESS]
     while True:
@@ -432,8 +438,8 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
         for k in range(n):
             rate[k] = -es * d[k]
         theta_self = _room_self(ek, ei, es, ev, t, lb, ub)
-        leave, theta, leave_up = ratio_test(sk, si, xb, rate, lb, ub, piv_tol,
-                                            tol[T_RATIO], t_lower)
+        leave, theta, leave_up = ratio_test_bounds(sk, si, xb, rate, lb, ub, slo, shi,
+                                                   piv_tol, tol[T_RATIO], t_lower)
         if (leave >= 0 and theta < theta_self and sk[leave] == VAR_T and leave_up == 0
                 and lim[L_FREE_BELOW] != 0 and istate[I_BELOW] < 0
                 and fstate[F_BEST_T] <= t_progress):
@@ -441,15 +447,15 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
             t_lower = -np.inf
             fstate[F_TLOW] = t_lower
             istate[I_BELOW] = pivots
-            leave, theta, leave_up = ratio_test(sk, si, xb, rate, lb, ub, piv_tol,
-                                                tol[T_RATIO], t_lower)
+            leave, theta, leave_up = ratio_test_bounds(sk, si, xb, rate, lb, ub, slo, shi,
+                                                       piv_tol, tol[T_RATIO], t_lower)
         if leave < 0 and not np.isfinite(theta_self):
             return RAY, MSG_RAY_UNBOUNDED
         if leave < 0 or theta_self <= theta:
             theta = theta_self
             for k in range(n):
                 xb[k] += theta * rate[k]
-            project_slots(sk, si, xb, lb, ub, t_lower)
+            project_bounds(sk, si, xb, lb, ub, slo, shi, t_lower)
             if ek == VAR_T:
                 fstate[F_T] = 1.0
                 return SOLVED, MSG_NONE
@@ -490,6 +496,7 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
         sk[leave] = ek
         si[leave] = ei
         xb[leave] = new_val
+        set_slot_bounds(leave, sk, si, lb, ub, slo, shi)
         if ek == VAR_T:
             istate[I_TSLOT] = leave
         if ek == VAR_Z:
@@ -514,7 +521,7 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
                 _log_pivot(rec, rect, pivots - start, pivots + 1, REC_EXCHANGE, ek, ei, lk,
                            li, upd, fstate[F_T])
                 return SINGULAR, msg
-        project_slots(sk, si, xb, lb, ub, t_lower)
+        project_bounds(sk, si, xb, lb, ub, slo, shi, t_lower)
         if istate[I_TSLOT] >= 0:
             fstate[F_T] = xb[istate[I_TSLOT]]
         _log_pivot(rec, rect, pivots - start, pivots + 1, REC_EXCHANGE, ek, ei, lk, li, upd,
