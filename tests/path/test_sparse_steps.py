@@ -1,0 +1,152 @@
+"""The sparse LU's dense tail (compass_sparse.path._sparse_steps): where it starts, that
+its factors solve B x = b as a dense solve does (with and without room for it), its rank
+test at both sides of the rank tolerance, the repair of a dependent column found in it,
+and the storage check."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from compass_sparse.path import _sparse_lu as SL
+from compass_sparse.path import _sparse_steps as ST
+from compass_sparse.path._dense_lu import N_PERM, W_REP_ROW, W_REP_SLOT
+from compass_sparse.path._kernels import VAR_A, VAR_W, VAR_Z
+
+RANK_TOL = 1e-11
+
+
+def _factor(M, sk, si=None, update_limit=50, nnz_guess=None, rank_tol=RANK_TOL):
+    """factor() of the slot table (sk, si) on M; returns (nrep, S, perm)."""
+    M = sp.csc_matrix(M, dtype=float)
+    M.sort_indices()
+    n = M.shape[0]
+    si = np.arange(n, dtype=np.int64) if si is None else si
+    if nnz_guess is None:
+        nnz_guess = 2 * M.nnz + 8 * n
+    S = SL.allocate(n, update_limit, nnz_guess)
+    perm = np.zeros((N_PERM, n), dtype=np.int64)
+    nrep = SL.factor(M.indptr.astype(np.int64), M.indices.astype(np.int64), M.data,
+                     np.zeros(0, np.int64), np.zeros(0), np.arange(n, dtype=np.int64),
+                     np.asarray(sk, dtype=np.int64), si, np.ones(n, dtype=np.int64), S,
+                     rank_tol, SL.PIVOT_THRESHOLD, perm[W_REP_SLOT], perm[W_REP_ROW])
+    return nrep, S, perm
+
+
+def _basis(M, sk, si=None):
+    """The basis matrix of the slot table, dense: M's column for a basic z, -e_i for w_i,
+    +e_i for an artificial on row si."""
+    M = np.asarray(sp.csc_matrix(M).todense())
+    n = M.shape[0]
+    si = np.arange(n) if si is None else si
+    B = np.zeros((n, n))
+    for s in range(n):
+        if sk[s] == VAR_Z:
+            B[:, s] = M[:, si[s]]
+        else:
+            B[si[s], s] = -1.0 if sk[s] == VAR_W else 1.0
+    return B
+
+
+def _check_solves(S, B):
+    """FTRAN and BTRAN against numpy's dense solves."""
+    n = B.shape[0]
+    rng = np.random.default_rng(5)
+    b = rng.standard_normal(n)
+    x = np.zeros(n)
+    SL.ftran_dense(S, 0, b, x)
+    ref = np.linalg.solve(B, b)
+    assert np.max(np.abs(x - ref)) <= 1e-10 * np.max(np.abs(ref))
+    y = np.zeros(n)
+    SL.btran(S, 0, b, y)
+    ref = np.linalg.solve(B.T, b)
+    assert np.max(np.abs(y - ref)) <= 1e-10 * np.max(np.abs(ref))
+
+
+def _random(n, density, seed):
+    return sp.random(n, n, density=density, random_state=seed) + 4.0 * sp.identity(n)
+
+
+@pytest.mark.parametrize("units", [0, 70], ids=["all z", "70 unit columns"])
+def test_dense_tail_factors_solve_like_a_dense_solve(units):
+    """A random sparse basis (n = 200, 3% dense) fills as it is eliminated: the last
+    columns go to the dense tail, and the factors solve B x = b and B^T y = c as numpy
+    does."""
+    n = 200
+    M = _random(n, 0.03, 0)
+    sk = np.full(n, VAR_Z, dtype=np.int64)
+    sk[np.random.default_rng(1).choice(n, units, replace=False)] = VAR_W
+    nrep, S, _ = _factor(M, sk, nnz_guess=n * n)
+    assert nrep == 0
+    assert S[0][SL.H_TAIL] >= ST.DENSE_TAIL_MIN
+    _check_solves(S, _basis(M, sk))
+
+
+def test_without_room_for_the_tail_the_steps_stay_sparse_and_solve_the_same():
+    """With one update's row-eta storage (1024 entries) the block of the basis above does
+    not fit: the tail is at most 32 columns or none, and the factors solve the same."""
+    n = 200
+    M = _random(n, 0.03, 0)
+    sk = np.full(n, VAR_Z, dtype=np.int64)
+    nrep, S_tail, _ = _factor(M, sk, nnz_guess=n * n)
+    nrep_small, S_small, _ = _factor(M, sk, update_limit=1, nnz_guess=n * n)
+    assert nrep == nrep_small == 0
+    assert S_small[0][SL.H_TAIL] <= 32 < S_tail[0][SL.H_TAIL]
+    _check_solves(S_small, _basis(M, sk))
+
+
+def test_dense_tail_starts_after_the_run_of_dense_columns_and_not_on_a_sparse_basis():
+    """A dense basis switches after DENSE_TAIL_RUN columns; a tridiagonal one never."""
+    n = 40
+    rng = np.random.default_rng(2)
+    dense = rng.standard_normal((n, n)) + n * np.eye(n)
+    sk = np.full(n, VAR_Z, dtype=np.int64)
+    nrep, S, _ = _factor(dense, sk)
+    assert nrep == 0 and S[0][SL.H_TAIL] == n - ST.DENSE_TAIL_RUN
+    _check_solves(S, dense)
+    tri = sp.diags([np.ones(n - 1), 4.0 * np.ones(n), np.ones(n - 1)], [-1, 0, 1])
+    nrep, S, _ = _factor(tri, sk)
+    assert nrep == 0 and S[0][SL.H_TAIL] == 0
+    _check_solves(S, tri.toarray())
+
+
+@pytest.mark.parametrize("delta, dependent", [(1e-9, False), (1e-13, True)])
+def test_rank_tolerance_in_the_dense_tail(delta, dependent):
+    """Column 7 = 2 x column 3 + delta e_0 (relative to its norm) in a dense basis, both
+    in the tail: independent above RANK_TOL (the factors solve), dependent below it --
+    one of the two slots is reported with the row left without a pivot."""
+    n = 40
+    rng = np.random.default_rng(3)
+    M = rng.standard_normal((n, n)) + n * np.eye(n)
+    M[:, 7] = 2.0 * M[:, 3]
+    M[0, 7] += delta * np.max(np.abs(M[:, 7]))
+    sk = np.full(n, VAR_Z, dtype=np.int64)
+    nrep, S, perm = _factor(M, sk)
+    assert S[0][SL.H_TAIL] > 0
+    if not dependent:
+        assert nrep == 0
+        return
+    assert nrep == 1
+    slot, row = int(perm[W_REP_SLOT][0]), int(perm[W_REP_ROW][0])
+    assert slot in (3, 7) and 0 <= row < n
+    # the repair: an artificial on the row left; the repaired basis factors and solves
+    sk2, si2 = sk.copy(), np.arange(n, dtype=np.int64)
+    sk2[slot], si2[slot] = VAR_A, row
+    nrep, S, _ = _factor(M, sk2, si2)
+    assert nrep == 0
+    _check_solves(S, _basis(M, sk2, si2))
+
+
+def test_dense_tail_that_does_not_fit_in_l_asks_for_more_storage():
+    """A dense 60 x 60 basis needs ~1800 entries of L; with 1024 the factorization
+    returns GROW (the engine then grows the storage and runs the path again), and with
+    the grown storage it factors."""
+    n = 60
+    rng = np.random.default_rng(4)
+    M = rng.standard_normal((n, n)) + n * np.eye(n)
+    sk = np.full(n, VAR_Z, dtype=np.int64)
+    nrep, S, _ = _factor(M, sk, nnz_guess=1)
+    assert nrep == SL.GROW
+    nrep, S, _ = _factor(M, sk, nnz_guess=4 * n * n)
+    assert nrep == 0
+    _check_solves(S, M)
