@@ -113,9 +113,13 @@ def residuals_small(z, f, lb, ub, tol, phi=None) -> bool:
 
 
 def live_rows(J) -> np.ndarray:
-    """The rows of J with a nonzero stored entry."""
-    J = sp.csr_matrix(J)
-    return np.asarray(abs(J).max(axis=1).todense()).ravel() != 0.0
+    """The rows of J with a nonzero stored entry (NaN counts as nonzero; duplicates are
+    summed first).  Read off the canonical CSC's row indices: through CSR, abs and a row
+    maximum it cost ~0.1 ms a call on the traffic model at n = 912."""
+    J = without_duplicates(J)
+    live = np.zeros(J.shape[0], dtype=bool)
+    live[J.indices[J.data != 0.0]] = True
+    return live
 
 
 def judge(z, f, lb, ub, tol, jac=None, phi=None, small=False, start_f=None) -> Verdict:

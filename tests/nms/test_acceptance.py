@@ -11,7 +11,7 @@ import scipy.sparse as sp
 from compass_sparse import MCP, merit, solve_mcp
 from compass_sparse.linalg.csc import without_duplicates
 from compass_sparse.merit import fb_phi
-from compass_sparse.nms.acceptance import FLAT_STEP_RTOL, judge
+from compass_sparse.nms.acceptance import FLAT_STEP_RTOL, judge, live_rows
 
 TOL = 1e-6
 
@@ -344,3 +344,17 @@ def test_compiled_scale_test_gives_the_array_formula_verdict(seed):
     assert got.step == ref.step or np.isclose(got.step, ref.step, rtol=1e-15)
     assert got.solved == (seed % 2 == 0)  # both verdicts occur
 
+
+
+@pytest.mark.parametrize("fmt", ["csc", "csr", "coo", "lil"])
+def test_live_rows_are_the_rows_with_a_nonzero_entry_in_every_format(fmt):
+    """Rows with a nonzero stored entry: explicit zeros do not count, NaN does, and
+    duplicate entries are summed first (two that cancel leave their row dead)."""
+    n = 8
+    rows = np.array([0, 1, 2, 3, 5, 5, 6])
+    cols = np.array([1, 2, 3, 4, 7, 7, 0])
+    vals = np.array([1.0, 0.0, np.nan, -2.0, 1.0, -1.0, 3.0])
+    J = sp.coo_matrix((vals, (rows, cols)), shape=(n, n)).asformat(fmt)
+    expected = np.zeros(n, dtype=bool)
+    expected[[0, 2, 3, 6]] = True
+    assert np.array_equal(live_rows(J), expected)
