@@ -26,7 +26,8 @@ from .._jit import njit
 from ._sparse_lu import GROW as SP_GROW, UPD_FILL
 from ._sparse_lu import factor as sp_factor, ftran_column as sp_ftran_column
 from ._sparse_lu import ftran_dense as sp_ftran_dense, replace_column as sp_replace_column
-from ._dense_lu import (P_ROW, P_SLOT, UPD_GROWTH, UPD_OK, UPD_REFUSED, UPD_UNSTABLE,
+from ._sparse_lu import count_solve, refactor_pays
+from ._dense_lu import (P_ROW, P_SLOT, UPD_GROWTH, UPD_LIMIT, UPD_OK, UPD_REFUSED, UPD_UNSTABLE,
                         W_FACTOR, W_REP_ROW, W_REP_SLOT, basis_column, factor, ftran,
                         lu_factor, replace_column)
 from ._kernels import (VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_bounds,
@@ -94,15 +95,19 @@ def _ftran_column(fk, prob, tab, D, S, nupd, ek, ei, col, d):
         ftran(L, U, R, perm, nupd, col, d, fwork[0], fwork[1], True)
     else:
         sp_ftran_column(ek, ei, Mp, Mi, Mx, rI, rX, art_sign, S, nupd, d)
+        count_solve(S)
 
 
 @njit(cache=True)
 def _replace(fk, D, S, nupd, slot, d, tol):
-    """The Forrest-Tomlin replacement of ``slot``'s column: UPD_OK or why not."""
+    """The Forrest-Tomlin replacement of ``slot``'s column: UPD_OK or why not (the sparse
+    kind: UPD_LIMIT also when a refactorization pays, _sparse_lu.refactor_pays)."""
     if fk == FAC_DENSE:
         L, U, R, perm, fwork = D
         return replace_column(U, R, perm, nupd, slot, d, fwork[1], fwork[2], tol[T_UPDATE],
                               tol[T_STAB], tol[T_GROWTH])
+    if refactor_pays(S):
+        return UPD_LIMIT
     return sp_replace_column(S, nupd, slot, d, tol[T_UPDATE], tol[T_STAB], tol[T_GROWTH],
                              tol[T_FILL])
 

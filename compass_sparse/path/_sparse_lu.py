@@ -67,6 +67,14 @@ Safeguards (each declines the update: the path refactorizes, with the repair):
   is full;
 
 and the update limit (``factorization_update_limit``) refactorizes in any case.
+
+When to refactorize (:func:`refactor_pays`): with the updates a pivot's solves read more
+entries (the appended columns of U, the row etas); a factorization costs its work once.
+The average cost per pivot of a cycle (factorization + k pivots) is smallest where the
+next pivot's solves would cost more than that average; the engine refactorizes there
+(the classic rule of the simplex codes), counting work in entries touched, never by the
+clock.  The update limit stays a hard maximum (automatic: ``AUTO_UPDATE_LIMIT`` of the
+engine); the fill limit and the safeguards above decline updates as before.
 """
 from __future__ import annotations
 
@@ -91,9 +99,23 @@ GROW = -1
 """factor()'s return when L or U did not fit in the preallocated storage (the engine
 grows it and runs the path again)."""
 
-# the header array h (int64) of the factors
-H_M1, H_NNZL, H_UFREE, H_NNZU, H_NNZR, H_BASE, H_N, H_FRESH, H_LAST = range(9)
-N_HEADER = 10
+# the header array h (int64) of the factors; H_FWORK .. H_UFACT: the refactorization
+# rule's counts (see refactor_pays)
+H_M1, H_NNZL, H_UFREE, H_NNZU, H_NNZR, H_BASE, H_N, H_FRESH, H_LAST, H_FWORK, H_XWORK, \
+    H_KSOL, H_UFACT, H_FWEIGHT = range(14)
+N_HEADER = 14
+
+FACTOR_WEIGHT = 2.5
+"""The cost of one work unit of a factorization (an entry of L visited by the depth-first
+search or the elimination, a row reached, an entry stored) in units of one entry of the
+update's solves (an entry of an appended U column or of a row eta read by FTRAN or by
+U^{-T} e_p), for :func:`refactor_pays`; held in the factors' header in 1/1024ths
+(``h[H_FWEIGHT]``).  Measured on the bases of a traffic solve at n = 2452 (compiled,
+quiet machine): 2.6-2.8 ns per factorization unit on the later bases (L + U 4e4-5e4,
+2.5e6-3.8e6 units, 6.6-10.8 ms), and a pivot's time grew by 0.9-1.1 ns per update unit
+(least squares over the pivots of a path without a refactorization).  The rule's optimum
+is flat: weights 1 to 8 gave 55 to 44 factorizations and path kernels equal within the
+noise (replayed)."""
 
 REORDER_FILL = 1.2
 """A factorization computes a fresh elimination order when the last one's L + U held
@@ -106,10 +128,18 @@ process per tree, interleaved): reusing across paths took 6% off the path kernel
 n = 912 and 20% at n = 2452 against a fresh order at each path's start."""
 
 
+ETA_ROOM_UPDATES = 50
+"""The appended columns of U and the row etas get room for at most this many updates of n
+entries each (more updates fit when they are sparser: a traffic basis' updates hold a few
+hundred entries); an update that does not fit is declined (UPD_FILL) and the path
+refactorizes."""
+
+
 def _capacities(n: int, update_limit: int, nnz_guess: int):
     lim = max(int(update_limit), 1)
     capL = max(int(nnz_guess), 4 * n, 1024)
-    return lim, n + lim + 1, capL, capL + lim * (n + 1), max(lim * (n + 1), 1024)
+    eta = min(lim, ETA_ROOM_UPDATES) * (n + 1)
+    return lim, n + lim + 1, capL, capL + eta, max(eta, 1024)
 
 
 def storage_bytes(n: int, update_limit: int, nnz_guess: int) -> int:
@@ -129,6 +159,7 @@ def allocate(n: int, update_limit: int, nnz_guess: int):
     lim, N, capL, capU, capR = _capacities(n, update_limit, nnz_guess)
     h = np.zeros(N_HEADER, dtype=np.int64)
     h[H_N] = n
+    h[H_FWEIGHT] = round(FACTOR_WEIGHT * 1024)
     i64 = np.int64
     return (h,
             np.zeros(n + 1, i64), np.zeros(capL, i64), np.zeros(capL),          # L
@@ -256,6 +287,7 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh
     nrep = 0
     ufree = 0
     fresh = False
+    work = 4 * n  # the factorization's work units (refactor_pays): the passes over n, ...
     Lp[0] = 0
     for t in range(n):
         if t == nunit:
@@ -287,11 +319,13 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh
                 top = _dfs(crow[e], Lp, Li, pinv, top, xi, pstack, mark)
         for e in range(nb):
             x[crow[e]] = cval[e]
+        work += nb + 3 * (n - top)  # ... the column, its reach (search, pivot, store) ...
         for q in range(top, n):
             j = xi[q]
             J = pinv[j]
             if J < 0:
                 continue
+            work += 2 * (Lp[J + 1] - Lp[J])  # ... L's entries searched and eliminated
             xj = x[j]
             if xj != 0.0:
                 for p in range(Lp[J], Lp[J + 1]):
@@ -411,8 +445,43 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh
     h[H_NNZU] = ufree + n
     h[H_NNZR] = 0
     h[H_BASE] = Lp[n] + ufree + n
+    h[H_FWORK] = (work + 2 * (Lp[n] + ufree)) * h[H_FWEIGHT] // 1024
+    h[H_XWORK] = 0
+    h[H_KSOL] = 0
+    h[H_UFACT] = ufree
     Rs[0] = 0
     return 0
+
+
+@njit(cache=True, inline="always")
+def update_work(h):
+    """The work units the updates since the factorization add to a pivot's solves: the
+    appended columns of U, read by FTRAN's U solve and by U^{-T} e_p, and the row etas."""
+    return 2 * (h[H_UFREE] - h[H_UFACT]) + h[H_NNZR]
+
+
+@njit(cache=True)
+def count_solve(S):
+    """Counts one pivot's solves since the factorization for :func:`refactor_pays`."""
+    h = S[0]
+    h[H_KSOL] += 1
+    h[H_XWORK] += update_work(h)
+
+
+@njit(cache=True)
+def refactor_pays(S):
+    """Whether a refactorization now costs less per pivot than going on with updates
+    (the classic rule; Chvatal's and the simplex codes'): with F the last
+    factorization's work and c_1 .. c_k the update work (:func:`update_work`) of the k
+    pivots since, a refactorization pays when the next pivot's c_k+1 exceeds the average
+    (F + c_1 + ... + c_k) / k, which the average per pivot of a cycle of updates is
+    smallest where it meets.  c_k+1 is taken as c_k (the last update's growth is not
+    known before it is made), and the work common to every pivot (L and the fresh U,
+    the passes over n) cancels on both sides.  All counts are integers: the rule never
+    depends on the clock."""
+    h = S[0]
+    k = h[H_KSOL]
+    return k > 0 and k * update_work(h) > h[H_FWORK] + h[H_XWORK]
 
 
 @njit(cache=True)
