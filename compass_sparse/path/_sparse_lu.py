@@ -101,9 +101,10 @@ grows it and runs the path again)."""
 
 # the header array h (int64) of the factors; H_FWORK .. H_UFACT: the refactorization
 # rule's counts (see refactor_pays)
+# (H_SPNNZ: the nonzeros of the last column FTRAN's spike, see solve)
 H_M1, H_NNZL, H_UFREE, H_NNZU, H_NNZR, H_BASE, H_N, H_FRESH, H_LAST, H_FWORK, H_XWORK, \
-    H_KSOL, H_UFACT, H_FWEIGHT = range(14)
-N_HEADER = 14
+    H_KSOL, H_UFACT, H_FWEIGHT, H_SPNNZ = range(15)
+N_HEADER = 15
 
 FACTOR_WEIGHT = 2.5
 """The cost of one work unit of a factorization (an entry of L visited by the depth-first
@@ -485,10 +486,13 @@ def refactor_pays(S):
 
 
 @njit(cache=True)
-def solve(S, nupd, w, out, keep):
+def solve(S, nupd, w, out, keep, rate, sign):
     """out = B^{-1} b (by slot) for w = P b scattered over positions (w: fw[0], zero past
-    the scattered entries, overwritten); with ``keep`` the spike (the vector before the U
-    solve) is left in fw[2]."""
+    the scattered entries, overwritten); returns max |out_s| (over the slots in order).
+    With ``keep`` (a column's FTRAN) the spike (the vector before the U solve) is left in
+    fw[2], its largest |entry| in fw[2]'s last element (never a position of a spike) and
+    its nonzeros in h[H_SPNNZ] (for replace_column), and ``rate`` = sign * out: the passes
+    the path would make over these vectors, made in the solve's own."""
     (h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead, Rs, Ri, Rx, Rpos, pinv,
      slot_at, pos_of, iw, fw, ow) = S
     n = out.shape[0]
@@ -508,8 +512,17 @@ def solve(S, nupd, w, out, keep):
     N = n + nupd
     if keep:
         sp = fw[2]
+        snorm = 0.0
+        nnz = 0
         for j in range(N):
-            sp[j] = w[j]
+            x = w[j]
+            sp[j] = x
+            a = abs(x)
+            snorm = max(snorm, a)
+            if a != 0.0:
+                nnz += 1
+        sp[sp.shape[0] - 1] = snorm
+        h[H_SPNNZ] = nnz
     for j in range(N - 1, -1, -1):
         x = w[j]
         if x != 0.0:
@@ -517,13 +530,25 @@ def solve(S, nupd, w, out, keep):
             w[j] = x
             for e in range(Us[j], Ue[j]):
                 w[Ui[e]] -= Ux[e] * x
-    for s in range(n):
-        out[s] = w[pos_of[s]]
+    dmax = 0.0
+    if keep:
+        for s in range(n):
+            x = w[pos_of[s]]
+            out[s] = x
+            dmax = max(dmax, abs(x))
+            rate[s] = sign * x
+    else:
+        for s in range(n):
+            x = w[pos_of[s]]
+            out[s] = x
+            dmax = max(dmax, abs(x))
+    return dmax
 
 
 @njit(cache=True)
-def ftran_column(kind, idx, Mp, Mi, Mx, rI, rX, art_sign, S, nupd, d):
-    """d = B^{-1} a for the basis column a of a slot variable; the spike kept (fw[2])."""
+def ftran_column(kind, idx, Mp, Mi, Mx, rI, rX, art_sign, S, nupd, d, rate, sign):
+    """d = B^{-1} a for the basis column a of a slot variable and rate = sign * d;
+    returns max |d_s|; the spike kept (fw[2], see :func:`solve`)."""
     pinv = S[17]
     fw = S[21]
     n = d.shape[0]
@@ -539,7 +564,7 @@ def ftran_column(kind, idx, Mp, Mi, Mx, rI, rX, art_sign, S, nupd, d):
             w[pinv[rI[e]]] = rX[e]
     else:
         w[pinv[idx]] = _unit_sign(kind, idx, art_sign)
-    solve(S, nupd, w, d, True)
+    return solve(S, nupd, w, d, True, rate, sign)
 
 
 @njit(cache=True)
@@ -552,7 +577,7 @@ def ftran_dense(S, nupd, b, out):
         w[j] = 0.0
     for i in range(n):
         w[pinv[i]] = b[i]
-    solve(S, nupd, w, out, False)
+    solve(S, nupd, w, out, False, out, 1.0)
 
 
 @njit(cache=True)
@@ -616,9 +641,11 @@ def _utsolve(S, w, start, N):
 
 
 @njit(cache=True)
-def replace_column(S, nupd, slot, d, update_tol, stab_tol, growth_limit, fill_factor):
+def replace_column(S, nupd, slot, d, dnorm, update_tol, stab_tol, growth_limit,
+                   fill_factor):
     """Forrest-Tomlin replacement of the column of ``slot`` by the column whose FTRAN is
-    d, its spike in fw[2] (:func:`ftran_column`).  Returns UPD_OK (the factors represent
+    d (``dnorm`` = max |d_s|, as ftran_column returned it), its spike in fw[2] with its
+    norm and nonzeros (:func:`ftran_column`).  Returns UPD_OK (the factors represent
     the new basis) or why the caller must refactorize (UPD_REFUSED, UPD_LIMIT,
     UPD_UNSTABLE, UPD_GROWTH, UPD_FILL; the factors are unchanged then).
 
@@ -637,16 +664,10 @@ def replace_column(S, nupd, slot, d, update_tol, stab_tol, growth_limit, fill_fa
     alpha = d[slot]
     upp = Ud[p]
     d1 = alpha * upp
-    snorm = 0.0
-    nc = 0  # the spike's entries but row p (the new column of U)
-    for i in range(N):
-        a = abs(spike[i])
-        snorm = max(snorm, a)
-        if a != 0.0 and i != p:
-            nc += 1
-    dnorm = 0.0
-    for i in range(n):
-        dnorm = max(dnorm, abs(d[i]))
+    snorm = spike[spike.shape[0] - 1]
+    nc = h[H_SPNNZ]  # the spike's entries but row p (the new column of U)
+    if spike[p] != 0.0:
+        nc -= 1
     if (not np.isfinite(d1) or not np.isfinite(dnorm) or abs(d1) <= update_tol * snorm
             or abs(alpha) <= update_tol * dnorm or d1 == 0.0):
         return UPD_REFUSED
