@@ -136,3 +136,32 @@ def test_automatic_limit_takes_no_more_update_storage_than_fifty_updates():
     auto = SL.storage_bytes(n, AUTO_UPDATE_LIMIT, guess)
     fifty = SL.storage_bytes(n, 50, guess)
     assert fifty < auto <= fifty + 16 * 8 * (AUTO_UPDATE_LIMIT - 50)
+
+
+def test_column_ftran_returns_the_norms_the_update_reads():
+    """The passes fused into the sparse FTRAN: it returns max |d|, writes rate = sign d,
+    and leaves the spike's largest |entry| (in fw[2]'s last element) and its nonzeros
+    (h[H_SPNNZ]) -- each equal to its definition on the vectors themselves -- after
+    updates too."""
+    g = gen.p_matrix_lcp(300, "banded", 4, "mixed")
+    M = sp.csc_matrix(g.lcp[0])
+    eng = SparsePathEngine(M, update_limit=None)
+    path = PivotalPath(M, g.lcp[1], g.lcp[2], g.lcp[3], eng, Options(), minor_limit=40)
+    res = path.run(np.clip(np.zeros(300), g.lcp[2], g.lcp[3]))
+    S = eng._S
+    h, fw = S[0], S[21]
+    nupd = int(np.count_nonzero(S[12]))  # (each update kills one position)
+    assert res.pivots > 0 and nupd > 0
+    d, rate = np.zeros(300), np.zeros(300)
+    Mp, Mi, Mx = (M.indptr.astype(np.int64), M.indices.astype(np.int64), M.data)
+    empty_i, empty_x = np.zeros(0, np.int64), np.zeros(0)
+    for j in (0, 7, 150, 299):
+        dmax = SL.ftran_column(0, j, Mp, Mi, Mx, empty_i, empty_x, np.ones(300, np.int64),
+                               S, nupd, d, rate, -1.0)
+        N = 300 + nupd
+        spike = fw[2][:N]
+        assert dmax == np.max(np.abs(d))
+        assert np.array_equal(rate, -1.0 * d)
+        assert fw[2][-1] == np.max(np.abs(spike))
+        assert h[SL.H_SPNNZ] == np.count_nonzero(spike)
+        assert np.count_nonzero(d) > 0
