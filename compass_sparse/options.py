@@ -138,9 +138,13 @@ class Options(OptionsMixin):
         1e-9, "Harris tolerance: bound violations up to this (relative) are allowed in the "
         "first ratio-test pass so that the largest pivot among near ties is chosen",
         lo=0.0)
-    factorization_update_limit: int = _opt(
-        50, "Forrest–Tomlin updates before a fresh factorization (capped at max(n, 50))",
-        lo=1)
+    factorization_update_limit: int | None = _opt(
+        None, "most Forrest–Tomlin updates before a fresh factorization (capped at "
+        "max(n, 50)); None = automatic: the sparse path engine refactorizes when that "
+        "costs less per pivot than further updates (work counted in entries of the "
+        "factors, at most 250 updates), the dense engine and the basis manager every 50 "
+        "updates (PATH's default).  An integer is the limit on every route; the sparse "
+        "engine's rule still refactorizes earlier where that pays", lo=1, nullable=True)
     factor_reuse: bool = _opt(
         True, "a pivotal path whose start basis has the slot table of the previous path's "
         "factors (or, first, the crash's last reduced Jacobian as its M block) solves with "

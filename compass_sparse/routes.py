@@ -53,11 +53,12 @@ from .homotopy.tracker import compiled_tracker_available
 from .linalg.direct import automatic_lu
 from .options import HOMOTOPY_DENSE_MAX_N, Options
 from .path.dense_engine import DensePathEngine
-from .path.sparse_engine import SPARSE_ENGINE_MAX_DENSITY, SparsePathEngine
+from .path.sparse_engine import AUTO_UPDATE_LIMIT, SPARSE_ENGINE_MAX_DENSITY, SparsePathEngine
 
 __all__ = ["COMPILED_NMS_MAX_N", "COMPILE_SECONDS_DENSE", "COMPILE_SECONDS_MEDIUM",
            "COMPILE_SECONDS_SPARSE",
            "DENSE_BASIS_MAX_N", "DENSE_ENGINE_MAX_N", "UPDATE_LIMIT_FLOOR", "Routes",
+           "DEFAULT_UPDATE_LIMIT",
            "basis_factory", "choose_routes", "compile_estimate", "kernel_route"]
 
 DENSE_ENGINE_MAX_N = 500
@@ -73,6 +74,10 @@ Python a major iteration saves is a vanishing share of its factorizations."""
 
 UPDATE_LIMIT_FLOOR = 50
 """factorization_update_limit is capped at max(n, this) (the bases preallocate the updates)."""
+
+DEFAULT_UPDATE_LIMIT = 50
+"""The update limit of the dense engine and the basis managers when
+factorization_update_limit is None (automatic): PATH's default."""
 
 
 @dataclass(frozen=True)
@@ -166,7 +171,10 @@ def basis_factory(route: str, options: Options, deadline=None):
         n = M.shape[0]
         # Both bases preallocate room for their updates; past max(n, 50) updates applying
         # them costs more than a fresh factorization, so a larger limit is capped there.
-        limit = min(options.factorization_update_limit, max(n, UPDATE_LIMIT_FLOOR))
+        limit = options.factorization_update_limit
+        if limit is None:  # automatic
+            limit = AUTO_UPDATE_LIMIT if route == "sparse engine" else DEFAULT_UPDATE_LIMIT
+        limit = min(limit, max(n, UPDATE_LIMIT_FLOOR))
         if route == "dense engine":
             return DensePathEngine(M, options, update_limit=limit)
         if route == "sparse engine":

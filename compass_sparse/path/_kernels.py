@@ -201,9 +201,25 @@ def ratio_test_bounds(sk, si, xb, rate, lb, ub, lo, hi, piv_tol, tol, t_lower):
     return best, best_ratio, best_up
 
 
+@njit(cache=True, inline="always")
+def project_slot(k, sk, si, xb, lb, ub, lo, hi, t_lower):
+    """Slot k's value clipped to its bounds (:func:`project_bounds` of one slot)."""
+    a = lo[k]
+    b = hi[k]
+    if a != a:
+        a, b = _slot_bounds(sk[k], si[k], xb[k], lb, ub, t_lower)
+    v = xb[k]
+    if v < a:
+        xb[k] = a
+    elif v > b:
+        xb[k] = b
+
+
 @njit(cache=True)
 def project_bounds(sk, si, xb, lb, ub, lo, hi, t_lower):
-    """:func:`project_slots` with the bounds of (lo, hi) (NaN: worked out as there)."""
+    """:func:`project_slots` with the bounds of (lo, hi) (NaN: worked out as there).
+    (Written out, not through :func:`project_slot`: a helper taking the arrays costs
+    reference counting per slot.)"""
     for k in range(sk.shape[0]):
         a = lo[k]
         b = hi[k]
@@ -214,6 +230,25 @@ def project_bounds(sk, si, xb, lb, ub, lo, hi, t_lower):
             xb[k] = a
         elif v > b:
             xb[k] = b
+
+
+@njit(cache=True)
+def advance_values(sk, si, xb, rate, theta, lb, ub, lo, hi, t_lower, skip):
+    """xb += theta rate, each value then clipped to its slot's bounds (the step and
+    project_bounds in one pass, the same operations on each slot), but slot
+    ``skip`` (-1: none), which the caller sets.  (Written out, as project_bounds.)"""
+    for k in range(sk.shape[0]):
+        if k != skip:
+            v = xb[k] + theta * rate[k]
+            a = lo[k]
+            b = hi[k]
+            if a != a:
+                a, b = _slot_bounds(sk[k], si[k], v, lb, ub, t_lower)
+            if v < a:
+                v = a
+            elif v > b:
+                v = b
+            xb[k] = v
 
 
 @njit(cache=True)

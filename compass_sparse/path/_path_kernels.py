@@ -26,11 +26,13 @@ from .._jit import njit
 from ._sparse_lu import GROW as SP_GROW, UPD_FILL
 from ._sparse_lu import factor as sp_factor, ftran_column as sp_ftran_column
 from ._sparse_lu import ftran_dense as sp_ftran_dense, replace_column as sp_replace_column
-from ._dense_lu import (P_ROW, P_SLOT, UPD_GROWTH, UPD_OK, UPD_REFUSED, UPD_UNSTABLE,
+from ._sparse_lu import count_solve, refactor_pays
+from ._dense_lu import (P_ROW, P_SLOT, UPD_GROWTH, UPD_LIMIT, UPD_OK, UPD_REFUSED, UPD_UNSTABLE,
                         W_FACTOR, W_REP_ROW, W_REP_SLOT, basis_column, factor, ftran,
                         lu_factor, replace_column)
-from ._kernels import (VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, project_bounds,
-                       ratio_test_bounds, set_slot_bounds, slot_bounds)
+from ._kernels import (VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, advance_values,
+                       project_bounds, project_slot, ratio_test_bounds, set_slot_bounds,
+                       slot_bounds)
 from ._slot_kernels import slot_table
 
 FAC_DENSE, FAC_SPARSE = 0, 1
@@ -84,27 +86,37 @@ def current_point(sk, si, xb, zval, lb, ub, z, w, v):
 
 # ------------------------------------------------------------------ the four factor operations
 @njit(cache=True)
-def _ftran_column(fk, prob, tab, D, S, nupd, ek, ei, col, d):
-    """d = B^{-1} a for the entering variable's column a, its spike kept for _replace."""
+def _ftran_column(fk, prob, tab, D, S, nupd, ek, ei, col, d, rate, sign):
+    """d = B^{-1} a for the entering variable's column a, its spike kept for _replace,
+    and rate = sign * d; returns max |d_k| (in slot order)."""
     M, Mp, Mi, Mx, q, r, rI, rX, lb, ub, colkey = prob
     art_sign = tab[4]
     if fk == FAC_DENSE:
         L, U, R, perm, fwork = D
         basis_column(ek, ei, M, r, art_sign, col)
         ftran(L, U, R, perm, nupd, col, d, fwork[0], fwork[1], True)
-    else:
-        sp_ftran_column(ek, ei, Mp, Mi, Mx, rI, rX, art_sign, S, nupd, d)
+        dmax = 0.0
+        for k in range(d.shape[0]):
+            dmax = max(dmax, abs(d[k]))
+            rate[k] = sign * d[k]
+        return dmax
+    dmax = sp_ftran_column(ek, ei, Mp, Mi, Mx, rI, rX, art_sign, S, nupd, d, rate, sign)
+    count_solve(S)
+    return dmax
 
 
 @njit(cache=True)
-def _replace(fk, D, S, nupd, slot, d, tol):
-    """The Forrest-Tomlin replacement of ``slot``'s column: UPD_OK or why not."""
+def _replace(fk, D, S, nupd, slot, d, dmax, tol):
+    """The Forrest-Tomlin replacement of ``slot``'s column: UPD_OK or why not (the sparse
+    kind: UPD_LIMIT also when a refactorization pays, _sparse_lu.refactor_pays)."""
     if fk == FAC_DENSE:
         L, U, R, perm, fwork = D
         return replace_column(U, R, perm, nupd, slot, d, fwork[1], fwork[2], tol[T_UPDATE],
                               tol[T_STAB], tol[T_GROWTH])
-    return sp_replace_column(S, nupd, slot, d, tol[T_UPDATE], tol[T_STAB], tol[T_GROWTH],
-                             tol[T_FILL])
+    if refactor_pays(S):
+        return UPD_LIMIT
+    return sp_replace_column(S, nupd, slot, d, dmax, tol[T_UPDATE], tol[T_STAB],
+                             tol[T_GROWTH], tol[T_FILL])
 
 
 @njit(cache=True)
@@ -258,20 +270,45 @@ def _room_self(ek, ei, es, ev, t, lb, ub):
 
 @njit(cache=True)
 def _record(sk, si, xb, zval, lb, ub, t, fstate, istate, best_x, bp_t, bp_x, work):
+    """The best point (and a breakpoint while there is room) when t is the largest yet:
+    z - w + v of :func:`current_point`, its passes over n fused into three (the same
+    operations on each entry, so the same bits)."""
     if t > fstate[F_BEST_T] + 1e-15:
         n = sk.shape[0]
         z = work[2]
         w = work[3]
         v = work[4]
-        current_point(sk, si, xb, zval, lb, ub, z, w, v)
         for i in range(n):
-            best_x[i] = z[i] - w[i] + v[i]
+            z[i] = zval[i]
+            w[i] = 0.0
+            v[i] = 0.0
+        for k in range(n):
+            kind = sk[k]
+            i = si[k]
+            val = xb[k]
+            if kind == VAR_Z:
+                z[i] = val
+            elif kind == VAR_W:
+                w[i] = max(val, 0.0)
+            elif kind == VAR_V:
+                v[i] = max(val, 0.0)
+            elif kind == VAR_S:
+                w[i] = max(val, 0.0)
+                v[i] = max(-val, 0.0)
         fstate[F_BEST_T] = t
         nb = istate[I_NBP]
         if nb < bp_t.shape[0]:
             bp_t[nb] = t
-            bp_x[nb, :] = best_x
             istate[I_NBP] = nb + 1
+            for i in range(n):
+                zi = min(max(z[i], lb[i]), ub[i])
+                x = zi - w[i] + v[i]
+                best_x[i] = x
+                bp_x[nb, i] = x
+        else:
+            for i in range(n):
+                zi = min(max(z[i], lb[i]), ub[i])
+                best_x[i] = zi - w[i] + v[i]
 
 
 @njit(cache=True)
@@ -419,12 +456,11 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
         enter_count[ek, ei] += 1
         if enter_count[ek, ei] > lim[L_CYCLE]:
             return CYCLE, MSG_CYCLE
-        _ftran_column(fk, prob, tab, D, S, istate[I_NETA], ek, ei, col, d)
+        # d = B^{-1} a, its largest |d_k| and the basic variables' rates -es d
+        rate = work[7]
+        dmax = _ftran_column(fk, prob, tab, D, S, istate[I_NETA], ek, ei, col, d, rate, -es)
         t_slot = istate[I_TSLOT]
         t = fstate[F_T]
-        dmax = 0.0
-        for k in range(n):
-            dmax = max(dmax, abs(d[k]))
         piv_tol = tol[T_PIV] * max(1.0, dmax)
         if ek == VAR_Z and es == 0.0:
             # direction free (after an artificial left): increase t; when t does not
@@ -434,9 +470,8 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
             else:
                 es = 1.0
             fstate[F_ES] = es
-        rate = work[7]
-        for k in range(n):
-            rate[k] = -es * d[k]
+            for k in range(n):
+                rate[k] = -es * d[k]
         theta_self = _room_self(ek, ei, es, ev, t, lb, ub)
         leave, theta, leave_up = ratio_test_bounds(sk, si, xb, rate, lb, ub, slo, shi,
                                                    piv_tol, tol[T_RATIO], t_lower)
@@ -453,9 +488,7 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
             return RAY, MSG_RAY_UNBOUNDED
         if leave < 0 or theta_self <= theta:
             theta = theta_self
-            for k in range(n):
-                xb[k] += theta * rate[k]
-            project_bounds(sk, si, xb, lb, ub, slo, shi, t_lower)
+            advance_values(sk, si, xb, rate, theta, lb, ub, slo, shi, t_lower, -1)
             if ek == VAR_T:
                 fstate[F_T] = 1.0
                 return SOLVED, MSG_NONE
@@ -474,9 +507,9 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
                            -1, fstate[F_T])
                 continue
             return ERROR, MSG_BOUNDED_SLACK
-        # a basic variable blocks: update values and exchange columns
-        for k in range(n):
-            xb[k] += theta * rate[k]
+        # a basic variable blocks: update values (but the leaving slot's, which the
+        # entering variable takes) and exchange columns
+        advance_values(sk, si, xb, rate, theta, lb, ub, slo, shi, t_lower, leave)
         new_val = ev + es * theta
         lk = sk[leave]
         li = si[leave]
@@ -501,10 +534,11 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
             istate[I_TSLOT] = leave
         if ek == VAR_Z:
             zval[ei] = new_val
-        upd = _replace(fk, D, S, istate[I_NETA], leave, d, tol)
+        upd = _replace(fk, D, S, istate[I_NETA], leave, d, dmax, tol)
         if upd == UPD_OK:
             istate[I_NETA] += 1
             istate[I_NUPD] += 1
+            project_slot(leave, sk, si, xb, lb, ub, slo, shi, t_lower)
         else:
             if upd == UPD_REFUSED:
                 istate[I_REFUSED] += 1
@@ -521,7 +555,7 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
                 _log_pivot(rec, rect, pivots - start, pivots + 1, REC_EXCHANGE, ek, ei, lk,
                            li, upd, fstate[F_T])
                 return SINGULAR, msg
-        project_bounds(sk, si, xb, lb, ub, slo, shi, t_lower)
+            project_bounds(sk, si, xb, lb, ub, slo, shi, t_lower)
         if istate[I_TSLOT] >= 0:
             fstate[F_T] = xb[istate[I_TSLOT]]
         _log_pivot(rec, rect, pivots - start, pivots + 1, REC_EXCHANGE, ek, ei, lk, li, upd,

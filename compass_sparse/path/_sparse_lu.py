@@ -72,6 +72,14 @@ Safeguards (each declines the update: the path refactorizes, with the repair):
   is full;
 
 and the update limit (``factorization_update_limit``) refactorizes in any case.
+
+When to refactorize (:func:`refactor_pays`): with the updates a pivot's solves read more
+entries (the appended columns of U, the row etas); a factorization costs its work once.
+The average cost per pivot of a cycle (factorization + k pivots) is smallest where the
+next pivot's solves would cost more than that average; the engine refactorizes there
+(the classic rule of the simplex codes), counting work in entries touched, never by the
+clock.  The update limit stays a hard maximum (automatic: ``AUTO_UPDATE_LIMIT`` of the
+engine); the fill limit and the safeguards above decline updates as before.
 """
 from __future__ import annotations
 
@@ -98,9 +106,25 @@ GROW = -1
 """factor()'s return when L or U did not fit in the preallocated storage (the engine
 grows it and runs the path again)."""
 
-# the header array h (int64) of the factors
-H_M1, H_NNZL, H_UFREE, H_NNZU, H_NNZR, H_BASE, H_N, H_FRESH, H_LAST, H_TAIL = range(10)
-N_HEADER = 10
+# the header array h (int64) of the factors; H_FWORK .. H_UFACT: the refactorization
+# rule's counts (see refactor_pays)
+# (H_SPNNZ: the nonzeros of the last column FTRAN's spike, see solve)
+# (H_TAIL: the columns of the last factorization's dense tail, see _sparse_steps)
+H_M1, H_NNZL, H_UFREE, H_NNZU, H_NNZR, H_BASE, H_N, H_FRESH, H_LAST, H_FWORK, H_XWORK, \
+    H_KSOL, H_UFACT, H_FWEIGHT, H_SPNNZ, H_TAIL = range(16)
+N_HEADER = 16
+
+FACTOR_WEIGHT = 2.5
+"""The cost of one work unit of a factorization (an entry of L visited by the depth-first
+search or the elimination, a row reached, an entry stored) in units of one entry of the
+update's solves (an entry of an appended U column or of a row eta read by FTRAN or by
+U^{-T} e_p), for :func:`refactor_pays`; held in the factors' header in 1/1024ths
+(``h[H_FWEIGHT]``).  Measured on the bases of a traffic solve at n = 2452 (compiled,
+quiet machine): 2.6-2.8 ns per factorization unit on the later bases (L + U 4e4-5e4,
+2.5e6-3.8e6 units, 6.6-10.8 ms), and a pivot's time grew by 0.9-1.1 ns per update unit
+(least squares over the pivots of a path without a refactorization).  The rule's optimum
+is flat: weights 1 to 8 gave 55 to 44 factorizations and path kernels equal within the
+noise (replayed)."""
 
 REORDER_FILL = 1.2
 """A factorization computes a fresh elimination order when the last one's L + U held
@@ -113,10 +137,18 @@ process per tree, interleaved): reusing across paths took 6% off the path kernel
 n = 912 and 20% at n = 2452 against a fresh order at each path's start."""
 
 
+ETA_ROOM_UPDATES = 50
+"""The appended columns of U and the row etas get room for at most this many updates of n
+entries each (more updates fit when they are sparser: a traffic basis' updates hold a few
+hundred entries); an update that does not fit is declined (UPD_FILL) and the path
+refactorizes."""
+
+
 def _capacities(n: int, update_limit: int, nnz_guess: int):
     lim = max(int(update_limit), 1)
     capL = max(int(nnz_guess), 4 * n, 1024)
-    return lim, n + lim + 1, capL, capL + lim * (n + 1), max(lim * (n + 1), 1024)
+    eta = min(lim, ETA_ROOM_UPDATES) * (n + 1)
+    return lim, n + lim + 1, capL, capL + eta, max(eta, 1024)
 
 
 def storage_bytes(n: int, update_limit: int, nnz_guess: int) -> int:
@@ -136,6 +168,7 @@ def allocate(n: int, update_limit: int, nnz_guess: int):
     lim, N, capL, capU, capR = _capacities(n, update_limit, nnz_guess)
     h = np.zeros(N_HEADER, dtype=np.int64)
     h[H_N] = n
+    h[H_FWEIGHT] = round(FACTOR_WEIGHT * 1024)
     i64 = np.int64
     return (h,
             np.zeros(n + 1, i64), np.zeros(capL, i64), np.zeros(capL),          # L
@@ -204,6 +237,7 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh
     fresh = False
     dense_run = 0
     h[H_TAIL] = 0
+    work = 4 * n  # the factorization's work units (refactor_pays): the passes over n, ...
     Lp[0] = 0
     for t in range(n):
         if t == nunit:
@@ -227,7 +261,10 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh
             k += 1
             continue
         nb = basis_column(kind, si[s], Mp, Mi, Mx, rI, rX, art_sign, crow, cval)
-        top, cmax = reach_solve(nb, crow, cval, Lp, Li, Lx, pinv, xi, pstack, mark, x)
+        # (reach_solve's work: the column, its reach (search, pivot, store), L's entries
+        # searched and eliminated)
+        top, cmax, w = reach_solve(nb, crow, cval, Lp, Li, Lx, pinv, xi, pstack, mark, x)
+        work += w
         amax = 0.0
         piv = -1
         for q in range(top, n):
@@ -289,9 +326,10 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh
         dense_run = dense_run + 1 if lp - Lp[k - 1] >= DENSE_TAIL_SHARE * (n - k) else 0
         if (dense_run >= DENSE_TAIL_RUN and n - t - 1 >= DENSE_TAIL_MIN
                 and tail_fits(n, n - k, n - t - 1, Rx.shape[0])):
-            k, ufree, nrep = dense_tail(t + 1, k, ufree, order, sk, si, Mp, Mi, Mx, rI,
-                                        rX, art_sign, S, rank_tol, piv_thresh, pref,
-                                        rep_slot, nrep)
+            k, ufree, nrep, w = dense_tail(t + 1, k, ufree, order, sk, si, Mp, Mi, Mx,
+                                           rI, rX, art_sign, S, rank_tol, piv_thresh, pref,
+                                           rep_slot, nrep)
+            work += w
             if k < 0:
                 return GROW
             h[H_TAIL] = n - t - 1
@@ -354,15 +392,53 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh
     h[H_NNZU] = ufree + n
     h[H_NNZR] = 0
     h[H_BASE] = Lp[n] + ufree + n
+    h[H_FWORK] = (work + 2 * (Lp[n] + ufree)) * h[H_FWEIGHT] // 1024
+    h[H_XWORK] = 0
+    h[H_KSOL] = 0
+    h[H_UFACT] = ufree
     Rs[0] = 0
     return 0
 
 
+@njit(cache=True, inline="always")
+def update_work(h):
+    """The work units the updates since the factorization add to a pivot's solves: the
+    appended columns of U, read by FTRAN's U solve and by U^{-T} e_p, and the row etas."""
+    return 2 * (h[H_UFREE] - h[H_UFACT]) + h[H_NNZR]
+
+
 @njit(cache=True)
-def solve(S, nupd, w, out, keep):
+def count_solve(S):
+    """Counts one pivot's solves since the factorization for :func:`refactor_pays`."""
+    h = S[0]
+    h[H_KSOL] += 1
+    h[H_XWORK] += update_work(h)
+
+
+@njit(cache=True)
+def refactor_pays(S):
+    """Whether a refactorization now costs less per pivot than going on with updates
+    (the classic rule; Chvatal's and the simplex codes'): with F the last
+    factorization's work and c_1 .. c_k the update work (:func:`update_work`) of the k
+    pivots since, a refactorization pays when the next pivot's c_k+1 exceeds the average
+    (F + c_1 + ... + c_k) / k, which the average per pivot of a cycle of updates is
+    smallest where it meets.  c_k+1 is taken as c_k (the last update's growth is not
+    known before it is made), and the work common to every pivot (L and the fresh U,
+    the passes over n) cancels on both sides.  All counts are integers: the rule never
+    depends on the clock."""
+    h = S[0]
+    k = h[H_KSOL]
+    return k > 0 and k * update_work(h) > h[H_FWORK] + h[H_XWORK]
+
+
+@njit(cache=True)
+def solve(S, nupd, w, out, keep, rate, sign):
     """out = B^{-1} b (by slot) for w = P b scattered over positions (w: fw[0], zero past
-    the scattered entries, overwritten); with ``keep`` the spike (the vector before the U
-    solve) is left in fw[2]."""
+    the scattered entries, overwritten); returns max |out_s| (over the slots in order).
+    With ``keep`` (a column's FTRAN) the spike (the vector before the U solve) is left in
+    fw[2], its largest |entry| in fw[2]'s last element (never a position of a spike) and
+    its nonzeros in h[H_SPNNZ] (for replace_column), and ``rate`` = sign * out: the passes
+    the path would make over these vectors, made in the solve's own."""
     (h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead, Rs, Ri, Rx, Rpos, pinv,
      slot_at, pos_of, iw, fw, ow) = S
     n = out.shape[0]
@@ -382,8 +458,17 @@ def solve(S, nupd, w, out, keep):
     N = n + nupd
     if keep:
         sp = fw[2]
+        snorm = 0.0
+        nnz = 0
         for j in range(N):
-            sp[j] = w[j]
+            x = w[j]
+            sp[j] = x
+            a = abs(x)
+            snorm = max(snorm, a)
+            if a != 0.0:
+                nnz += 1
+        sp[sp.shape[0] - 1] = snorm
+        h[H_SPNNZ] = nnz
     for j in range(N - 1, -1, -1):
         x = w[j]
         if x != 0.0:
@@ -391,13 +476,25 @@ def solve(S, nupd, w, out, keep):
             w[j] = x
             for e in range(Us[j], Ue[j]):
                 w[Ui[e]] -= Ux[e] * x
-    for s in range(n):
-        out[s] = w[pos_of[s]]
+    dmax = 0.0
+    if keep:
+        for s in range(n):
+            x = w[pos_of[s]]
+            out[s] = x
+            dmax = max(dmax, abs(x))
+            rate[s] = sign * x
+    else:
+        for s in range(n):
+            x = w[pos_of[s]]
+            out[s] = x
+            dmax = max(dmax, abs(x))
+    return dmax
 
 
 @njit(cache=True)
-def ftran_column(kind, idx, Mp, Mi, Mx, rI, rX, art_sign, S, nupd, d):
-    """d = B^{-1} a for the basis column a of a slot variable; the spike kept (fw[2])."""
+def ftran_column(kind, idx, Mp, Mi, Mx, rI, rX, art_sign, S, nupd, d, rate, sign):
+    """d = B^{-1} a for the basis column a of a slot variable and rate = sign * d;
+    returns max |d_s|; the spike kept (fw[2], see :func:`solve`)."""
     pinv = S[17]
     fw = S[21]
     n = d.shape[0]
@@ -413,7 +510,7 @@ def ftran_column(kind, idx, Mp, Mi, Mx, rI, rX, art_sign, S, nupd, d):
             w[pinv[rI[e]]] = rX[e]
     else:
         w[pinv[idx]] = unit_sign(kind, idx, art_sign)
-    solve(S, nupd, w, d, True)
+    return solve(S, nupd, w, d, True, rate, sign)
 
 
 @njit(cache=True)
@@ -426,7 +523,7 @@ def ftran_dense(S, nupd, b, out):
         w[j] = 0.0
     for i in range(n):
         w[pinv[i]] = b[i]
-    solve(S, nupd, w, out, False)
+    solve(S, nupd, w, out, False, out, 1.0)
 
 
 @njit(cache=True)
@@ -490,9 +587,11 @@ def _utsolve(S, w, start, N):
 
 
 @njit(cache=True)
-def replace_column(S, nupd, slot, d, update_tol, stab_tol, growth_limit, fill_factor):
+def replace_column(S, nupd, slot, d, dnorm, update_tol, stab_tol, growth_limit,
+                   fill_factor):
     """Forrest-Tomlin replacement of the column of ``slot`` by the column whose FTRAN is
-    d, its spike in fw[2] (:func:`ftran_column`).  Returns UPD_OK (the factors represent
+    d (``dnorm`` = max |d_s|, as ftran_column returned it), its spike in fw[2] with its
+    norm and nonzeros (:func:`ftran_column`).  Returns UPD_OK (the factors represent
     the new basis) or why the caller must refactorize (UPD_REFUSED, UPD_LIMIT,
     UPD_UNSTABLE, UPD_GROWTH, UPD_FILL; the factors are unchanged then).
 
@@ -511,16 +610,10 @@ def replace_column(S, nupd, slot, d, update_tol, stab_tol, growth_limit, fill_fa
     alpha = d[slot]
     upp = Ud[p]
     d1 = alpha * upp
-    snorm = 0.0
-    nc = 0  # the spike's entries but row p (the new column of U)
-    for i in range(N):
-        a = abs(spike[i])
-        snorm = max(snorm, a)
-        if a != 0.0 and i != p:
-            nc += 1
-    dnorm = 0.0
-    for i in range(n):
-        dnorm = max(dnorm, abs(d[i]))
+    snorm = spike[spike.shape[0] - 1]
+    nc = h[H_SPNNZ]  # the spike's entries but row p (the new column of U)
+    if spike[p] != 0.0:
+        nc -= 1
     if (not np.isfinite(d1) or not np.isfinite(dnorm) or abs(d1) <= update_tol * snorm
             or abs(alpha) <= update_tol * dnorm or d1 == 0.0):
         return UPD_REFUSED

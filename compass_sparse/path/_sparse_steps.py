@@ -41,6 +41,12 @@ dense column alone, e.g. a column of many entries early in the order, does not).
 DENSE_TAIL_MIN = 16
 """The fewest columns left for which the dense tail is worth its set-up."""
 
+DENSE_WORK_DIVISOR = 8
+"""A multiply-add of the dense block in the factorization's work units (an entry of L
+searched or eliminated by a sparse step, ~2.7 ns; see compass_sparse.path._sparse_lu.
+FACTOR_WEIGHT): one unit per DENSE_WORK_DIVISOR of them (measured 0.29 ns each at
+200 x 200)."""
+
 
 @njit(cache=True, inline="always")
 def unit_sign(kind, idx, art_sign):
@@ -110,7 +116,9 @@ def reach_solve(nb, crow, cval, Lp, Li, Lx, pinv, xi, pstack, mark, x):
     """x = L_k^{-1} b for the column b with entries (crow, cval)[:nb], L_k the columns of
     L made so far (rows by row index, pinv[row] their position or -1).  The rows reached
     are xi[top:] in topological order, marked; x is zero elsewhere.  Returns (top,
-    max |b|)."""
+    max |b|, work units: the column, its reach counted three times (search, pivot,
+    store) and twice each entry of L searched and eliminated; see
+    :func:`compass_sparse.path._sparse_lu.refactor_pays`)."""
     n = xi.shape[0]
     cmax = 0.0
     top = n
@@ -120,16 +128,18 @@ def reach_solve(nb, crow, cval, Lp, Li, Lx, pinv, xi, pstack, mark, x):
             top = _dfs(crow[e], Lp, Li, pinv, top, xi, pstack, mark)
     for e in range(nb):
         x[crow[e]] = cval[e]
+    work = nb + 3 * (n - top)
     for q in range(top, n):
         j = xi[q]
         J = pinv[j]
         if J < 0:
             continue
+        work += 2 * (Lp[J + 1] - Lp[J])
         xj = x[j]
         if xj != 0.0:
             for p in range(Lp[J], Lp[J + 1]):
                 x[Li[p]] -= Lx[p] * xj
-    return top, cmax
+    return top, cmax, work
 
 
 @njit(cache=True)
@@ -143,8 +153,8 @@ def tail_fits(n, rows, cols, capacity):
 def _stage(t0, nc, nr, order, sk, si, Mp, Mi, Mx, rI, rX, art_sign, S, pref, ufree, ix):
     """Solve each tail column with L_k: its entries on pivoted rows (positions) are
     staged in U's storage from ``ufree`` with room for its dense part after them, the
-    rest goes to its column of the dense block.  Returns the new ufree, -1 when U's
-    storage is full."""
+    rest goes to its column of the dense block.  Returns (the new ufree, -1 when U's
+    storage is full; the solves' work units)."""
     (h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead, Rs, Ri, Rx, Rpos, pinv,
      slot_at, pos_of, iw, fw, ow) = S
     n = sk.shape[0]
@@ -153,11 +163,14 @@ def _stage(t0, nc, nr, order, sk, si, Mp, Mi, Mx, rI, rX, art_sign, S, pref, ufr
     rowpos, tstart, tcount, tpref = ix
     A = Rx
     capU = Ui.shape[0]
+    work = 0
     for j in range(nc):
         s = order[t0 + j]
         kind = sk[s]
         nb = basis_column(kind, si[s], Mp, Mi, Mx, rI, rX, art_sign, crow, cval)
-        top, tcmax[j] = reach_solve(nb, crow, cval, Lp, Li, Lx, pinv, xi, pstack, mark, x)
+        top, tcmax[j], w = reach_solve(nb, crow, cval, Lp, Li, Lx, pinv, xi, pstack, mark,
+                                       x)
+        work += w + nr
         pr = pref[s] if kind == VAR_Z else -1
         tpref[j] = pr if pr >= 0 and pinv[pr] < 0 else -1
         col = j * nr
@@ -182,8 +195,8 @@ def _stage(t0, nc, nr, order, sk, si, Mp, Mi, Mx, rI, rX, art_sign, S, pref, ufr
         tcount[j] = ufree - tstart[j]
         ufree += j  # room for the entries of its column above the dense diagonal
         if full or ufree > capU:
-            return -1
-    return ufree
+            return -1, work
+    return ufree, work
 
 
 @njit(cache=True)
@@ -193,8 +206,10 @@ def _block_lu(nr, nc, A, drow, rowpos, tcmax, tpref, tpiv, rank_tol, piv_thresh)
     sparse steps: the largest |entry| (ties: the smaller row index), the column's matched
     row tpref when within ``piv_thresh`` of it; a column whose largest entry is at most
     ``rank_tol`` times its own norm (tcmax) is dependent (tpiv -1) and skipped.  Returns
-    the number of pivots; tpiv[j] is column j's pivot row in the block."""
+    (the number of pivots, the multiply-adds of its updates); tpiv[j] is column j's
+    pivot row in the block."""
     r0 = 0
+    flops = 0
     for j in range(nc):
         col = j * nr
         amax = 0.0
@@ -230,11 +245,12 @@ def _block_lu(nr, nc, A, drow, rowpos, tcmax, tpref, tpiv, rank_tol, piv_thresh)
         for c in range(j + 1, nc):
             a = A[c * nr + r0]
             if a != 0.0:
+                flops += nr - r0 - 1
                 dst = A[c * nr + r0 + 1:c * nr + nr]
                 for r in range(nr - r0 - 1):
                     dst[r] -= lcol[r] * a
         r0 += 1
-    return r0
+    return r0, flops
 
 
 @njit(cache=True)
@@ -242,8 +258,9 @@ def dense_tail(t0, k0, ufree, order, sk, si, Mp, Mi, Mx, rI, rX, art_sign, S, ra
                piv_thresh, pref, rep_slot, nrep):
     """Eliminate the columns order[t0:] as a dense block after k0 sparse steps (see the
     module docstring; the caller checked :func:`tail_fits`).  Returns (positions made,
-    U's next free entry, the count of dependent slots in rep_slot), or (-1, 0, 0) when L
-    or U did not fit in their storage."""
+    U's next free entry, the count of dependent slots in rep_slot, the work units: the
+    solves', the block's multiply-adds / DENSE_WORK_DIVISOR and its entries), or
+    (-1, 0, 0, 0) when L or U did not fit in their storage."""
     (h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead, Rs, Ri, Rx, Rpos, pinv,
      slot_at, pos_of, iw, fw, ow) = S
     n = sk.shape[0]
@@ -259,12 +276,14 @@ def dense_tail(t0, k0, ufree, order, sk, si, Mp, Mi, Mx, rI, rX, art_sign, S, ra
             drow[r] = i
             r += 1
     first = ufree
-    ufree = _stage(t0, nc, nr, order, sk, si, Mp, Mi, Mx, rI, rX, art_sign, S, pref,
-                   ufree, (rowpos, tstart, tcount, tpref))
+    ufree, work = _stage(t0, nc, nr, order, sk, si, Mp, Mi, Mx, rI, rX, art_sign, S, pref,
+                         ufree, (rowpos, tstart, tcount, tpref))
     if ufree < 0:
-        return -1, 0, 0
+        return -1, 0, 0, 0
     A = Rx
-    npiv = _block_lu(nr, nc, A, drow, rowpos, fw[2], tpref, tpiv, rank_tol, piv_thresh)
+    npiv, flops = _block_lu(nr, nc, A, drow, rowpos, fw[2], tpref, tpiv, rank_tol,
+                            piv_thresh)
+    work += flops // DENSE_WORK_DIVISOR + 2 * nr * nc
     # commit, column by column in pivot order: U (the staged part moved down to w, then
     # the block's part above the diagonal), the diagonal, L (below it, by row index)
     w = first
@@ -294,11 +313,11 @@ def dense_tail(t0, k0, ufree, order, sk, si, Mp, Mi, Mx, rI, rX, art_sign, S, ra
         for q in range(r + 1, nr):
             if A[col + q] != 0.0:
                 if lp >= capL:
-                    return -1, 0, 0
+                    return -1, 0, 0, 0
                 Li[lp] = drow[q]
                 Lx[lp] = A[col + q]
                 lp += 1
         Lp[k + 1] = lp
         pinv[drow[r]] = k
         slot_at[k] = s
-    return k0 + npiv, w, nrep
+    return k0 + npiv, w, nrep, work

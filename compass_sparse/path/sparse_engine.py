@@ -49,7 +49,7 @@ from ..basis.backends import MEMORY_SHARE, FactorBudget
 from ..exceptions import FactorBudgetError
 from ..linalg._csc_kernels import csc_is_canonical
 
-__all__ = ["ORDERING", "SPARSE_ENGINE_MAX_DENSITY", "SparsePathEngine"]
+__all__ = ["AUTO_UPDATE_LIMIT", "ORDERING", "SPARSE_ENGINE_MAX_DENSITY", "SparsePathEngine"]
 
 _I = np.int64
 
@@ -72,6 +72,12 @@ a limit of 100 declined 315 updates (339 factorizations against the Python loop'
 on these bases (variables of different units: flows and potentials) and harmless: the
 d1 / d2 stability test and the final residual check guard the accuracy, as in the basis
 manager, which has no growth test."""
+
+AUTO_UPDATE_LIMIT = 250
+"""The engine's update limit when ``factorization_update_limit`` is None (automatic): a
+hard maximum above its own rule (:func:`compass_sparse.path._sparse_lu.refactor_pays`),
+which refactorizes when that costs less per pivot than further updates.  The storage of
+the updates does not grow with it (see :func:`compass_sparse.path._sparse_lu.allocate`)."""
 
 ORDERING = "matching, minimum degree"
 """The engine's ordering as ``Result.lu`` reports it (see the module docstring)."""
@@ -98,7 +104,9 @@ class SparsePathEngine(PathEngine):
         if growth_limit is None:
             growth_limit = GROWTH_LIMIT
         if update_limit is None:
-            update_limit = options.factorization_update_limit if options is not None else 50
+            update_limit = options.factorization_update_limit if options is not None else None
+        if update_limit is None:  # automatic (see routes.basis_factory)
+            update_limit = AUTO_UPDATE_LIMIT
         self.n = M.shape[0]
         self.set_matrix(M)
         self.init_common(update_limit, pivot_tolerance, rank_tolerance,

@@ -106,3 +106,32 @@ def test_projection_from_the_bound_arrays_is_the_projection(seed):
         want = [min(max(x[k], _bounds(sk[k], si[k], x[k], lb, ub, t_lower)[0]),
                     _bounds(sk[k], si[k], x[k], lb, ub, t_lower)[1]) for k in range(sk.size)]
         assert np.array_equal(a, want)
+
+
+@pytest.mark.parametrize("seed", range(10))
+@pytest.mark.parametrize("skip", [-1, 0, 17])
+def test_step_with_projection_is_the_step_then_the_projection(seed, skip):
+    """advance_values (the engines' one pass) leaves xb bit for bit as the step
+    ``xb += theta rate`` followed by project_bounds, artificials near zero and t included,
+    and slot ``skip`` as it was."""
+    sk, si, xb, rate, lb, ub = _table(seed)
+    lo, hi = np.empty(sk.size), np.empty(sk.size)
+    PK.slot_bounds(sk, si, lb, ub, lo, hi)
+    for theta in (0.0, 0.37, 2.5):
+        for t_lower in (0.0, -np.inf):
+            ref = xb.copy()
+            ref += theta * rate
+            PK.project_bounds(sk, si, ref, lb, ub, lo, hi, t_lower)
+            if skip >= 0:
+                ref[skip] = xb[skip]
+            got = xb.copy()
+            PK.advance_values(sk, si, got, rate, theta, lb, ub, lo, hi, t_lower, skip)
+            assert np.array_equal(got.view(np.int64), ref.view(np.int64))
+            one = got.copy()
+            if skip >= 0:
+                one[skip] = 10.0 * (1 + abs(one[skip]))  # out of every finite bound
+                PK.project_slot(skip, sk, si, one, lb, ub, lo, hi, t_lower)
+                full = got.copy()
+                full[skip] = 10.0 * (1 + abs(full[skip]))
+                PK.project_bounds(sk, si, full, lb, ub, lo, hi, t_lower)
+                assert np.array_equal(one.view(np.int64), full.view(np.int64))
