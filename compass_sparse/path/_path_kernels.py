@@ -61,12 +61,14 @@ REC_FLIP, REC_EXCHANGE = 0, 1
 
 
 @njit(cache=True)
-def current_point(sk, si, xb, zval, lb, ub, z, w, v):
-    """(z, w, v) of the current basic solution (PivotalPath.current_point)."""
+def _slot_values(sk, si, xb, zval, z, w, v):
+    """(z, w, v) of the current basic solution before z is clipped to its bounds: two
+    passes over n."""
     n = sk.shape[0]
-    z[:] = zval
-    w[:] = 0.0
-    v[:] = 0.0
+    for i in range(n):
+        z[i] = zval[i]
+        w[i] = 0.0
+        v[i] = 0.0
     for k in range(n):
         kind = sk[k]
         i = si[k]
@@ -80,7 +82,13 @@ def current_point(sk, si, xb, zval, lb, ub, z, w, v):
         elif kind == VAR_S:
             w[i] = max(val, 0.0)
             v[i] = max(-val, 0.0)
-    for i in range(n):
+
+
+@njit(cache=True)
+def current_point(sk, si, xb, zval, lb, ub, z, w, v):
+    """(z, w, v) of the current basic solution (PivotalPath.current_point)."""
+    _slot_values(sk, si, xb, zval, z, w, v)
+    for i in range(sk.shape[0]):
         z[i] = min(max(z[i], lb[i]), ub[i])
 
 
@@ -278,23 +286,7 @@ def _record(sk, si, xb, zval, lb, ub, t, fstate, istate, best_x, bp_t, bp_x, wor
         z = work[2]
         w = work[3]
         v = work[4]
-        for i in range(n):
-            z[i] = zval[i]
-            w[i] = 0.0
-            v[i] = 0.0
-        for k in range(n):
-            kind = sk[k]
-            i = si[k]
-            val = xb[k]
-            if kind == VAR_Z:
-                z[i] = val
-            elif kind == VAR_W:
-                w[i] = max(val, 0.0)
-            elif kind == VAR_V:
-                v[i] = max(val, 0.0)
-            elif kind == VAR_S:
-                w[i] = max(val, 0.0)
-                v[i] = max(-val, 0.0)
+        _slot_values(sk, si, xb, zval, z, w, v)
         fstate[F_BEST_T] = t
         nb = istate[I_NBP]
         if nb < bp_t.shape[0]:
