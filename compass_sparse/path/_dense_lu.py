@@ -104,7 +104,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._jit import njit
-from ._kernels import VAR_A, VAR_S, VAR_T, VAR_W, VAR_Z
+from ._kernels import VAR_A, VAR_T, VAR_Z, unit_sign
 
 
 # rows of the integer factor array ``perm`` (N_PERM x (n + limit)): the pivot row of each
@@ -132,12 +132,8 @@ def basis_column(kind, idx, M, r, art_sign, out):
         out[:] = M[:, idx]
     elif kind == VAR_T:
         out[:] = r
-    elif kind == VAR_W or kind == VAR_S:
-        out[idx] = -1.0
-    elif kind == VAR_A:
-        out[idx] = art_sign[idx]
     else:
-        out[idx] = 1.0
+        out[idx] = unit_sign(kind, idx, art_sign)
 
 
 @njit(cache=True)

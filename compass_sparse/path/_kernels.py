@@ -37,6 +37,17 @@ placed at exactly 0, and rounding of either sign must not decide which way it ma
 
 
 @njit(cache=True, inline="always")
+def unit_sign(kind, idx, art_sign):
+    """The sign of a unit basis column: -e_i for w_i and a free slack, art_sign[i] e_i for
+    an artificial, +e_i for v_i."""
+    if kind == VAR_W or kind == VAR_S:
+        return -1.0
+    if kind == VAR_A:
+        return float(art_sign[idx])
+    return 1.0
+
+
+@njit(cache=True, inline="always")
 def _slot_bounds(kind, idx, val, lb, ub, t_lower):
     if kind == VAR_Z:
         return lb[idx], ub[idx]

@@ -87,10 +87,10 @@ import numpy as np
 
 from .._jit import njit
 from ._dense_lu import UPD_GROWTH, UPD_LIMIT, UPD_OK, UPD_REFUSED, UPD_UNSTABLE
-from ._kernels import VAR_A, VAR_T, VAR_V, VAR_W, VAR_S, VAR_Z
+from ._kernels import VAR_A, VAR_T, VAR_Z, unit_sign
 from ._sparse_order import MATCH_TOL, block_order, work_size
 from ._sparse_steps import (DENSE_TAIL_MIN, DENSE_TAIL_RUN, DENSE_TAIL_SHARE, basis_column,
-                            dense_tail, reach_solve, tail_fits, unit_sign)
+                            dense_tail, reach_solve, tail_fits)
 
 UPD_FILL = 5
 """replace_column's outcome when the update would exceed the fill limit or the storage."""

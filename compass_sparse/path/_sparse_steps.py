@@ -29,7 +29,7 @@ steps go on sparse).
 from __future__ import annotations
 
 from .._jit import njit
-from ._kernels import VAR_A, VAR_S, VAR_T, VAR_W, VAR_Z
+from ._kernels import VAR_T, VAR_Z, unit_sign
 
 DENSE_TAIL_SHARE = 0.4
 """A column's L part covering at least this share of the rows left counts as dense."""
@@ -46,17 +46,6 @@ DENSE_WORK_DIVISOR = 8
 searched or eliminated by a sparse step, ~2.7 ns; see compass_sparse.path._sparse_lu.
 FACTOR_WEIGHT): one unit per DENSE_WORK_DIVISOR of them (measured 0.29 ns each at
 200 x 200)."""
-
-
-@njit(cache=True, inline="always")
-def unit_sign(kind, idx, art_sign):
-    """The sign of a unit basis column: -e_i for w_i and a free slack, art_sign[i] e_i for
-    an artificial, +e_i for v_i."""
-    if kind == VAR_W or kind == VAR_S:
-        return -1.0
-    if kind == VAR_A:
-        return float(art_sign[idx])
-    return 1.0
 
 
 @njit(cache=True)
