@@ -91,7 +91,7 @@ def ratio_test(sk, si, xb, rate, lb, ub, piv_tol, tol, t_lower):
     out from its kind.)"""
     unknown = np.full(sk.shape[0], np.nan)
     return ratio_test_bounds(sk, si, xb, rate, lb, ub, unknown, unknown, piv_tol, tol,
-                             t_lower)
+                             t_lower, np.empty(sk.shape[0], np.int64))
 
 
 @njit(cache=True, inline="always")
@@ -123,33 +123,41 @@ def slot_bounds(sk, si, lb, ub, lo, hi):
 
 
 @njit(cache=True)
-def ratio_test_bounds(sk, si, xb, rate, lb, ub, lo, hi, piv_tol, tol, t_lower):
+def ratio_test_bounds(sk, si, xb, rate, lb, ub, lo, hi, piv_tol, tol, t_lower, cand):
     """:func:`ratio_test` with the slots' bounds read from (lo, hi) (:func:`slot_bounds`;
     NaN: worked out from the slot's kind) -- the same slot and values, bit for bit, as
-    with every bound worked out: the compiled engines' loop (at n = 2452, 11 against 22-27 us a
-    call; the kinds' branches were mispredicted).  (The room is computed in the loops
-    themselves: a helper taking the arrays cost reference counting per slot.)"""
+    with every bound worked out: the compiled engines' loop.  ``cand`` (n integers, work
+    space) receives pass 1's candidates for pass 2.
+
+    Why it is written so (each measured on the pivots of a traffic solve): the bound a
+    slot moves towards and its room are chosen by selects, not branches on the rate's
+    sign, which a dense rate vector mispredicts half the time; and pass 1 lists every slot
+    whose room is within ``theta1 * _CLEARLY * |rate|`` for the theta1 of the moment -- a
+    superset of pass 2's slots, since theta1 only decreases and rounding is monotone --
+    so that pass 2 reads that short list, not all n slots.  (The room is computed in the
+    loop itself: a helper taking the arrays cost reference counting per slot.)"""
     n = sk.shape[0]
     theta1 = np.inf
+    nc = 0
     for k in range(n):
         r = rate[k]
         if -piv_tol <= r <= piv_tol:
             continue
-        if r > 0.0:
-            bnd = hi[k]
-            if bnd != bnd:
-                bnd = _slot_bounds(sk[k], si[k], xb[k], lb, ub, t_lower)[1]
-            room = max(bnd - xb[k], 0.0)
-        else:
-            bnd = lo[k]
-            if bnd != bnd:
-                bnd = _slot_bounds(sk[k], si[k], xb[k], lb, ub, t_lower)[0]
-            room = max(xb[k] - bnd, 0.0)
-        if np.isfinite(bnd):
-            a = room + tol * max(1.0, abs(bnd))
-            if a > theta1 * abs(r) * _CLEARLY:
-                continue
-            theta1 = min(theta1, a / abs(r))
+        up = r > 0.0
+        bnd = hi[k] if up else lo[k]
+        if bnd != bnd:
+            b2 = _slot_bounds(sk[k], si[k], xb[k], lb, ub, t_lower)
+            bnd = b2[1] if up else b2[0]
+        room = max(bnd - xb[k] if up else xb[k] - bnd, 0.0)
+        ar = abs(r)
+        # an infinite bound: room infinite, a infinite or NaN (tol 0): neither test
+        # takes the slot
+        a = room + tol * max(1.0, abs(bnd))
+        if a <= theta1 * ar * _CLEARLY:
+            theta1 = min(theta1, a / ar)
+        if room <= theta1 * _CLEARLY * ar and np.isfinite(bnd):
+            cand[nc] = k
+            nc += 1
     if not np.isfinite(theta1):
         return -1, np.inf, 0
     bound = theta1 * _CLEARLY
@@ -158,28 +166,24 @@ def ratio_test_bounds(sk, si, xb, rate, lb, ub, lo, hi, piv_tol, tol, t_lower):
     best_piv = -1.0
     best_ratio = np.inf
     best_up = 0
-    for k in range(n):
+    for c in range(nc):
+        k = cand[c]
         r = rate[k]
-        if -piv_tol <= r <= piv_tol:
-            continue
-        if r > 0.0:
-            bnd = hi[k]
-            if bnd != bnd:
-                bnd = _slot_bounds(sk[k], si[k], xb[k], lb, ub, t_lower)[1]
-            room = max(bnd - xb[k], 0.0)
-        else:
-            bnd = lo[k]
-            if bnd != bnd:
-                bnd = _slot_bounds(sk[k], si[k], xb[k], lb, ub, t_lower)[0]
-            room = max(xb[k] - bnd, 0.0)
-        if not np.isfinite(bnd) or room > bound * abs(r) or room / abs(r) > theta1:
+        up = r > 0.0
+        bnd = hi[k] if up else lo[k]
+        if bnd != bnd:
+            b2 = _slot_bounds(sk[k], si[k], xb[k], lb, ub, t_lower)
+            bnd = b2[1] if up else b2[0]
+        room = max(bnd - xb[k] if up else xb[k] - bnd, 0.0)
+        ar = abs(r)
+        if room > bound * ar or room / ar > theta1:
             continue
         kind = sk[k]
         pri = 2 if kind == VAR_T else (1 if kind == VAR_A else 0)
-        if pri > best_pri or (pri == best_pri and abs(r) > best_piv):
-            best, best_pri, best_piv = k, pri, abs(r)
-            best_ratio = room / abs(r)
-            best_up = 1 if r > 0.0 else 0
+        if pri > best_pri or (pri == best_pri and ar > best_piv):
+            best, best_pri, best_piv = k, pri, ar
+            best_ratio = room / ar
+            best_up = 1 if up else 0
     return best, best_ratio, best_up
 
 

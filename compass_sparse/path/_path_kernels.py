@@ -28,7 +28,7 @@ from ._sparse_lu import factor as sp_factor, ftran_column as sp_ftran_column
 from ._sparse_lu import ftran_dense as sp_ftran_dense, replace_column as sp_replace_column
 from ._sparse_lu import count_solve, refactor_pays
 from ._dense_lu import (P_ROW, P_SLOT, UPD_GROWTH, UPD_LIMIT, UPD_OK, UPD_REFUSED, UPD_UNSTABLE,
-                        W_FACTOR, W_REP_ROW, W_REP_SLOT, basis_column, factor, ftran,
+                        W_CAND, W_FACTOR, W_REP_ROW, W_REP_SLOT, basis_column, factor, ftran,
                         lu_factor, replace_column)
 from ._kernels import (VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, advance_values,
                        project_bounds, project_slot, ratio_test_bounds, set_slot_bounds,
@@ -427,6 +427,7 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
     col = work[6]
     slo = work[8]  # the slots' bounds (refactor sets them; each exchange its slot's)
     shi = work[9]
+    cand = D[3][W_CAND]
     start = istate[I_PIV]
     t_progress = tol[T_PROGRESS]
     while True:
@@ -466,7 +467,7 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
                 rate[k] = -es * d[k]
         theta_self = _room_self(ek, ei, es, ev, t, lb, ub)
         leave, theta, leave_up = ratio_test_bounds(sk, si, xb, rate, lb, ub, slo, shi,
-                                                   piv_tol, tol[T_RATIO], t_lower)
+                                                   piv_tol, tol[T_RATIO], t_lower, cand)
         if (leave >= 0 and theta < theta_self and sk[leave] == VAR_T and leave_up == 0
                 and lim[L_FREE_BELOW] != 0 and istate[I_BELOW] < 0
                 and fstate[F_BEST_T] <= t_progress):
@@ -475,7 +476,7 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
             fstate[F_TLOW] = t_lower
             istate[I_BELOW] = pivots
             leave, theta, leave_up = ratio_test_bounds(sk, si, xb, rate, lb, ub, slo, shi,
-                                                       piv_tol, tol[T_RATIO], t_lower)
+                                                       piv_tol, tol[T_RATIO], t_lower, cand)
         if leave < 0 and not np.isfinite(theta_self):
             return RAY, MSG_RAY_UNBOUNDED
         if leave < 0 or theta_self <= theta:

@@ -85,7 +85,8 @@ def test_ratio_tests_agree_with_the_definition_bit_for_bit(seed, t_lower):
     for piv_tol, tol in ((1e-11, 1e-9), (0.0, 0.0), (1e-11, 1e-12)):
         want = _reference(sk, si, xb, rate, lb, ub, piv_tol, tol, t_lower)
         got = PK.ratio_test(sk, si, xb, rate, lb, ub, piv_tol, tol, t_lower)
-        fast = PK.ratio_test_bounds(sk, si, xb, rate, lb, ub, lo, hi, piv_tol, tol, t_lower)
+        fast = PK.ratio_test_bounds(sk, si, xb, rate, lb, ub, lo, hi, piv_tol, tol, t_lower,
+                                    np.empty(sk.size, np.int64))
         assert tuple(got) == tuple(want) == tuple(fast), (piv_tol, tol, want, got, fast)
 
 
