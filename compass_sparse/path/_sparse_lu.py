@@ -108,7 +108,8 @@ grows it and runs the path again)."""
 
 # the header array h (int64) of the factors; H_FWORK .. H_UFACT: the refactorization
 # rule's counts (see refactor_pays)
-# (H_SPNNZ: the nonzeros of the last column FTRAN's spike, see solve)
+# (H_SPNNZ: the nonzeros of the last column FTRAN's spike, their positions in iw; see
+# solve: iw is the factorization's work space, free between factorizations)
 # (H_TAIL: the columns of the last factorization's dense tail, see _sparse_steps)
 H_M1, H_NNZL, H_UFREE, H_NNZU, H_NNZR, H_BASE, H_N, H_FRESH, H_LAST, H_FWORK, H_XWORK, \
     H_KSOL, H_UFACT, H_FWEIGHT, H_SPNNZ, H_TAIL = range(16)
@@ -156,7 +157,7 @@ def storage_bytes(n: int, update_limit: int, nnz_guess: int) -> int:
     against the memory budget before allocating)."""
     lim, N, capL, capU, capR = _capacities(n, update_limit, nnz_guess)
     ints = N_HEADER + (n + 1) + capL + 2 * N + capU + (n + 1) + capU + N \
-        + 2 * (lim + 1) + capR + 2 * n + N + 6 * n + 4 + work_size(n, nnz_guess)
+        + 2 * (lim + 1) + capR + 2 * n + N + max(6 * n + 4, N) + work_size(n, nnz_guess)
     floats = capL + capU + N + capU + capR + 3 * N
     return 8 * (ints + floats)
 
@@ -179,7 +180,7 @@ def allocate(n: int, update_limit: int, nnz_guess: int):
             np.zeros(lim + 1, i64), np.zeros(capR, i64), np.zeros(capR),
             np.zeros(lim + 1, i64),                                             # R
             np.zeros(n, i64), np.zeros(N, i64), np.zeros(n, i64),   # pinv, slot_at, pos_of
-            np.zeros(6 * n + 4, i64),                                           # int work
+            np.zeros(max(6 * n + 4, N), i64),                           # int work (iw)
             np.zeros((3, N)),                                                   # float work
             np.zeros(work_size(n, nnz_guess), i64))                             # ordering
 
@@ -437,7 +438,8 @@ def solve(S, nupd, w, out, keep, rate, sign):
     the scattered entries, overwritten); returns max |out_s| (over the slots in order).
     With ``keep`` (a column's FTRAN) the spike (the vector before the U solve) is left in
     fw[2], its largest |entry| in fw[2]'s last element (never a position of a spike) and
-    its nonzeros in h[H_SPNNZ] (for replace_column), and ``rate`` = sign * out: the passes
+    its nonzeros' count in h[H_SPNNZ] and their positions, increasing, in iw (for
+    replace_column), and ``rate`` = sign * out: the passes
     the path would make over these vectors, made in the solve's own."""
     (h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead, Rs, Ri, Rx, Rpos, pinv,
      slot_at, pos_of, iw, fw, ow) = S
@@ -466,6 +468,7 @@ def solve(S, nupd, w, out, keep, rate, sign):
             a = abs(x)
             snorm = max(snorm, a)
             if a != 0.0:
+                iw[nnz] = j
                 nnz += 1
         sp[sp.shape[0] - 1] = snorm
         h[H_SPNNZ] = nnz
@@ -643,8 +646,9 @@ def replace_column(S, nupd, slot, d, dnorm, update_tol, stab_tol, growth_limit,
     # commit: the spike as column q = N, position p dead, the row eta
     f = h[H_UFREE]
     Us[N] = f
-    for i in range(N):
-        if spike[i] != 0.0 and i != p:
+    for e in range(h[H_SPNNZ]):  # the spike's nonzeros, listed by the FTRAN (solve)
+        i = iw[e]
+        if i != p:
             Ui[f] = i
             Ux[f] = spike[i]
             f += 1

@@ -141,8 +141,8 @@ def test_automatic_limit_takes_no_more_update_storage_than_fifty_updates():
 def test_column_ftran_returns_the_norms_the_update_reads():
     """The passes fused into the sparse FTRAN: it returns max |d|, writes rate = sign d,
     and leaves the spike's largest |entry| (in fw[2]'s last element) and its nonzeros
-    (h[H_SPNNZ]) -- each equal to its definition on the vectors themselves -- after
-    updates too."""
+    (h[H_SPNNZ]) with their positions (in iw) -- each equal to its definition on the
+    vectors themselves -- after updates too."""
     g = gen.p_matrix_lcp(300, "banded", 4, "mixed")
     M = sp.csc_matrix(g.lcp[0])
     eng = SparsePathEngine(M, update_limit=None)
@@ -164,4 +164,6 @@ def test_column_ftran_returns_the_norms_the_update_reads():
         assert np.array_equal(rate, -1.0 * d)
         assert fw[2][-1] == np.max(np.abs(spike))
         assert h[SL.H_SPNNZ] == np.count_nonzero(spike)
+        # the positions of its nonzeros, increasing, for the update's new column of U
+        assert np.array_equal(S[20][:h[SL.H_SPNNZ]], np.flatnonzero(spike))
         assert np.count_nonzero(d) > 0
