@@ -53,7 +53,8 @@ from .homotopy.tracker import compiled_tracker_available
 from .linalg.direct import automatic_lu
 from .options import HOMOTOPY_DENSE_MAX_N, Options
 from .path.dense_engine import DensePathEngine
-from .path.sparse_engine import AUTO_UPDATE_LIMIT, SPARSE_ENGINE_MAX_DENSITY, SparsePathEngine
+from .path.engine import DEFAULT_UPDATE_LIMIT, UPDATE_LIMIT_FLOOR, resolve_update_limit
+from .path.sparse_engine import SPARSE_ENGINE_MAX_DENSITY, SparsePathEngine
 
 __all__ = ["COMPILED_NMS_MAX_N", "COMPILE_SECONDS_DENSE", "COMPILE_SECONDS_MEDIUM",
            "COMPILE_SECONDS_SPARSE",
@@ -72,12 +73,6 @@ COMPILED_NMS_MAX_N = 5000
 vectors of length n (224 MB at n = 1e6), and above a few thousand variables the ~50 us of
 Python a major iteration saves is a vanishing share of its factorizations."""
 
-UPDATE_LIMIT_FLOOR = 50
-"""factorization_update_limit is capped at max(n, this) (the bases preallocate the updates)."""
-
-DEFAULT_UPDATE_LIMIT = 50
-"""The update limit of the dense engine and the basis managers when
-factorization_update_limit is None (automatic): PATH's default."""
 
 
 @dataclass(frozen=True)
@@ -168,19 +163,16 @@ def basis_factory(route: str, options: Options, deadline=None):
     route ``route``; the sparse manager gets the solve's deadline, so that a factorization
     that cannot finish in time is not started (TIME_LIMIT)."""
     def make(M):
-        n = M.shape[0]
-        # Both bases preallocate room for their updates; past max(n, 50) updates applying
-        # them costs more than a fresh factorization, so a larger limit is capped there.
-        limit = options.factorization_update_limit
-        if limit is None:  # automatic
-            limit = AUTO_UPDATE_LIMIT if route == "sparse engine" else DEFAULT_UPDATE_LIMIT
-        limit = min(limit, max(n, UPDATE_LIMIT_FLOOR))
+        # (the engines resolve factorization_update_limit themselves, the managers here:
+        # path.engine.resolve_update_limit either way)
         if route == "dense engine":
-            return DensePathEngine(M, options, update_limit=limit)
+            return DensePathEngine(M, options)
         if route == "sparse engine":
-            return SparsePathEngine(M, options, update_limit=limit)
+            return SparsePathEngine(M, options)
         if route == "dense basis":
             return DenseBasis(M)
+        limit = resolve_update_limit(options.factorization_update_limit,
+                                     DEFAULT_UPDATE_LIMIT, M.shape[0])
         return BasisManager(M, options=BasisOptions(update_limit=limit, deadline=deadline,
                                                     backend=options.lu_backend,
                                                     ordering=options.lu_ordering,

@@ -52,14 +52,10 @@ class DensePathEngine(PathEngine):
     def __init__(self, M, options=None, *, update_limit: int | None = None,
                  pivot_tolerance: float = 1e-11, rank_tolerance: float = 1e-9,
                  stability_tolerance: float = 1e-8, growth_limit: float = 100.0):
-        if update_limit is None:
-            update_limit = options.factorization_update_limit if options is not None else None
-        if update_limit is None:  # automatic (see routes.basis_factory)
-            update_limit = 50
         self._dense = None
         self.set_matrix(M)
-        self.init_common(update_limit, pivot_tolerance, rank_tolerance,
-                          stability_tolerance, growth_limit)
+        self.init_common(update_limit, options, pivot_tolerance, rank_tolerance,
+                         stability_tolerance, growth_limit)
         self.L = None  # the factors: allocated by the first path (see _allocate)
         self._S = None
 

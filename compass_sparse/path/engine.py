@@ -28,10 +28,30 @@ from . import _path_kernels as K
 from ..basis.types import BasisStats
 from .outcome import LinearCode
 
-__all__ = ["PIVOT_CHUNK", "PathEngine"]
+__all__ = ["DEFAULT_UPDATE_LIMIT", "PIVOT_CHUNK", "PathEngine", "UPDATE_LIMIT_FLOOR",
+           "resolve_update_limit"]
 
 PIVOT_CHUNK = 1000
 """Pivots per compiled call at most: the time limit is checked between calls."""
+
+UPDATE_LIMIT_FLOOR = 50
+"""factorization_update_limit is capped at max(n, this) (the bases preallocate the updates)."""
+
+DEFAULT_UPDATE_LIMIT = 50
+"""The update limit of the dense engine and the basis managers when
+factorization_update_limit is None (automatic): PATH's default."""
+
+
+def resolve_update_limit(requested, automatic: int, n: int) -> int:
+    """The update limit of a basis of order n: ``requested`` (``factorization_update_limit``,
+    an integer the user set: a hard limit on every basis) or, when it is None (automatic),
+    the basis' own ``automatic`` (:data:`DEFAULT_UPDATE_LIMIT`; the sparse engine's
+    ``AUTO_UPDATE_LIMIT`` above its refactorization rule).  Every basis preallocates room
+    for its updates, and past max(n, UPDATE_LIMIT_FLOOR) updates applying them costs more
+    than a fresh factorization, so a larger limit is capped there.  The one place the
+    limit is decided: the routes and the engines built directly call it."""
+    limit = automatic if requested is None else int(requested)
+    return max(1, min(limit, max(int(n), UPDATE_LIMIT_FLOOR)))
 
 _NAMES = "zwvatS"
 
@@ -58,9 +78,17 @@ class PathEngine:
     kind = K.FAC_DENSE
     chunk = PIVOT_CHUNK
 
-    def init_common(self, update_limit, pivot_tolerance, rank_tolerance,
-                     stability_tolerance, growth_limit, fill_factor=2.0):
-        self.update_limit = max(1, int(update_limit))
+    automatic_update_limit = DEFAULT_UPDATE_LIMIT
+    """The engine's update limit when factorization_update_limit is None."""
+
+    def init_common(self, update_limit, options, pivot_tolerance, rank_tolerance,
+                    stability_tolerance, growth_limit, fill_factor=2.0):
+        """The tolerances and limits of the engine (``update_limit``: the caller's, else
+        the options' factorization_update_limit, resolved by :func:`resolve_update_limit`)."""
+        if update_limit is None and options is not None:
+            update_limit = options.factorization_update_limit
+        self.update_limit = resolve_update_limit(update_limit, self.automatic_update_limit,
+                                                 self.n)
         self.pivot_tolerance = float(pivot_tolerance)
         self.rank_tolerance = float(rank_tolerance)
         self.stability_tolerance = float(stability_tolerance)

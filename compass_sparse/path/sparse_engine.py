@@ -96,6 +96,7 @@ class SparsePathEngine(PathEngine):
     ``set_dense_column``, ``stats``, :meth:`run_path`)."""
 
     kind = K.FAC_SPARSE
+    automatic_update_limit = AUTO_UPDATE_LIMIT
 
     def __init__(self, M, options=None, *, update_limit: int | None = None,
                  pivot_tolerance: float = 1e-11, rank_tolerance: float = 1e-11,
@@ -103,14 +104,10 @@ class SparsePathEngine(PathEngine):
                  fill_factor: float = 2.0):
         if growth_limit is None:
             growth_limit = GROWTH_LIMIT
-        if update_limit is None:
-            update_limit = options.factorization_update_limit if options is not None else None
-        if update_limit is None:  # automatic (see routes.basis_factory)
-            update_limit = AUTO_UPDATE_LIMIT
         self.n = M.shape[0]
         self.set_matrix(M)
-        self.init_common(update_limit, pivot_tolerance, rank_tolerance,
-                          stability_tolerance, growth_limit, fill_factor)
+        self.init_common(update_limit, options, pivot_tolerance, rank_tolerance,
+                         stability_tolerance, growth_limit, fill_factor)
         self.chunk = int(max(16, min(PIVOT_CHUNK, CHUNK_WORK // max(self.n, 1))))
         self.pivot_threshold = SL.PIVOT_THRESHOLD
         self._S = None

@@ -167,3 +167,23 @@ def test_column_ftran_returns_the_norms_the_update_reads():
         # the positions of its nonzeros, increasing, for the update's new column of U
         assert np.array_equal(S[20][:h[SL.H_SPNNZ]], np.flatnonzero(spike))
         assert np.count_nonzero(d) > 0
+
+
+@pytest.mark.parametrize("requested", [None, 1, 30, 120, 10 ** 6])
+@pytest.mark.parametrize("n", [40, 100, 600])
+def test_engines_built_directly_resolve_the_limit_as_the_routes_do(requested, n):
+    """One owner decides the update limit (path.engine.resolve_update_limit): an engine
+    built directly, from the keyword or from the options, gets what its route gives it
+    -- the automatic limit or the integer, capped at max(n, 50)."""
+    M = (sp.random(n, n, density=0.02, format="csc", random_state=1)
+         + sp.identity(n)).tocsc()
+    opt = Options(factorization_update_limit=requested)
+    cap = max(n, 50)
+    want_sparse = min(AUTO_UPDATE_LIMIT if requested is None else requested, cap)
+    want_dense = min(DEFAULT_UPDATE_LIMIT if requested is None else requested, cap)
+    assert basis_factory("sparse engine", opt)(M).update_limit == want_sparse
+    assert SparsePathEngine(M, opt).update_limit == want_sparse
+    assert SparsePathEngine(M, update_limit=requested).update_limit == want_sparse
+    assert basis_factory("dense engine", opt)(M).update_limit == want_dense
+    assert DensePathEngine(M.toarray(), update_limit=requested).update_limit == want_dense
+    assert basis_factory("sparse basis", opt)(M).options.update_limit == want_dense
