@@ -1,7 +1,8 @@
 """Time limits at scale: how far past ``time_limit`` a large solve returns.
 
-The problem is a tridiagonal NCP (the shape of a discretized 1-D obstacle problem with a
-nonlinear term): F(z) = A z + a sin(z) + 0.1 z^3 - b on z >= 0, A tridiagonal and
+The problem is a tridiagonal NCP (``compass_sparse.generators.tridiagonal_ncp``, the shape of
+a discretized 1-D obstacle problem with a nonlinear term): F(z) = A z + a sin(z) + 0.1 z^3 - b
+on z >= 0, A tridiagonal and
 diagonally dominant (diagonal in [3, 4], off-diagonals in [-1, 1]), a in [0.1, 0.5], b in
 [-1, 1], start z = 2; F and the exact J are vectorized (about 40 ms for both at n = 1e6).
 At n = 1e6 it needs more than the limits below; at n = 2e5 a solve may end SOLVED within
@@ -37,7 +38,6 @@ import time
 from pathlib import Path
 
 import numpy as np
-import scipy.sparse as sp
 from _revision import git_revision
 
 HERE = Path(__file__).resolve().parent
@@ -47,34 +47,11 @@ FIELDS = ["tree", "n", "limit", "wall", "over", "cpu", "status", "crash", "major
           "factorizations", "eval_fj", "walls", "load"]
 
 
-def tridiagonal_ncp(n, seed=0):
-    """(F, J, lb, ub, x0) of the tridiagonal NCP of the module docstring."""
-    rng = np.random.default_rng(seed)
-    i = np.arange(n)
-    rows = np.concatenate([i, i[:-1], i[1:]])
-    cols = np.concatenate([i, i[1:], i[:-1]])
-    vals = np.concatenate([3.0 + rng.uniform(0, 1, n), rng.uniform(-1, 1, 2 * (n - 1))])
-    A = sp.csc_matrix((vals, (rows, cols)), shape=(n, n))
-    A.sort_indices()
-    dpos = np.flatnonzero(A.indices == np.repeat(i, np.diff(A.indptr)))
-    a = rng.uniform(0.1, 0.5, n)
-    b = rng.uniform(-1.0, 1.0, n)
-
-    def F(z):
-        return A @ z + a * np.sin(z) + 0.1 * z**3 - b
-
-    def J(z):
-        Jz = A.copy()
-        Jz.data[dpos] += a * np.cos(z) + 0.3 * z**2
-        return Jz
-
-    return F, J, np.zeros(n), np.full(n, np.inf), np.full(n, 2.0)
-
-
 def run_case(n, limit):
     """One timed solve in this process (after the untimed one): its row's fields."""
     from compass_sparse import solve_mcp
     from compass_sparse._jit import end_cold_start
+    from compass_sparse.generators import tridiagonal_ncp
 
     end_cold_start()  # (compiled kernels, loaded by the untimed solve below)
     solve_mcp(*tridiagonal_ncp(6000, seed=1), options={"time_limit": 30.0})

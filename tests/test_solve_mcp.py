@@ -16,7 +16,7 @@ import compass_sparse.generators as gen
 from compass_sparse import (MCP, EvaluationError, IntermediateResult, MCPSolver, OptionError,
                             Options, PointStatus, StartPointError, Status, solve_mcp)
 from compass_sparse.exceptions import ProblemError
-from compass_sparse.generators.sparse import draw_bounds
+from compass_sparse.generators.sparse import BandedNonlinear, draw_bounds
 
 import known_problems as kp
 
@@ -180,35 +180,6 @@ def test_nonfinite_start_is_an_input_error():
 
 
 # ----------------------------------------------------------------------------- manufactured
-class BandedNonlinear:
-    """F(z) = A z + a sin(z) + 0.1 z^3 with A tridiagonal, diagonally dominant; J in CSC with
-    a fixed pattern (data changes only at the diagonal positions)."""
-
-    def __init__(self, n, seed):
-        rng = np.random.default_rng(seed)
-        i = np.arange(n)
-        rows = np.concatenate([i, i[:-1], i[1:]])
-        cols = np.concatenate([i, i[1:], i[:-1]])
-        vals = np.concatenate([3.0 + rng.uniform(0, 1, n), rng.uniform(-1, 1, 2 * (n - 1))])
-        A = sp.csc_matrix((vals, (rows, cols)), shape=(n, n))
-        A.sort_indices()
-        self.A = A
-        self.n = n
-        self.dpos = np.flatnonzero(A.indices == np.repeat(i, np.diff(A.indptr)))
-        self.a = rng.uniform(0.1, 0.5, n)
-
-    def F(self, z):
-        return self.A @ z + self.a * np.sin(z) + 0.1 * z**3
-
-    def J(self, z):
-        d = self.A.data.copy()
-        d[self.dpos] += self.a * np.cos(z) + 0.3 * z**2
-        return sp.csc_matrix((d, self.A.indices, self.A.indptr), shape=(self.n, self.n))
-
-    def FJ(self, z):
-        return self.F(z), self.J(z)
-
-
 def manufactured_case(n, seed, degenerate=0.0, bound_mix=(0.25, 0.25, 0.25, 0.25)):
     base = BandedNonlinear(n, seed)
     lb, ub, _ = draw_bounds(n, np.random.default_rng(1000 + seed), bound_mix)

@@ -11,6 +11,8 @@ Families
 * :func:`sparse_quadratic` -- F = D z^2 + A z + b with a random sparse A (k per row).
 * :func:`structured_quadratic` -- the same form on grid / banded couplings, scaling to
   n = 1e6, with a manufactured solution.
+* :class:`BandedNonlinear`, :func:`tridiagonal_ncp` -- a strongly monotone tridiagonal
+  nonlinear F (A z + a sin(z) + 0.1 z^3) and its NCP.
 * :func:`p_matrix_lcp`, :func:`monotone_lcp`, :func:`obstacle_problem`,
   :func:`infeasible_lcp`, :func:`duplicated_columns_lcp` -- sparse LCPs; all but the
   infeasible one have manufactured solutions.
@@ -49,7 +51,8 @@ class GeneratedProblem:
 
 from .manufactured import manufacture, manufactured_point, ManufacturedPoint  # noqa: E402
 from .thesis import thesis_family  # noqa: E402
-from .sparse import sparse_quadratic, structured_quadratic, QuadraticF  # noqa: E402
+from .sparse import (BandedNonlinear, QuadraticF, sparse_quadratic,  # noqa: E402
+                     structured_quadratic, tridiagonal_ncp)
 from .lcp import (  # noqa: E402
     brute_force_lcp,
     duplicated_columns_lcp,
@@ -62,6 +65,7 @@ from .lcp import (  # noqa: E402
 from .traffic import traffic_equilibrium  # noqa: E402
 
 __all__ = [
+    "BandedNonlinear",
     "GeneratedProblem",
     "ManufacturedPoint",
     "QuadraticF",
@@ -78,4 +82,5 @@ __all__ = [
     "brute_force_lcp",
     "lcp_problem",
     "traffic_equilibrium",
+    "tridiagonal_ncp",
 ]

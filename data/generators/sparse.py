@@ -10,6 +10,10 @@
 * :func:`structured_quadratic` -- A on a 2-D 5-point grid stencil or a band, plus a few
   long-range entries, controllable diagonal dominance, mixed bound types and a
   manufactured known solution.  Builds n = 1e6 in seconds (everything is vectorized).
+
+* :class:`BandedNonlinear`, :func:`tridiagonal_ncp` -- F(z) = A z + a sin(z) + 0.1 z^3 (- b)
+  with A tridiagonal and diagonally dominant (a discretized 1-D obstacle problem with a
+  nonlinear term): the suite's manufactured nonlinear cases and the time-limit benchmark.
 """
 from __future__ import annotations
 
@@ -20,7 +24,8 @@ from compass_sparse.problem import MCP
 
 from .manufactured import manufacture, manufactured_point
 
-__all__ = ["QuadraticF", "sparse_quadratic", "structured_quadratic", "draw_bounds"]
+__all__ = ["BandedNonlinear", "QuadraticF", "sparse_quadratic", "structured_quadratic",
+           "draw_bounds", "tridiagonal_ncp"]
 
 
 class QuadraticF:
@@ -237,3 +242,47 @@ def structured_quadratic(
     name = f"structured_quadratic({structure}, n={n}, seed={seed})"
     return manufacture(qf.F, qf.jac, pt.z, lb, ub, rng, w_star=pt.w, v_star=pt.v, x0=x0,
                        name=name, info=info, constant_jac=qf.constant_pattern())
+
+
+class BandedNonlinear:
+    """F(z) = A z + a sin(z) + 0.1 z^3 with A tridiagonal and diagonally dominant (diagonal
+    3 + U(0, 1), off-diagonals U(-1, 1)) and a ~ U(0.1, 0.5), drawn in that order from
+    ``default_rng(seed)``; J in CSC with a fixed pattern (only the diagonal's data
+    change).  Strongly monotone on z >= 0."""
+
+    def __init__(self, n, seed):
+        self.rng = np.random.default_rng(seed)
+        i = np.arange(n)
+        rows = np.concatenate([i, i[:-1], i[1:]])
+        cols = np.concatenate([i, i[1:], i[:-1]])
+        vals = np.concatenate([3.0 + self.rng.uniform(0, 1, n),
+                               self.rng.uniform(-1, 1, 2 * (n - 1))])
+        A = sp.csc_matrix((vals, (rows, cols)), shape=(n, n))
+        A.sort_indices()
+        self.A = A
+        self.n = n
+        self.dpos = np.flatnonzero(A.indices == np.repeat(i, np.diff(A.indptr)))
+        self.a = self.rng.uniform(0.1, 0.5, n)
+
+    def F(self, z):
+        return self.A @ z + self.a * np.sin(z) + 0.1 * z**3
+
+    def J(self, z):
+        d = self.A.data.copy()
+        d[self.dpos] += self.a * np.cos(z) + 0.3 * z**2
+        return sp.csc_matrix((d, self.A.indices, self.A.indptr), shape=(self.n, self.n))
+
+    def FJ(self, z):
+        return self.F(z), self.J(z)
+
+
+def tridiagonal_ncp(n, seed=0):
+    """(F, J, lb, ub, x0) of the NCP F(z) - b on z >= 0, F of :class:`BandedNonlinear` and b ~
+    U(-1, 1) drawn after it from the same stream; x0 = 2."""
+    base = BandedNonlinear(n, seed)
+    b = base.rng.uniform(-1.0, 1.0, n)
+
+    def F(z):
+        return base.F(z) - b
+
+    return F, base.J, np.zeros(n), np.full(n, np.inf), np.full(n, 2.0)
