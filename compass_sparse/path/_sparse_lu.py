@@ -110,10 +110,11 @@ grows it and runs the path again)."""
 # rule's counts (see refactor_pays)
 # (H_SPNNZ: the nonzeros of the last column FTRAN's spike, their positions in iw; see
 # solve: iw is the factorization's work space, free between factorizations)
-# (H_TAIL: the columns of the last factorization's dense tail, see _sparse_steps)
+# (H_TAIL: the columns of the last factorization's dense tail, see _sparse_steps; H_ZL,
+# H_ZU: the zeros its block stores in L and U, which the counts of entries leave out)
 H_M1, H_NNZL, H_UFREE, H_NNZU, H_NNZR, H_BASE, H_N, H_FRESH, H_LAST, H_FWORK, H_XWORK, \
-    H_KSOL, H_UFACT, H_FWEIGHT, H_SPNNZ, H_TAIL = range(16)
-N_HEADER = 16
+    H_KSOL, H_UFACT, H_FWEIGHT, H_SPNNZ, H_TAIL, H_ZL, H_ZU = range(18)
+N_HEADER = 18
 
 FACTOR_WEIGHT = 2.5
 """The cost of one work unit of a factorization (an entry of L visited by the depth-first
@@ -238,6 +239,8 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh
     fresh = False
     dense_run = 0
     h[H_TAIL] = 0
+    h[H_ZL] = 0
+    h[H_ZU] = 0
     work = 4 * n  # the factorization's work units (refactor_pays): the passes over n, ...
     Lp[0] = 0
     for t in range(n):
@@ -327,13 +330,15 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh
         dense_run = dense_run + 1 if lp - Lp[k - 1] >= DENSE_TAIL_SHARE * (n - k) else 0
         if (dense_run >= DENSE_TAIL_RUN and n - t - 1 >= DENSE_TAIL_MIN
                 and tail_fits(n, n - k, n - t - 1, Rx.shape[0])):
-            k, ufree, nrep, w = dense_tail(t + 1, k, ufree, order, sk, si, Mp, Mi, Mx,
-                                           rI, rX, art_sign, S, rank_tol, piv_thresh, pref,
-                                           rep_slot, nrep)
+            k, ufree, nrep, w, zl, zu = dense_tail(t + 1, k, ufree, order, sk, si, Mp, Mi,
+                                                   Mx, rI, rX, art_sign, S, rank_tol,
+                                                   piv_thresh, pref, rep_slot, nrep)
             work += w
             if k < 0:
                 return GROW
             h[H_TAIL] = n - t - 1
+            h[H_ZL] = zl
+            h[H_ZU] = zu
             break
     if nrep > 0:
         # dependent slots in increasing order get the rows left without a pivot
@@ -385,20 +390,46 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh
     for j in range(n):
         pos_of[slot_at[j]] = j
     h[H_M1] = nunit
-    h[H_LAST] = Lp[n] + ufree
+    # (the counts are of entries, nonzeros: the dense tail's stored zeros left out)
+    nnzl = Lp[n] - h[H_ZL]
+    nnzu = ufree - h[H_ZU]
+    h[H_LAST] = nnzl + nnzu
     if fresh:
-        h[H_FRESH] = max(Lp[n] + ufree, 1)
-    h[H_NNZL] = Lp[n]
+        h[H_FRESH] = max(nnzl + nnzu, 1)
+    h[H_NNZL] = nnzl
     h[H_UFREE] = ufree
-    h[H_NNZU] = ufree + n
+    h[H_NNZU] = nnzu + n
     h[H_NNZR] = 0
-    h[H_BASE] = Lp[n] + ufree + n
-    h[H_FWORK] = (work + 2 * (Lp[n] + ufree)) * h[H_FWEIGHT] // 1024
+    h[H_BASE] = nnzl + nnzu + n
+    h[H_FWORK] = (work + 2 * (nnzl + nnzu)) * h[H_FWEIGHT] // 1024
     h[H_XWORK] = 0
     h[H_KSOL] = 0
     h[H_UFACT] = ufree
     Rs[0] = 0
     return 0
+
+
+@njit(cache=True, inline="always")
+def _axpy_tail(w, i0, vals, e0, m, x):
+    """w[i0 + r] -= vals[e0 + r] * x for r < m: a column of the dense tail, stored with its
+    zeros over consecutive positions, so that the loop runs over contiguous memory (and
+    vectorizes) instead of through the row indices; each w entry gets the same operation
+    as through the indices (an explicit zero subtracts 0)."""
+    dst = w[i0:i0 + m]
+    src = vals[e0:e0 + m]
+    for r in range(m):
+        dst[r] -= src[r] * x
+
+
+@njit(cache=True, inline="always")
+def _dot_tail(s, w, i0, vals, e0, m):
+    """s - sum vals[e0 + r] * w[i0 + r], term by term in order (the same operations as
+    through the row indices)."""
+    src = vals[e0:e0 + m]
+    ws = w[i0:i0 + m]
+    for r in range(m):
+        s -= src[r] * ws[r]
+    return s
 
 
 @njit(cache=True, inline="always")
@@ -445,11 +476,16 @@ def solve(S, nupd, w, out, keep, rate, sign):
      slot_at, pos_of, iw, fw, ow) = S
     n = out.shape[0]
     m1 = h[H_M1]
-    for j in range(m1, n):
+    kt = n - h[H_TAIL]
+    for j in range(m1, kt):
         x = w[j]
         if x != 0.0:
             for p in range(Lp[j], Lp[j + 1]):
                 w[Li[p]] -= Lx[p] * x
+    for j in range(kt, n):
+        x = w[j]
+        if x != 0.0:
+            _axpy_tail(w, j + 1, Lx, Lp[j], n - 1 - j, x)
     for t in range(nupd):
         p = Rpos[t]
         s = w[p]
@@ -477,7 +513,12 @@ def solve(S, nupd, w, out, keep, rate, sign):
         if x != 0.0:
             x = x / Ud[j]
             w[j] = x
-            for e in range(Us[j], Ue[j]):
+            e1 = Ue[j]
+            if kt <= j < n and dead[j] == 0:
+                # the tail's block part: rows kt .. j-1, the column's last j - kt entries
+                e1 -= j - kt
+                _axpy_tail(w, kt, Ux, e1, j - kt, x)
+            for e in range(Us[j], e1):
                 w[Ui[e]] -= Ux[e] * x
     dmax = 0.0
     if keep:
@@ -551,10 +592,14 @@ def btran(S, nupd, c, out):
             for e in range(Rs[t], Rs[t + 1]):
                 w[Ri[e]] -= Rx[e] * s
     m1 = h[H_M1]
+    kt = n - h[H_TAIL]
     for j in range(n - 1, m1 - 1, -1):  # L^T: row j of L^T is column j of L
         s = w[j]
-        for p in range(Lp[j], Lp[j + 1]):
-            s -= Lx[p] * w[Li[p]]
+        if j >= kt:  # (the tail's column: rows j+1 .. n-1 in order, zeros stored)
+            s = _dot_tail(s, w, j + 1, Lx, Lp[j], n - 1 - j)
+        else:
+            for p in range(Lp[j], Lp[j + 1]):
+                s -= Lx[p] * w[Li[p]]
         w[j] = s
     for i in range(n):
         out[i] = w[pinv[i]]
@@ -567,6 +612,7 @@ def _utsolve(S, w, start, N):
     (h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead, Rs, Ri, Rx, Rpos, pinv,
      slot_at, pos_of, iw, fw, ow) = S
     n = pinv.shape[0]
+    kt = n - h[H_TAIL]
     for j in range(start, min(n, N)):
         if dead[j] != 0:
             w[j] = 0.0
@@ -575,6 +621,11 @@ def _utsolve(S, w, start, N):
         if x != 0.0:
             x = x / Ud[j]
             w[j] = x
+            if j >= kt:
+                # a row of the dense tail: columns j+1 .. n-1 in order, zeros stored; a
+                # dead column's entry lands on w[k], which is zeroed when k is reached
+                _axpy_tail(w, j + 1, Urx, Urp[j], n - 1 - j, x)
+                continue
             for e in range(Urp[j], Urp[j + 1]):
                 k = Urj[e]
                 if dead[k] == 0:
@@ -639,7 +690,10 @@ def replace_column(S, nupd, slot, d, dnorm, update_tol, stab_tol, growth_limit,
         return UPD_REFUSED
     if not gmax <= growth_limit:
         return UPD_GROWTH
-    old_len = Ue[p] - Us[p]
+    old_len = 0  # (column p's entries: the dense tail stores zeros)
+    for e in range(Us[p], Ue[p]):
+        if Ux[e] != 0.0:
+            old_len += 1
     if (h[H_NNZL] + h[H_NNZU] - old_len + nc + h[H_NNZR] + ne > fill_factor * h[H_BASE]
             or h[H_UFREE] + nc > Ui.shape[0] or Rs[nupd] + ne > Ri.shape[0]):
         return UPD_FILL

@@ -21,8 +21,10 @@ block: each remaining column is solved with L_k as above (its entries on pivoted
 its part of U), the rest of it -- its column of the Schur complement -- goes to a dense
 column-major block, and the block is factorized by right-looking LU with the same pivot
 rule (partial pivoting with the matched row kept within the threshold, the rank test
-against the column's own norm).  The factors are stored as the sparse steps store them, so
-FTRAN, BTRAN and the Forrest-Tomlin updates are unchanged.  The block lives in the row-eta
+against the column's own norm).  The factors are stored as the sparse steps store them -- but
+the block's parts whole, zeros too, over consecutive positions, so that FTRAN and BTRAN run
+over the tail's columns as dense columns (:mod:`compass_sparse.path._sparse_lu`) -- and the
+Forrest-Tomlin updates are unchanged.  The block lives in the row-eta
 storage, which a factorization empties; a block that does not fit there is not made (the
 steps go on sparse).
 """
@@ -248,8 +250,9 @@ def dense_tail(t0, k0, ufree, order, sk, si, Mp, Mi, Mx, rI, rX, art_sign, S, ra
     """Eliminate the columns order[t0:] as a dense block after k0 sparse steps (see the
     module docstring; the caller checked :func:`tail_fits`).  Returns (positions made,
     U's next free entry, the count of dependent slots in rep_slot, the work units: the
-    solves', the block's multiply-adds / DENSE_WORK_DIVISOR and its entries), or
-    (-1, 0, 0, 0) when L or U did not fit in their storage."""
+    solves', the block's multiply-adds / DENSE_WORK_DIVISOR and its entries, the zeros
+    stored in L and in U), or (-1, 0, 0, 0, 0, 0) when L or U did not fit in their
+    storage."""
     (h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead, Rs, Ri, Rx, Rpos, pinv,
      slot_at, pos_of, iw, fw, ow) = S
     n = sk.shape[0]
@@ -268,16 +271,21 @@ def dense_tail(t0, k0, ufree, order, sk, si, Mp, Mi, Mx, rI, rX, art_sign, S, ra
     ufree, work = _stage(t0, nc, nr, order, sk, si, Mp, Mi, Mx, rI, rX, art_sign, S, pref,
                          ufree, (rowpos, tstart, tcount, tpref))
     if ufree < 0:
-        return -1, 0, 0, 0
+        return -1, 0, 0, 0, 0, 0
     A = Rx
     npiv, flops = _block_lu(nr, nc, A, drow, rowpos, fw[2], tpref, tpiv, rank_tol,
                             piv_thresh)
     work += flops // DENSE_WORK_DIVISOR + 2 * nr * nc
     # commit, column by column in pivot order: U (the staged part moved down to w, then
-    # the block's part above the diagonal), the diagonal, L (below it, by row index)
+    # the block's part above the diagonal), the diagonal, L (below it, by row index).  The
+    # block's parts are stored whole, zeros too, over consecutive positions: the solves
+    # then run over them as dense columns (_sparse_lu.solve); h[H_ZL], h[H_ZU] count
+    # the zeros, which the counts of entries leave out.
     w = first
     lp = Lp[k0]
     capL = Li.shape[0]
+    zl = 0
+    zu = 0
     for j in range(nc):
         s = order[t0 + j]
         r = tpiv[j]
@@ -293,20 +301,20 @@ def dense_tail(t0, k0, ufree, order, sk, si, Mp, Mi, Mx, rI, rX, art_sign, S, ra
             Ux[w] = Ux[e]
             w += 1
         for q in range(r):
-            if A[col + q] != 0.0:
-                Ui[w] = k0 + q
-                Ux[w] = A[col + q]
-                w += 1
+            Ui[w] = k0 + q
+            Ux[w] = A[col + q]
+            zu += A[col + q] == 0.0
+            w += 1
         Ue[k] = w
         Ud[k] = A[col + r]
+        if lp + nr - r - 1 > capL:
+            return -1, 0, 0, 0, 0, 0
         for q in range(r + 1, nr):
-            if A[col + q] != 0.0:
-                if lp >= capL:
-                    return -1, 0, 0, 0
-                Li[lp] = drow[q]
-                Lx[lp] = A[col + q]
-                lp += 1
+            Li[lp] = drow[q]
+            Lx[lp] = A[col + q]
+            zl += A[col + q] == 0.0
+            lp += 1
         Lp[k + 1] = lp
         pinv[drow[r]] = k
         slot_at[k] = s
-    return k0 + npiv, w, nrep, work
+    return k0 + npiv, w, nrep, work, zl, zu

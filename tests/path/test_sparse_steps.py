@@ -150,3 +150,118 @@ def test_dense_tail_that_does_not_fit_in_l_asks_for_more_storage():
     nrep, S, _ = _factor(M, sk, nnz_guess=4 * n * n)
     assert nrep == 0
     _check_solves(S, M)
+
+
+def _ftran_by_indices(S, nupd, b):
+    """B^{-1} b through the factors' row indices, entry by entry (the definition of
+    _sparse_lu.solve, in Python)."""
+    h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud = S[:9]
+    Rs, Ri, Rx, Rpos, pinv, slot_at, pos_of = S[13:20]
+    n = b.size
+    N = n + nupd
+    w = np.zeros(N)
+    w[pinv] = b
+    for j in range(h[SL.H_M1], n):
+        x = w[j]
+        if x != 0.0:
+            for p in range(Lp[j], Lp[j + 1]):
+                w[Li[p]] -= Lx[p] * x
+    for t in range(nupd):
+        p = Rpos[t]
+        s = w[p]
+        for e in range(Rs[t], Rs[t + 1]):
+            s -= Rx[e] * w[Ri[e]]
+        w[n + t] = s
+        w[p] = 0.0
+    for j in range(N - 1, -1, -1):
+        x = w[j]
+        if x != 0.0:
+            x = x / Ud[j]
+            w[j] = x
+            for e in range(Us[j], Ue[j]):
+                w[Ui[e]] -= Ux[e] * x
+    return w[pos_of]
+
+
+def _btran_by_indices(S, nupd, c):
+    """B^{-T} c through the row form and the row indices (the definition of btran)."""
+    h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead = S[:13]
+    Rs, Ri, Rx, Rpos, pinv, slot_at, pos_of = S[13:20]
+    n = c.size
+    N = n + nupd
+    w = np.zeros(N)
+    w[pos_of] = c
+    for j in range(N):
+        if dead[j]:
+            w[j] = 0.0
+            continue
+        if j < n:
+            x = w[j]
+            if x != 0.0:
+                x = x / Ud[j]
+                w[j] = x
+                for e in range(Urp[j], Urp[j + 1]):
+                    if not dead[Urj[e]]:
+                        w[Urj[e]] -= Urx[e] * x
+        else:
+            s = w[j]
+            for e in range(Us[j], Ue[j]):
+                s -= Ux[e] * w[Ui[e]]
+            w[j] = s / Ud[j]
+    for t in range(nupd - 1, -1, -1):
+        s = w[n + t]
+        w[n + t] = 0.0
+        if s != 0.0:
+            w[Rpos[t]] += s
+            for e in range(Rs[t], Rs[t + 1]):
+                w[Ri[e]] -= Rx[e] * s
+    for j in range(n - 1, h[SL.H_M1] - 1, -1):
+        s = w[j]
+        for p in range(Lp[j], Lp[j + 1]):
+            s -= Lx[p] * w[Li[p]]
+        w[j] = s
+    return w[pinv]
+
+
+def test_dense_tail_solves_as_through_the_indices_bit_for_bit_after_updates():
+    """The tail's columns are stored whole (zeros too) over consecutive positions and the
+    solves run over them as dense columns; FTRAN and BTRAN give, bit for bit, what the
+    same factors give through their row indices -- on the fresh factors and after
+    Forrest-Tomlin updates that kill columns of the tail -- and the counts of entries
+    leave the stored zeros out."""
+    n = 200
+    M = _random(n, 0.03, 0)
+    Mc = sp.csc_matrix(M)
+    Mc.sort_indices()
+    sk = np.full(n, VAR_Z, dtype=np.int64)
+    units = np.random.default_rng(1).choice(n, 70, replace=False)
+    sk[units] = VAR_W
+    nrep, S, _ = _factor(M, sk, nnz_guess=n * n)
+    h = S[0]
+    assert nrep == 0 and h[SL.H_TAIL] >= ST.DENSE_TAIL_MIN
+    kt = n - h[SL.H_TAIL]
+    Lp, Ux, Us, Ue = S[1], S[7], S[4], S[5]
+    assert h[SL.H_ZL] + h[SL.H_ZU] > 0  # (a tail of a sparse basis holds zeros)
+    assert h[SL.H_NNZL] == np.count_nonzero(S[3][:Lp[n]])
+    assert h[SL.H_NNZU] - n == np.count_nonzero(Ux[:h[SL.H_UFREE]])
+    rng = np.random.default_rng(7)
+    Mp, Mi = Mc.indptr.astype(np.int64), Mc.indices.astype(np.int64)
+    d, rate = np.zeros(n), np.zeros(n)
+    nupd = 0
+    for enter in units[:6]:
+        for trial in range(2):
+            b = rng.standard_normal(n)
+            x, y = np.zeros(n), np.zeros(n)
+            SL.ftran_dense(S, nupd, b, x)
+            SL.btran(S, nupd, b, y)
+            assert np.array_equal(x, _ftran_by_indices(S, nupd, b))
+            assert np.array_equal(y, _btran_by_indices(S, nupd, b))
+        # z_enter enters in place of the live tail slot with the largest |d|
+        dmax = SL.ftran_column(VAR_Z, enter, Mp, Mi, Mc.data, np.zeros(0, np.int64),
+                               np.zeros(0), np.ones(n, np.int64), S, nupd, d, rate, 1.0)
+        pos_of = S[19]
+        tail_slots = [s for s in range(n) if kt <= pos_of[s] < n]
+        leave = max(tail_slots, key=lambda s: abs(d[s]))
+        assert SL.replace_column(S, nupd, leave, d, dmax, 1e-11, 1e-8, 1e8, 2.0) == 0
+        nupd += 1
+    assert np.count_nonzero(S[12][kt:n]) == 6  # six tail positions dead
