@@ -53,11 +53,12 @@ Forrest and Tomlin 1972): after k updates ``R_k ... R_1 L^{-1} P B Q_k = U_k`` w
 positions 0 .. n+k-1 (a replaced position is *dead*: empty column, unit diagonal);
 FTRAN ``w = P a; w = L^{-1} w; w = R_k...R_1 w; w = U^{-1} w; x = Q^T w``, each solve
 column-oriented and skipping zeros, so a sparse right-hand side costs O(n) index checks
-plus its flops.  The dense tail's columns and rows (the last ``h[H_TAIL]``
-positions) are stored whole, zeros too, over consecutive positions: the solves run over
-them as contiguous loops (:func:`_axpy_tail`, :func:`_dot_tail`) with the same operation
-on each entry as through the indices, so the same bits (on a late traffic basis, n = 2452
-and a 184-column tail: FTRAN 66-81 -> 36-54 us, BTRAN 82-86 -> 54-55 us).  The update replacing position p by a column with spike s:
+plus its flops.  The dense tail's columns and rows (the last ``h[H_TAIL]`` positions)
+are stored whole, zeros too, over consecutive positions: the solves run over them as
+contiguous loops (:func:`_axpy_tail`, :func:`_dot_tail`) with the same operation on each
+entry as through the indices, so the same bits (on a late traffic basis, n = 2452 and a
+184-column tail: FTRAN 66-81 -> 36-54 us, BTRAN 82-86 -> 54-55 us).  The update replacing
+position p by a column with spike s:
 ``y = U^{-T} e_p`` (row form of the fresh U plus the appended columns), row eta
 ``c_i = -u_pp y_i`` (i > p), new diagonal ``d2 = u_pp y^T s`` appended as position
 n + k with column s (row p dropped); position p dies.
@@ -474,8 +475,8 @@ def solve(S, nupd, w, out, keep, rate, sign):
     With ``keep`` (a column's FTRAN) the spike (the vector before the U solve) is left in
     fw[2], its largest |entry| in fw[2]'s last element (never a position of a spike) and
     its nonzeros' count in h[H_SPNNZ] and their positions, increasing, in iw (for
-    replace_column), and ``rate`` = sign * out: the passes
-    the path would make over these vectors, made in the solve's own."""
+    replace_column), and ``rate`` = sign * out: the passes the path would make over these
+    vectors, made in the solve's own."""
     (h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead, Rs, Ri, Rx, Rpos, pinv,
      slot_at, pos_of, iw, fw, ow) = S
     n = out.shape[0]

@@ -21,12 +21,12 @@ block: each remaining column is solved with L_k as above (its entries on pivoted
 its part of U), the rest of it -- its column of the Schur complement -- goes to a dense
 column-major block, and the block is factorized by right-looking LU with the same pivot
 rule (partial pivoting with the matched row kept within the threshold, the rank test
-against the column's own norm).  The factors are stored as the sparse steps store them -- but
-the block's parts whole, zeros too, over consecutive positions, so that FTRAN and BTRAN run
-over the tail's columns as dense columns (:mod:`compass_sparse.path._sparse_lu`) -- and the
-Forrest-Tomlin updates are unchanged.  The block lives in the row-eta
-storage, which a factorization empties; a block that does not fit there is not made (the
-steps go on sparse).
+against the column's own norm).  The factors are stored as the sparse steps store them,
+but the block's parts whole, zeros too, over consecutive positions, so that FTRAN and BTRAN
+run over the tail's columns as dense columns (:mod:`compass_sparse.path._sparse_lu`); the
+Forrest-Tomlin updates are unchanged.  The block is factorized in the row-eta storage,
+which a factorization empties; a block that does not fit there is not made (the steps go
+on sparse).
 """
 from __future__ import annotations
 
