@@ -91,7 +91,8 @@ def ratio_test(sk, si, xb, rate, lb, ub, piv_tol, tol, t_lower):
     out from its kind.)"""
     unknown = np.full(sk.shape[0], np.nan)
     return ratio_test_bounds(sk, si, xb, rate, lb, ub, unknown, unknown, piv_tol, tol,
-                             t_lower, np.empty(sk.shape[0], np.int64))
+                             t_lower, np.empty(sk.shape[0], np.int64),
+                             np.empty(sk.shape[0]))
 
 
 @njit(cache=True, inline="always")
@@ -123,20 +124,22 @@ def slot_bounds(sk, si, lb, ub, lo, hi):
 
 
 @njit(cache=True)
-def ratio_test_bounds(sk, si, xb, rate, lb, ub, lo, hi, piv_tol, tol, t_lower, cand):
+def ratio_test_bounds(sk, si, xb, rate, lb, ub, lo, hi, piv_tol, tol, t_lower, cand, croom):
     """:func:`ratio_test` with the slots' bounds read from (lo, hi) (:func:`slot_bounds`;
     NaN: worked out from the slot's kind) -- the same slot and values, bit for bit, as
-    with every bound worked out: the compiled engines' loop.  ``cand`` (n integers, work
-    space) receives pass 1's candidates for pass 2.
+    with every bound worked out: the compiled engines' loop.  ``cand`` (n integers) and
+    ``croom`` (n floats), work space, receive pass 1's candidates and their rooms for
+    pass 2.
 
     Why it is written so (each measured on the pivots of a traffic solve): the bound a
     slot moves towards and its room are chosen by selects, not branches on the rate's
     sign, which a dense rate vector mispredicts half the time; and pass 1 lists every slot
     whose room is within ``theta1 * _CLEARLY * |rate|`` for the theta1 of the moment -- a
     superset of pass 2's slots, since theta1 only decreases and rounding is monotone --
-    so that pass 2 reads that short list, not all n slots.  (Each pass works out the bound
-    and the room in the loop itself: an inlined helper taking the arrays made the test 18-21
-    times slower on those rate vectors, by reference counting per slot.)"""
+    so that pass 2 reads that short list, with each candidate's room, not all n slots.
+    (The bound and the room are worked out in the loop itself: an inlined helper taking
+    the arrays made the test 18-21 times slower on those rate vectors, by reference
+    counting per slot.)"""
     n = sk.shape[0]
     theta1 = np.inf
     nc = 0
@@ -158,6 +161,7 @@ def ratio_test_bounds(sk, si, xb, rate, lb, ub, lo, hi, piv_tol, tol, t_lower, c
             theta1 = min(theta1, a / ar)
         if room <= theta1 * _CLEARLY * ar and np.isfinite(bnd):
             cand[nc] = k
+            croom[nc] = room
             nc += 1
     if not np.isfinite(theta1):
         return -1, np.inf, 0
@@ -169,13 +173,9 @@ def ratio_test_bounds(sk, si, xb, rate, lb, ub, lo, hi, piv_tol, tol, t_lower, c
     best_up = 0
     for c in range(nc):
         k = cand[c]
+        room = croom[c]
         r = rate[k]
         up = r > 0.0
-        bnd = hi[k] if up else lo[k]
-        if bnd != bnd:
-            b2 = _slot_bounds(sk[k], si[k], xb[k], lb, ub, t_lower)
-            bnd = b2[1] if up else b2[0]
-        room = max(bnd - xb[k] if up else xb[k] - bnd, 0.0)
         ar = abs(r)
         if room > bound * ar or room / ar > theta1:
             continue

@@ -427,7 +427,8 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
     col = work[6]
     slo = work[8]  # the slots' bounds (refactor sets them; each exchange its slot's)
     shi = work[9]
-    cand = D[3][W_CAND]
+    cand = D[3][W_CAND]  # (the ratio test's candidates and their rooms)
+    croom = work[10]
     start = istate[I_PIV]
     t_progress = tol[T_PROGRESS]
     while True:
@@ -467,7 +468,8 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
                 rate[k] = -es * d[k]
         theta_self = _room_self(ek, ei, es, ev, t, lb, ub)
         leave, theta, leave_up = ratio_test_bounds(sk, si, xb, rate, lb, ub, slo, shi,
-                                                   piv_tol, tol[T_RATIO], t_lower, cand)
+                                                   piv_tol, tol[T_RATIO], t_lower, cand,
+                                                   croom)
         if (leave >= 0 and theta < theta_self and sk[leave] == VAR_T and leave_up == 0
                 and lim[L_FREE_BELOW] != 0 and istate[I_BELOW] < 0
                 and fstate[F_BEST_T] <= t_progress):
@@ -476,7 +478,8 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
             fstate[F_TLOW] = t_lower
             istate[I_BELOW] = pivots
             leave, theta, leave_up = ratio_test_bounds(sk, si, xb, rate, lb, ub, slo, shi,
-                                                       piv_tol, tol[T_RATIO], t_lower, cand)
+                                                       piv_tol, tol[T_RATIO], t_lower, cand,
+                                                       croom)
         if leave < 0 and not np.isfinite(theta_self):
             return RAY, MSG_RAY_UNBOUNDED
         if leave < 0 or theta_self <= theta:

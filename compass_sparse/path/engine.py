@@ -104,7 +104,8 @@ class PathEngine:
         """The path's work areas, once per engine: a solve whose paths all end by the
         direct step (direct_step.py) never needs them."""
         n = self.n
-        self.work = np.zeros((10, n))  # (rows 8, 9: the slots' bounds)
+        # (rows 8, 9: the slots' bounds; row 10: the ratio test's candidates' rooms)
+        self.work = np.zeros((11, n))
         self.n_breakpoints = max(1, min(200, 5_000_000 // max(n, 1)))
         self.bp_t = np.zeros(self.n_breakpoints)
         self.bp_x = np.zeros((self.n_breakpoints, n))

@@ -86,7 +86,7 @@ def test_ratio_tests_agree_with_the_definition_bit_for_bit(seed, t_lower):
         want = _reference(sk, si, xb, rate, lb, ub, piv_tol, tol, t_lower)
         got = PK.ratio_test(sk, si, xb, rate, lb, ub, piv_tol, tol, t_lower)
         fast = PK.ratio_test_bounds(sk, si, xb, rate, lb, ub, lo, hi, piv_tol, tol, t_lower,
-                                    np.empty(sk.size, np.int64))
+                                    np.empty(sk.size, np.int64), np.empty(sk.size))
         assert tuple(got) == tuple(want) == tuple(fast), (piv_tol, tol, want, got, fast)
 
 
