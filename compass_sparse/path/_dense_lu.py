@@ -110,13 +110,11 @@ from ._kernels import VAR_A, VAR_T, VAR_Z, unit_sign
 # rows of the integer factor array ``perm`` (N_PERM x (n + limit)): the pivot row of each
 # elimination step, the slot at each position (-1: replaced), the position of each slot,
 # the position eliminated by each row eta, and P_INFO; then the work of a factorization
-# (the slots and rows of a repair, and four rows for factor()), the ratio test's
-# candidate slots (W_CAND, _kernels.ratio_test_bounds) and the slots of the nonzero rates
-# (W_RATES, _kernels.rate_slots), preallocated with the rest
+# (the slots and rows of a repair, and four rows for factor()), and the ratio test's
+# candidate slots (W_CAND, _kernels.ratio_test_bounds), preallocated with the rest
 P_ROW, P_SLOT, P_POS, P_ETA, P_INFO, W_REP_SLOT, W_REP_ROW, W_FACTOR = range(8)
 W_CAND = W_FACTOR + 4
-W_RATES = W_CAND + 1
-N_PERM = W_RATES + 1
+N_PERM = W_CAND + 1
 # perm[P_INFO, 0]: the number m1 of unit columns of the factorization; they are its first
 # steps, their columns of L are zero and their columns of U are zero above the diagonal,
 # so every solve and update skips them

@@ -92,40 +92,7 @@ def ratio_test(sk, si, xb, rate, lb, ub, piv_tol, tol, t_lower):
     unknown = np.full(sk.shape[0], np.nan)
     return ratio_test_bounds(sk, si, xb, rate, lb, ub, unknown, unknown, piv_tol, tol,
                              t_lower, np.empty(sk.shape[0], np.int64),
-                             np.empty(sk.shape[0]), ALL_SLOTS, -1)
-
-
-ALL_SLOTS = np.empty(0, dtype=np.int64)
-"""No slot list (``nl`` = -1): every slot (:func:`rate_slots`)."""
-
-
-@njit(cache=True)
-def rate_slots(rate, lst, share, keep):
-    """The slots of the nonzero rates, in increasing order, in lst[:count], and then slot
-    ``keep`` (>= 0) when its rate is zero; returns count, or -1 (no list: every slot) when
-    more than n // ``share`` rates are nonzero or ``share`` is 0.  The ratio test and the
-    step then visit the listed slots only (``nl`` >= 0 in :func:`ratio_test_bounds` and
-    :func:`advance_values`): a zero rate is skipped by the ratio test in any case, and the
-    step leaves its slot's value as it is (within its bounds: every value is clipped
-    after each step, at each exchange and after each refactorization) -- but t's, whose
-    lower bound 0 may come back while t is below it (the path passes ``keep`` = t's slot,
-    which the step then clips as before).  The scan stops at the first rate past the
-    share, so a dense rate vector costs a fraction of a pass."""
-    n = rate.shape[0]
-    if share <= 0:
-        return -1
-    cap = n // share
-    c = 0
-    for k in range(n):
-        if rate[k] != 0.0:
-            if c >= cap:
-                return -1
-            lst[c] = k
-            c += 1
-    if keep >= 0 and rate[keep] == 0.0:
-        lst[c] = keep
-        c += 1
-    return c
+                             np.empty(sk.shape[0]))
 
 
 @njit(cache=True, inline="always")
@@ -157,14 +124,12 @@ def slot_bounds(sk, si, lb, ub, lo, hi):
 
 
 @njit(cache=True)
-def ratio_test_bounds(sk, si, xb, rate, lb, ub, lo, hi, piv_tol, tol, t_lower, cand, croom,
-                      lst, nl):
+def ratio_test_bounds(sk, si, xb, rate, lb, ub, lo, hi, piv_tol, tol, t_lower, cand, croom):
     """:func:`ratio_test` with the slots' bounds read from (lo, hi) (:func:`slot_bounds`;
     NaN: worked out from the slot's kind) -- the same slot and values, bit for bit, as
     with every bound worked out: the compiled engines' loop.  ``cand`` (n integers) and
     ``croom`` (n floats), work space, receive pass 1's candidates and their rooms for
-    pass 2.  Pass 1 visits the slots lst[:nl] (:func:`rate_slots`: the nonzero rates in
-    increasing order, so the same slot), or every slot when ``nl`` < 0.
+    pass 2.
 
     Why it is written so (each measured on the pivots of a traffic solve): the bound a
     slot moves towards and its room are chosen by selects, not branches on the rate's
@@ -178,8 +143,7 @@ def ratio_test_bounds(sk, si, xb, rate, lb, ub, lo, hi, piv_tol, tol, t_lower, c
     n = sk.shape[0]
     theta1 = np.inf
     nc = 0
-    for c0 in range(n if nl < 0 else nl):
-        k = c0 if nl < 0 else lst[c0]
+    for k in range(n):
         r = rate[k]
         if -piv_tol <= r <= piv_tol:
             continue
@@ -256,13 +220,11 @@ def project_bounds(sk, si, xb, lb, ub, lo, hi, t_lower):
 
 
 @njit(cache=True)
-def advance_values(sk, si, xb, rate, theta, lb, ub, lo, hi, t_lower, skip, lst, nl):
+def advance_values(sk, si, xb, rate, theta, lb, ub, lo, hi, t_lower, skip):
     """xb += theta rate, each value then clipped to its slot's bounds (the step and
     project_bounds in one pass, the same operations on each slot), but slot
-    ``skip`` (-1: none), which the caller sets; over the slots lst[:nl] only when ``nl``
-    >= 0 (:func:`rate_slots`).  (Written out, as project_bounds.)"""
-    for c0 in range(sk.shape[0] if nl < 0 else nl):
-        k = c0 if nl < 0 else lst[c0]
+    ``skip`` (-1: none), which the caller sets.  (Written out, as project_bounds.)"""
+    for k in range(sk.shape[0]):
         if k != skip:
             v = xb[k] + theta * rate[k]
             a = lo[k]

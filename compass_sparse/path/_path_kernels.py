@@ -28,11 +28,11 @@ from ._sparse_lu import factor as sp_factor, ftran_column as sp_ftran_column
 from ._sparse_lu import ftran_dense as sp_ftran_dense, replace_column as sp_replace_column
 from ._sparse_lu import count_solve, refactor_pays
 from ._dense_lu import (P_ROW, P_SLOT, UPD_GROWTH, UPD_LIMIT, UPD_OK, UPD_REFUSED, UPD_UNSTABLE,
-                        W_CAND, W_FACTOR, W_RATES, W_REP_ROW, W_REP_SLOT, basis_column, factor,
-                        ftran, lu_factor, replace_column)
+                        W_CAND, W_FACTOR, W_REP_ROW, W_REP_SLOT, basis_column, factor, ftran,
+                        lu_factor, replace_column)
 from ._kernels import (VAR_A, VAR_S, VAR_T, VAR_V, VAR_W, VAR_Z, advance_values,
-                       project_bounds, project_slot, rate_slots, ratio_test_bounds,
-                       set_slot_bounds, slot_bounds)
+                       project_bounds, project_slot, ratio_test_bounds, set_slot_bounds,
+                       slot_bounds)
 from ._slot_kernels import slot_table
 
 FAC_DENSE, FAC_SPARSE = 0, 1
@@ -53,8 +53,8 @@ N_FSTATE = 6
 # tolerances (tol) and limits (lim)
 T_PIV, T_RATIO, T_RANK, T_UPDATE, T_STAB, T_GROWTH, T_PROGRESS, T_FILL, T_THRESH = range(9)
 N_TOL = 9
-L_MINOR, L_CYCLE, L_CHUNK, L_FREE_BELOW, L_BELOW, L_RATES = range(6)
-N_LIM = 6
+L_MINOR, L_CYCLE, L_CHUNK, L_FREE_BELOW, L_BELOW = range(5)
+N_LIM = 5
 # the per-pivot records of path_loop (a minor log): columns, and the two kinds of pivot
 REC_COLUMNS = 7
 REC_FLIP, REC_EXCHANGE = 0, 1
@@ -429,7 +429,6 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
     shi = work[9]
     cand = D[3][W_CAND]  # (the ratio test's candidates and their rooms)
     croom = work[10]
-    rlist = D[3][W_RATES]  # (the slots of the nonzero rates, rate_slots)
     start = istate[I_PIV]
     t_progress = tol[T_PROGRESS]
     while True:
@@ -467,11 +466,10 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
             fstate[F_ES] = es
             for k in range(n):
                 rate[k] = -es * d[k]
-        nl = rate_slots(rate, rlist, lim[L_RATES] if fk != FAC_DENSE else 0, t_slot)
         theta_self = _room_self(ek, ei, es, ev, t, lb, ub)
         leave, theta, leave_up = ratio_test_bounds(sk, si, xb, rate, lb, ub, slo, shi,
                                                    piv_tol, tol[T_RATIO], t_lower, cand,
-                                                   croom, rlist, nl)
+                                                   croom)
         if (leave >= 0 and theta < theta_self and sk[leave] == VAR_T and leave_up == 0
                 and lim[L_FREE_BELOW] != 0 and istate[I_BELOW] < 0
                 and fstate[F_BEST_T] <= t_progress):
@@ -481,12 +479,12 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
             istate[I_BELOW] = pivots
             leave, theta, leave_up = ratio_test_bounds(sk, si, xb, rate, lb, ub, slo, shi,
                                                        piv_tol, tol[T_RATIO], t_lower, cand,
-                                                       croom, rlist, nl)
+                                                       croom)
         if leave < 0 and not np.isfinite(theta_self):
             return RAY, MSG_RAY_UNBOUNDED
         if leave < 0 or theta_self <= theta:
             theta = theta_self
-            advance_values(sk, si, xb, rate, theta, lb, ub, slo, shi, t_lower, -1, rlist, nl)
+            advance_values(sk, si, xb, rate, theta, lb, ub, slo, shi, t_lower, -1)
             if ek == VAR_T:
                 fstate[F_T] = 1.0
                 return SOLVED, MSG_NONE
@@ -507,8 +505,7 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
             return ERROR, MSG_BOUNDED_SLACK
         # a basic variable blocks: update values (but the leaving slot's, which the
         # entering variable takes) and exchange columns
-        advance_values(sk, si, xb, rate, theta, lb, ub, slo, shi, t_lower, leave, rlist,
-                       nl)
+        advance_values(sk, si, xb, rate, theta, lb, ub, slo, shi, t_lower, leave)
         new_val = ev + es * theta
         lk = sk[leave]
         li = si[leave]

@@ -28,17 +28,11 @@ from . import _path_kernels as K
 from ..basis.types import BasisStats
 from .outcome import LinearCode
 
-__all__ = ["DEFAULT_UPDATE_LIMIT", "PIVOT_CHUNK", "PathEngine", "RATE_LIST_SHARE",
-           "UPDATE_LIMIT_FLOOR", "resolve_update_limit"]
+__all__ = ["DEFAULT_UPDATE_LIMIT", "PIVOT_CHUNK", "PathEngine", "UPDATE_LIMIT_FLOOR",
+           "resolve_update_limit"]
 
 PIVOT_CHUNK = 1000
 """Pivots per compiled call at most: the time limit is checked between calls."""
-
-RATE_LIST_SHARE = 4
-"""The sparse engine's ratio test and step visit only the slots of the nonzero rates
-(:func:`compass_sparse.path._kernels.rate_slots`) when at most n / RATE_LIST_SHARE rates
-are nonzero, else every slot; the same slots and values either way.  The dense engine's
-rates are dense (a dense basis inverse) and always take the full passes."""
 
 UPDATE_LIMIT_FLOOR = 50
 """factorization_update_limit is capped at max(n, this) (the bases preallocate the updates)."""
@@ -83,9 +77,6 @@ class PathEngine:
     runs_paths = True
     kind = K.FAC_DENSE
     chunk = PIVOT_CHUNK
-    rate_list_share = RATE_LIST_SHARE
-    """(:data:`RATE_LIST_SHARE`; 0: every slot always -- the reference the tests compare
-    the lists against.)"""
 
     automatic_update_limit = DEFAULT_UPDATE_LIMIT
     """The engine's update limit when factorization_update_limit is None."""
@@ -143,8 +134,7 @@ class PathEngine:
                         self.pivot_tolerance, self.stability_tolerance, self.growth_limit,
                         float(PK.T_PROGRESS), self.fill_factor, self.pivot_threshold])
         lim = np.array([int(path.minor_limit), int(opt.lemke_cycle_limit), self.chunk,
-                        int(bool(st.free_below)), int(PK.BELOW_ZERO_PIVOTS),
-                        self.rate_list_share], dtype=np.int64)
+                        int(bool(st.free_below)), int(PK.BELOW_ZERO_PIVOTS)], dtype=np.int64)
         tab = (st.sk, st.si, st.xb, st.zval, st.art_sign, self.displaced, self.enter_count)
         state = (istate, fstate, self.best_x, self.bp_t, self.bp_x, self.work)
         use_slack = slack_basis is not None

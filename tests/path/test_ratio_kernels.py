@@ -86,8 +86,7 @@ def test_ratio_tests_agree_with_the_definition_bit_for_bit(seed, t_lower):
         want = _reference(sk, si, xb, rate, lb, ub, piv_tol, tol, t_lower)
         got = PK.ratio_test(sk, si, xb, rate, lb, ub, piv_tol, tol, t_lower)
         fast = PK.ratio_test_bounds(sk, si, xb, rate, lb, ub, lo, hi, piv_tol, tol, t_lower,
-                                    np.empty(sk.size, np.int64), np.empty(sk.size),
-                                    PK.ALL_SLOTS, -1)
+                                    np.empty(sk.size, np.int64), np.empty(sk.size))
         assert tuple(got) == tuple(want) == tuple(fast), (piv_tol, tol, want, got, fast)
 
 
@@ -127,8 +126,7 @@ def test_step_with_projection_is_the_step_then_the_projection(seed, skip):
             if skip >= 0:
                 ref[skip] = xb[skip]
             got = xb.copy()
-            PK.advance_values(sk, si, got, rate, theta, lb, ub, lo, hi, t_lower, skip,
-                              PK.ALL_SLOTS, -1)
+            PK.advance_values(sk, si, got, rate, theta, lb, ub, lo, hi, t_lower, skip)
             assert np.array_equal(got.view(np.int64), ref.view(np.int64))
             one = got.copy()
             if skip >= 0:
@@ -138,76 +136,3 @@ def test_step_with_projection_is_the_step_then_the_projection(seed, skip):
                 full[skip] = 10.0 * (1 + abs(full[skip]))
                 PK.project_bounds(sk, si, full, lb, ub, lo, hi, t_lower)
                 assert np.array_equal(one.view(np.int64), full.view(np.int64))
-
-
-def _within_bounds(sk, si, xb, rate, lb, ub, t_lower):
-    """The table with its values clipped to their bounds (as every value is before a step:
-    see rate_slots) and t's slot at zero rate."""
-    lo, hi = np.empty(sk.size), np.empty(sk.size)
-    PK.slot_bounds(sk, si, lb, ub, lo, hi)
-    x = xb.copy()
-    PK.project_bounds(sk, si, x, lb, ub, lo, hi, t_lower)
-    return x, lo, hi
-
-
-@pytest.mark.parametrize("seed", range(10))
-@pytest.mark.parametrize("t_lower", [0.0, -np.inf])
-def test_ratio_test_over_the_rate_list_takes_the_same_slot_as_every_slot(seed, t_lower):
-    """Pass 1 over the slots of the nonzero rates (rate_slots, increasing order) takes the
-    same slot and values, bit for bit, as over every slot, ties included."""
-    sk, si, xb, rate, lb, ub = _table(seed)
-    rng = np.random.default_rng(seed + 7)
-    rate[rng.random(sk.size) < 0.7] = 0.0  # a sparse rate vector
-    k = rng.choice(np.flatnonzero(rate != 0.0), 3, replace=False)
-    sk[k], rate[k], xb[k] = VAR_W, -1.0, 0.25  # a tie
-    x, lo, hi = _within_bounds(sk, si, xb, rate, lb, ub, t_lower)
-    lst = np.empty(sk.size, np.int64)
-    nl = PK.rate_slots(rate, lst, 1, int(np.flatnonzero(sk == VAR_T)[0]))
-    assert 0 < nl < sk.size
-    for piv_tol, tol in ((1e-11, 1e-9), (0.0, 0.0), (1e-11, 1e-12)):
-        args = (sk, si, x, rate, lb, ub, lo, hi, piv_tol, tol, t_lower,
-                np.empty(sk.size, np.int64), np.empty(sk.size))
-        full = PK.ratio_test_bounds(*args, PK.ALL_SLOTS, -1)
-        listed = PK.ratio_test_bounds(*args, lst, nl)
-        assert tuple(listed) == tuple(full) == tuple(_reference(sk, si, x, rate, lb, ub,
-                                                                piv_tol, tol, t_lower))
-
-
-@pytest.mark.parametrize("seed", range(10))
-@pytest.mark.parametrize("skip", [-1, 0, 17])
-def test_step_over_the_rate_list_is_the_step_over_every_slot(seed, skip):
-    """On values within their bounds the step over the listed slots leaves xb as the step
-    over every slot, bit for bit -- t's slot too when its rate is zero and its lower bound
-    0 came back while t was below it (rate_slots lists it: the step clips it to 0)."""
-    sk, si, xb, rate, lb, ub = _table(seed)
-    rng = np.random.default_rng(seed + 11)
-    rate[rng.random(sk.size) < 0.7] = 0.0
-    t = int(np.flatnonzero(sk == VAR_T)[0])
-    for t_rate in (0.0, -0.5):
-        x, lo, hi = _within_bounds(sk, si, xb, rate, lb, ub, -np.inf)
-        x[t] = -0.3  # below 0, which is t's bound again from this step
-        rate[t] = t_rate
-        lst = np.empty(sk.size + 1, np.int64)
-        nl = PK.rate_slots(rate, lst, 1, t)
-        assert (t in lst[:nl]) and nl == np.count_nonzero(rate) + (t_rate == 0.0)
-        for theta in (0.0, 0.37, 2.5):
-            full, listed = x.copy(), x.copy()
-            PK.advance_values(sk, si, full, rate, theta, lb, ub, lo, hi, 0.0, skip,
-                              PK.ALL_SLOTS, -1)
-            PK.advance_values(sk, si, listed, rate, theta, lb, ub, lo, hi, 0.0, skip, lst, nl)
-            assert np.array_equal(listed.view(np.int64), full.view(np.int64))
-            if skip != t:
-                assert listed[t] >= 0.0
-
-
-def test_rate_slots_gives_up_past_the_share():
-    """More than n // share nonzero rates, or share 0: no list (-1, every slot); at the
-    share exactly: the list, in increasing order, then the kept slot if its rate is zero."""
-    rate = np.zeros(40)
-    rate[[3, 9, 17, 30]] = [1.0, -2.0, np.nan, 1e-300]
-    lst = np.empty(41, np.int64)
-    assert PK.rate_slots(rate, lst, 10, -1) == 4 and list(lst[:4]) == [3, 9, 17, 30]
-    assert PK.rate_slots(rate, lst, 10, 5) == 5 and lst[4] == 5
-    assert PK.rate_slots(rate, lst, 10, 9) == 4  # (a nonzero rate: listed once)
-    assert PK.rate_slots(rate, lst, 11, -1) == -1
-    assert PK.rate_slots(rate, lst, 0, -1) == -1

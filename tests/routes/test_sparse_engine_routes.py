@@ -268,31 +268,3 @@ def test_whole_solves_take_the_python_loops_pivots(name, make, opts, same_from, 
     assert re_.success and rp.success
     if same_from is None:
         assert np.max(np.abs(re_.x - rp.x)) <= 1e-8 * (1.0 + np.abs(rp.x).max())
-
-
-@pytest.mark.parametrize("name,make,opts", [
-    ("traffic n=912", lambda: gen.traffic_equilibrium(8).problem, {}),
-    ("obstacle m=30, no crash", lambda: gen.obstacle_problem(30, 0).problem,
-     {"crash_method": "none"}),
-    ("banded LCP n=700, no crash",
-     lambda: gen.p_matrix_lcp(700, "banded", 3, "mixed").problem, {"crash_method": "none"}),
-])
-def test_rate_lists_leave_every_pivot_and_the_point_bit_for_bit(name, make, opts, monkeypatch):
-    """The ratio test and the step over the slots of the nonzero rates (while at most
-    n / RATE_LIST_SHARE rates are nonzero) against both over every slot
-    (rate_list_share 0): the same pivots, counts and point, bit for bit, on whole solves;
-    and the lists were taken (a share of 1 lists every rate vector: the same again)."""
-    from compass_sparse.path import engine as E
-
-    problem = make()
-    runs = []
-    for share in (0, E.RATE_LIST_SHARE, 1):
-        monkeypatch.setattr(E.PathEngine, "rate_list_share", share)
-        runs.append(_minor_pivots(problem.with_start(problem.x0), opts))
-    (piv0, r0), *others = runs
-    assert r0.routes["path"] == "sparse engine" and r0.success and r0.minor_iterations > 0
-    for piv, r in others:
-        assert piv == piv0
-        assert (r.status, r.nit, r.minor_iterations, r.factorizations) == (
-            r0.status, r0.nit, r0.minor_iterations, r0.factorizations)
-        assert r.x.tobytes() == r0.x.tobytes()
