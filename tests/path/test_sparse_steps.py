@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+from compass_sparse.basis import _kernels as BK
 from compass_sparse.path import _sparse_lu as SL
 from compass_sparse.path import _sparse_steps as ST
 from compass_sparse.path._dense_lu import N_PERM, W_REP_ROW, W_REP_SLOT
@@ -154,67 +155,31 @@ def test_dense_tail_that_does_not_fit_in_l_asks_for_more_storage():
 
 def _ftran_by_indices(S, nupd, b):
     """B^{-1} b through the factors' row indices, entry by entry (the definition of
-    _sparse_lu.solve, in Python)."""
+    _sparse_lu.solve): the basis manager's triangular solves and row etas, which make the
+    same operations through the indices."""
     h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud = S[:9]
     Rs, Ri, Rx, Rpos, pinv, slot_at, pos_of = S[13:20]
     n = b.size
     N = n + nupd
     w = np.zeros(N)
     w[pinv] = b
-    for j in range(h[SL.H_M1], n):
-        x = w[j]
-        if x != 0.0:
-            for p in range(Lp[j], Lp[j + 1]):
-                w[Li[p]] -= Lx[p] * x
-    for t in range(nupd):
-        p = Rpos[t]
-        s = w[p]
-        for e in range(Rs[t], Rs[t + 1]):
-            s -= Rx[e] * w[Ri[e]]
-        w[n + t] = s
-        w[p] = 0.0
-    for j in range(N - 1, -1, -1):
-        x = w[j]
-        if x != 0.0:
-            x = x / Ud[j]
-            w[j] = x
-            for e in range(Us[j], Ue[j]):
-                w[Ui[e]] -= Ux[e] * x
+    BK.lsolve(Lp, Li, Lx, w, h[SL.H_M1])
+    BK.apply_etas(Rs, Ri, Rx, Rpos, n + np.arange(nupd, dtype=np.int64), nupd, w)
+    BK.usolve(Us, Ue, Ui, Ux, Ud, w, N)
     return w[pos_of]
 
 
 def _btran_by_indices(S, nupd, c):
-    """B^{-T} c through the row form and the row indices (the definition of btran)."""
+    """B^{-T} c through the row form and the row indices (the definition of btran): the
+    basis manager's U^T solve and transposed row etas, then L^T by dot products."""
     h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead = S[:13]
     Rs, Ri, Rx, Rpos, pinv, slot_at, pos_of = S[13:20]
     n = c.size
     N = n + nupd
     w = np.zeros(N)
     w[pos_of] = c
-    for j in range(N):
-        if dead[j]:
-            w[j] = 0.0
-            continue
-        if j < n:
-            x = w[j]
-            if x != 0.0:
-                x = x / Ud[j]
-                w[j] = x
-                for e in range(Urp[j], Urp[j + 1]):
-                    if not dead[Urj[e]]:
-                        w[Urj[e]] -= Urx[e] * x
-        else:
-            s = w[j]
-            for e in range(Us[j], Ue[j]):
-                s -= Ux[e] * w[Ui[e]]
-            w[j] = s / Ud[j]
-    for t in range(nupd - 1, -1, -1):
-        s = w[n + t]
-        w[n + t] = 0.0
-        if s != 0.0:
-            w[Rpos[t]] += s
-            for e in range(Rs[t], Rs[t + 1]):
-                w[Ri[e]] -= Rx[e] * s
+    BK.utsolve(Urp, Urj, Urx, dead, n, Us, Ue, Ui, Ux, Ud, w, 0, N)
+    BK.apply_etas_t(Rs, Ri, Rx, Rpos, n + np.arange(nupd, dtype=np.int64), nupd, w)
     for j in range(n - 1, h[SL.H_M1] - 1, -1):
         s = w[j]
         for p in range(Lp[j], Lp[j + 1]):
