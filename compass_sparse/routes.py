@@ -74,7 +74,6 @@ vectors of length n (224 MB at n = 1e6), and above a few thousand variables the 
 Python a major iteration saves is a vanishing share of its factorizations."""
 
 
-
 @dataclass(frozen=True)
 class Routes:
     """The routes of one solve (see the module docstring for each field's values)."""
