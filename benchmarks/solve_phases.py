@@ -1,14 +1,16 @@
-"""Where a small solve's time goes, by phase: exclusive times per solve of the user's F
-and J, the evaluator around them, the homotopy's compiled tracker, its driver and its
-offers of accepted points, the crash, the stabilized Newton method's runs, the paths and
-the rest of the pipeline (``solve_mcp`` outside all of these).
+"""Where a solve's time goes, by phase: exclusive times per solve of the user's F and J,
+the evaluator around them, the homotopy's compiled tracker, its driver and its offers of
+accepted points, the crash, the stabilized Newton method's runs, the path engines'
+compiled kernels (their start_path and run_pivots calls), the paths around them and the
+rest of the pipeline (``solve_mcp`` outside all of these).
 
 Each phase is a function wrapped by a timer that subtracts the wrapped phases called
 inside it (~0.3 us of overhead per call, counted in the caller's phase): the split is
 a guide to what is left, not a benchmark (``bench_small.py`` and the ``ab_round*.py``
 scripts are those).
 
-Usage:  PYTHONPATH=. python3 benchmarks/solve_phases.py [--thesis FAMILY N SEED | --known NAME]
+Usage:  PYTHONPATH=. python3 benchmarks/solve_phases.py [--thesis FAMILY N SEED | --known NAME
+                                                          | --traffic DESTINATIONS]
                                                          [--solves 300]
 """
 from __future__ import annotations
@@ -26,6 +28,10 @@ sys.path[:0] = [os.path.join(os.path.dirname(__file__), "..", "tests")]
 def _problem(a):
     from compass_sparse import MCP
 
+    if getattr(a, "traffic", None):
+        from compass_sparse.generators import traffic_equilibrium
+
+        return traffic_equilibrium(a.traffic).problem
     if a.known:
         import known_problems as kp
 
@@ -45,6 +51,9 @@ def main(argv=None):
     ap.add_argument("--thesis", nargs=3, type=int, default=[2, 10, 1],
                     metavar=("FAMILY", "N", "SEED"))
     ap.add_argument("--known", help="a known problem's name (instead of --thesis)")
+    ap.add_argument("--traffic", type=int, metavar="DESTINATIONS",
+                    help="the traffic equilibrium with this many destinations (8: n = 912, "
+                         "24: n = 2452) instead of --thesis")
     ap.add_argument("--solves", type=int, default=300)
     a = ap.parse_args(argv)
 
@@ -52,6 +61,7 @@ def main(argv=None):
     from compass_sparse.homotopy import _kernels as hk
     from compass_sparse.homotopy import tracker
     from compass_sparse.nms import newton, solver
+    from compass_sparse.path import engine
     from compass_sparse.problem import evaluator as evaluation
     from compass_sparse._jit import end_cold_start
 
@@ -91,6 +101,8 @@ def main(argv=None):
     timed(solver, "crash", "the crash")
     timed(solver.NMSSolver, "run", "the NMS runs")
     timed(newton.NewtonStep, "solve_linear", "the paths")
+    timed(engine.K, "start_path", "the path kernels")
+    timed(engine.K, "run_pivots", "the path kernels")
     for _ in range(30):
         solve_mcp(prob, options={"time_limit": 60})
     rows = []  # per solve: {phase: seconds}, "total"

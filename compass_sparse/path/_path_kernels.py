@@ -14,7 +14,7 @@ code path, compiled once (one signature serves both engines).
 Arguments come in bundles: ``prob`` = (M dense or a 2 x 2 placeholder, M's CSC arrays
 (Mp, Mi, Mx; empty for the dense kind), q, r, r's nonzeros (rI, rX), lb, ub, colkey (the
 sparse LU's column order)); ``tab`` = the slot table (sk, si, xb, zval, art_sign,
-displaced, enter_count); ``state`` = (istate, fstate, best_x, bp_t, bp_x, work); ``D`` and
+displaced, enter_count); ``state`` = (istate, fstate, best_x, work); ``D`` and
 ``S`` the dense and the sparse factors (the unused kind's are small placeholders);
 ``tol`` = the float tolerances (T_*), ``lim`` = the integer limits (L_*).
 """
@@ -45,9 +45,9 @@ MSG_NONE, MSG_RAY_UNBOUNDED, MSG_T_ZERO, MSG_CYCLE, MSG_LIMIT, MSG_SING_FACTOR, 
     MSG_BOUNDED_SLACK, MSG_T_STALL, MSG_GROW = range(15)
 
 # integer state (istate) and float state (fstate) layout
-I_EK, I_EI, I_PIV, I_TSLOT, I_NFAC, I_NUPD, I_NETA, I_NBP, I_MSG, I_REFUSED, \
-    I_UNSTABLE, I_GROWTH, I_BELOW, I_FILL = range(14)
-N_ISTATE = 14
+I_EK, I_EI, I_PIV, I_TSLOT, I_NFAC, I_NUPD, I_NETA, I_MSG, I_REFUSED, I_UNSTABLE, \
+    I_GROWTH, I_BELOW, I_FILL = range(13)
+N_ISTATE = 13
 F_ES, F_EV, F_T, F_BEST_T, F_RES, F_TLOW = range(6)
 N_FSTATE = 6
 # tolerances (tol) and limits (lim)
@@ -216,7 +216,7 @@ def refactor(fk, prob, tab, state, D, S, tol, t_lower):
     recompute the basic values.  Returns 0 or a SINGULAR message code (MSG_GROW: the
     sparse factors need more storage)."""
     sk, si, xb, zval, art_sign, displaced, enter_count = tab
-    istate, fstate, best_x, bp_t, bp_x, work = state
+    istate, fstate, best_x, work = state
     perm = D[3]
     rep_slot = perm[W_REP_SLOT]
     rep_row = perm[W_REP_ROW]
@@ -277,10 +277,10 @@ def _room_self(ek, ei, es, ev, t, lb, ub):
 
 
 @njit(cache=True)
-def _record(sk, si, xb, zval, lb, ub, t, fstate, istate, best_x, bp_t, bp_x, work):
-    """The best point (and a breakpoint while there is room) when t is the largest yet:
-    z - w + v of :func:`current_point`, its passes over n fused into three (the same
-    operations on each entry, so the same bits)."""
+def _record(sk, si, xb, zval, lb, ub, t, fstate, best_x, work):
+    """The best point when t is the largest yet: z - w + v of :func:`current_point`, its
+    passes over n fused into three (the same operations on each entry, so the same
+    bits)."""
     if t > fstate[F_BEST_T] + 1e-15:
         n = sk.shape[0]
         z = work[2]
@@ -288,19 +288,9 @@ def _record(sk, si, xb, zval, lb, ub, t, fstate, istate, best_x, bp_t, bp_x, wor
         v = work[4]
         _slot_values(sk, si, xb, zval, z, w, v)
         fstate[F_BEST_T] = t
-        nb = istate[I_NBP]
-        if nb < bp_t.shape[0]:
-            bp_t[nb] = t
-            istate[I_NBP] = nb + 1
-            for i in range(n):
-                zi = min(max(z[i], lb[i]), ub[i])
-                x = zi - w[i] + v[i]
-                best_x[i] = x
-                bp_x[nb, i] = x
-        else:
-            for i in range(n):
-                zi = min(max(z[i], lb[i]), ub[i])
-                best_x[i] = zi - w[i] + v[i]
+        for i in range(n):
+            zi = min(max(z[i], lb[i]), ub[i])
+            best_x[i] = zi - w[i] + v[i]
 
 
 @njit(cache=True)
@@ -308,7 +298,7 @@ def verify(fk, prob, tab, state, D, S, tol):
     """PivotalPath._verify_solution: (code, message)."""
     M, Mp, Mi, Mx, q, r, rI, rX, lb, ub, colkey = prob
     sk, si, xb, zval, art_sign, displaced, enter_count = tab
-    istate, fstate, best_x, bp_t, bp_x, work = state
+    istate, fstate, best_x, work = state
     n = sk.shape[0]
     qmax = 0.0
     rmax = 0.0
@@ -421,7 +411,7 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
     100 lines per function."""
     M, Mp, Mi, Mx, q, r, rI, rX, lb, ub, colkey = prob
     sk, si, xb, zval, art_sign, displaced, enter_count = tab
-    istate, fstate, best_x, bp_t, bp_x, work = state
+    istate, fstate, best_x, work = state
     n = sk.shape[0]
     d = work[5]
     col = work[6]
@@ -497,8 +487,7 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
                 fstate[F_EV] = 0.0
                 if t_slot >= 0:
                     fstate[F_T] = xb[t_slot]
-                _record(sk, si, xb, zval, lb, ub, fstate[F_T], fstate, istate, best_x,
-                        bp_t, bp_x, work)
+                _record(sk, si, xb, zval, lb, ub, fstate[F_T], fstate, best_x, work)
                 _log_pivot(rec, rect, pivots - start, pivots + 1, REC_FLIP, ek, ei, -1, -1,
                            -1, fstate[F_T])
                 continue
@@ -560,8 +549,7 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
             if leave_up:
                 return SOLVED, MSG_NONE
             return RAY, MSG_T_ZERO
-        _record(sk, si, xb, zval, lb, ub, fstate[F_T], fstate, istate, best_x, bp_t, bp_x,
-                work)
+        _record(sk, si, xb, zval, lb, ub, fstate[F_T], fstate, best_x, work)
         msg = _complement(lk, li, leave_up, istate, fstate, lb, ub, zval, displaced)
         if msg != 0:
             return ERROR, msg
@@ -577,7 +565,7 @@ def start_path(fk, prob, tab, state, D, S, tol, lim, slack, use_slack, z, w, v, 
     could be factorized (code GROW: the sparse factors need more storage); code RUNNING
     when the pivots are used up (the caller continues with run_pivots)."""
     sk, si, xb, zval, art_sign, displaced, enter_count = tab
-    istate, fstate, best_x, bp_t, bp_x, work = state
+    istate, fstate, best_x, work = state
     n = sk.shape[0]
     for k in range(istate.shape[0]):
         istate[k] = 0

@@ -11,7 +11,7 @@ side are shared with the sparse engine: :mod:`compass_sparse.path.engine`).
 The factorization is a dense LU with partial pivoting; column replacements are
 Forrest-Tomlin updates of its U (row etas, no explicit inverse), refreshed every
 ``factorization_update_limit`` pivots (see :mod:`compass_sparse.path._dense_lu`).  All
-work arrays (L, U, row etas, breakpoints) are allocated once per engine and reused by
+work arrays (L, U, row etas, the best point) are allocated once per engine and reused by
 every path of a solve.
 
 Tolerances: a column whose eliminated pivot is at most ``rank_tolerance`` (1e-9, the dense

@@ -4,7 +4,7 @@ A path engine stands where a basis manager stands (``set_matrix`` /
 ``set_dense_column`` / ``stats``) and :meth:`PivotalPath.run` hands it the slot table it
 set up (``runs_paths``); the initial factorization with artificial repair, every pivot
 (FTRAN, Harris ratio test, column replacement, refactorization, complement and cycle
-rules, t's lower-bound rules, best point and breakpoints) and the final solution check
+rules, t's lower-bound rules, best point) and the final solution check
 then run in :mod:`compass_sparse.path._path_kernels` with no Python per pivot, in chunks
 of at most ``chunk`` pivots between which the time limit is checked.  Results are
 returned through the same PivotalPath fields, so the algorithm, the codes and the
@@ -106,9 +106,6 @@ class PathEngine:
         n = self.n
         # (rows 8, 9: the slots' bounds; row 10: the ratio test's candidates' rooms)
         self.work = np.zeros((11, n))
-        self.n_breakpoints = max(1, min(200, 5_000_000 // max(n, 1)))
-        self.bp_t = np.zeros(self.n_breakpoints)
-        self.bp_x = np.zeros((self.n_breakpoints, n))
         self.best_x = np.zeros(n)
         self.enter_count = np.zeros((6, n), dtype=np.int64)
         self.displaced = np.full(n, -1, dtype=np.int64)
@@ -136,7 +133,7 @@ class PathEngine:
         lim = np.array([int(path.minor_limit), int(opt.lemke_cycle_limit), self.chunk,
                         int(bool(st.free_below)), int(PK.BELOW_ZERO_PIVOTS)], dtype=np.int64)
         tab = (st.sk, st.si, st.xb, st.zval, st.art_sign, self.displaced, self.enter_count)
-        state = (istate, fstate, self.best_x, self.bp_t, self.bp_x, self.work)
+        state = (istate, fstate, self.best_x, self.work)
         use_slack = slack_basis is not None
         log = path.log
         rec, rect = self._records() if log is not None else (_NO_RECORDS, NO_VALUES)
@@ -192,13 +189,6 @@ class PathEngine:
         st.t_lower, st.below_from = float(fstate[K.F_TLOW]), int(istate[K.I_BELOW])
         st.t_slot = int(istate[K.I_TSLOT])
         st.pivots = int(istate[K.I_PIV])
-        nbp = int(istate[K.I_NBP])
-        # (the rows handed out as views of the buffer, which the next path does not
-        # overwrite: it gets a new one.  A copy per row cost ~1 ms a solve of traffic
-        # n = 912, whose long paths record 200 breakpoints; one copy of the rows 1.3 ms.)
-        st.breakpoints = list(zip(self.bp_t[:nbp].tolist(), self.bp_x[:nbp]))
-        if nbp:
-            self.bp_x = np.empty_like(self.bp_x)
         if fstate[K.F_BEST_T] > 0.0:
             st.best = (float(fstate[K.F_BEST_T]), self.best_x.copy())
 

@@ -4,7 +4,7 @@ variable of each index is basic, the warm start of the next path or of a later s
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -45,7 +45,6 @@ class PathResult:
     factorizations: int = 0
     updates: int = 0
     artificials: int = 0
-    breakpoints: list = field(default_factory=list)  # (t, x) with t increasing
     basis: WarmBasis | None = None
     ray_start: bool = False
     unbounded: bool = False  #: RAY because the entering variable grows without bound

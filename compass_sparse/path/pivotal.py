@@ -113,7 +113,6 @@ class PathState:
     start: tuple | None = None  #: (z, w, v) at t = 0: returned by a path that never reaches t > 0
     t_slot: int = -1  #: the slot holding t (-1: t nonbasic)
     best: tuple = (0.0, None)  #: (largest t, its x), for a path that does not reach t = 1
-    breakpoints: list = field(default_factory=list)  #: (t, x) with t increasing
     pivots: int = 0
     unbounded: bool = False  #: RAY because the entering variable grows without bound
     ray: tuple | None = None  #: (base z, direction dz) of that ray
@@ -258,7 +257,6 @@ class PivotalPath:
         self.st.t = 0.0
         self.st.t_slot = -1
         self.st.best = (0.0, None)
-        self.st.breakpoints = []
         code, msg = self._pivot_loop()
         if code is LinearCode.SOLVED:
             code, msg = self._verify_solution()
@@ -584,10 +582,6 @@ class PivotalPath:
         if self.st.t > self.st.best[0] + 1e-15:
             x = self._current_x()
             self.st.best = (self.st.t, x)
-            # Breakpoints keep copies of x: at most 200, and at most ~5e6 numbers in all
-            # (a long path at n = 1e6 would otherwise hold gigabytes).
-            if len(self.st.breakpoints) < min(200, max(1, 5_000_000 // self.n)):
-                self.st.breakpoints.append((self.st.t, x))
 
     def current_point(self):
         if float_vectors(self.n, self.st.zval, self.st.xb, self.lb, self.ub):
@@ -653,7 +647,6 @@ class PivotalPath:
             factorizations=s.factorizations - st0[0], updates=s.updates - st0[1],
             artificials=(int(np.count_nonzero(self.st.sk == VAR_A))
                          if self.st.sk is not None else 0),
-            breakpoints=self.st.breakpoints,
             basis=WarmBasis(basic), ray_start=ray_start, message=msg,
         )
         res.direct_lu_nnz = self.direct_lu_nnz

@@ -1,7 +1,7 @@
 """The sparse LU's dense tail (compass_sparse.path._sparse_steps): where it starts, that
 its factors solve B x = b as a dense solve does (with and without room for it), its rank
 test at both sides of the rank tolerance, the repair of a dependent column found in it,
-and the storage check."""
+and the storage check; and the solves' backward error on ill-conditioned bases."""
 from __future__ import annotations
 
 import numpy as np
@@ -230,3 +230,49 @@ def test_dense_tail_solves_as_through_the_indices_bit_for_bit_after_updates():
         assert SL.replace_column(S, nupd, leave, d, dmax, 1e-11, 1e-8, 1e8, 2.0) == 0
         nupd += 1
     assert np.count_nonzero(S[12][kt:n]) == 6  # six tail positions dead
+
+
+def _backward_error(B, x, b):
+    """||B x - b|| / (||B|| ||x|| + ||b||), infinity norms: the normwise backward error."""
+    return np.abs(B @ x - b).max() / (np.abs(B).sum(1).max() * np.abs(x).max()
+                                      + np.abs(b).max())
+
+
+@pytest.mark.parametrize("cond", [1e6, 1e10, 1e13])
+def test_solves_stay_backward_stable_on_ill_conditioned_bases_and_after_updates(cond):
+    """On bases of condition up to 1e13 (n = 120, 30 unit columns) FTRAN and BTRAN keep a
+    normwise backward error of a few eps, fresh and after Forrest-Tomlin updates that
+    bring z columns in for unit ones: measured 4e-17 to 1.2e-16; bound 1e-14."""
+    n = 120
+    rng = np.random.default_rng(int(np.log10(cond)))
+    U_, _ = np.linalg.qr(rng.standard_normal((n, n)))
+    V_, _ = np.linalg.qr(rng.standard_normal((n, n)))
+    A = U_ @ np.diag(np.logspace(0, -np.log10(cond), n)) @ V_.T
+    Mc = sp.csc_matrix(A)
+    Mc.sort_indices()
+    units = rng.choice(n, 30, replace=False)
+    sk = np.full(n, VAR_Z, dtype=np.int64)
+    sk[units] = VAR_W
+    nrep, S, _ = _factor(Mc, sk, rank_tol=1e-15)
+    assert nrep == 0
+    B = _basis(Mc, sk)
+    Mp, Mi = Mc.indptr.astype(np.int64), Mc.indices.astype(np.int64)
+    d, rate = np.zeros(n), np.zeros(n)
+    nupd = 0
+    worst = 0.0
+    for enter in units[:10]:
+        for trial in range(3):
+            b = rng.standard_normal(n)
+            x, y = np.zeros(n), np.zeros(n)
+            SL.ftran_dense(S, nupd, b, x)
+            SL.btran(S, nupd, b, y)
+            worst = max(worst, _backward_error(B, x, b), _backward_error(B.T, y, b))
+        # z_enter (column `enter` of M) enters in place of the slot with the largest |d|
+        dmax = SL.ftran_column(VAR_Z, enter, Mp, Mi, Mc.data, np.zeros(0, np.int64),
+                               np.zeros(0), np.ones(n, np.int64), S, nupd, d, rate, 1.0)
+        leave = int(np.argmax(np.abs(d)))
+        assert SL.replace_column(S, nupd, leave, d, dmax, 1e-11, 1e-8, 1e8, 2.0) == 0
+        B[:, leave] = A[:, enter]
+        nupd += 1
+    assert nupd == 10
+    assert worst <= 1e-14

@@ -47,7 +47,7 @@ def _both(lcp, x=None, options=None, engine_kw=None, **kw):
 def _assert_same_path(both, M, q, lb=None, ub=None):
     """The same pivots, codes, counts and points (to rounding), and the same basis --
     but where the two points hold z_i at a bound to rounding (``lb``, ``ub`` given): a
-    path whose t never rose above rounding returns the breakpoint of largest t, which
+    path whose t never rose above rounding returns the point of largest t, which
     rounding decides, and a z_i at lb + 1e-17 in one of them is basic there while the
     other's z_i <= lb makes w_i basic."""
     (py, lpy), (cc, lcc) = both
