@@ -188,6 +188,27 @@ def _btran_by_indices(S, nupd, c):
     return w[pinv]
 
 
+def _solves_through_updates(S, Mc, enters, trials, leaving, rng):
+    """For each column of M in ``enters``: ``trials`` FTRAN and BTRAN of random
+    right-hand sides on the factors S as they are (yields (updates so far, b, B^{-1} b,
+    B^{-T} b)), then a Forrest-Tomlin update that brings the column in for the slot
+    ``leaving(d, column)`` names (d = B^{-1} a); each update must be accepted."""
+    n = Mc.shape[0]
+    Mp, Mi = Mc.indptr.astype(np.int64), Mc.indices.astype(np.int64)
+    d, rate = np.zeros(n), np.zeros(n)
+    for nupd, enter in enumerate(enters):
+        for _ in range(trials):
+            b = rng.standard_normal(n)
+            x, y = np.zeros(n), np.zeros(n)
+            SL.ftran_dense(S, nupd, b, x)
+            SL.btran(S, nupd, b, y)
+            yield nupd, b, x, y
+        dmax = SL.ftran_column(VAR_Z, enter, Mp, Mi, Mc.data, np.zeros(0, np.int64),
+                               np.zeros(0), np.ones(n, np.int64), S, nupd, d, rate, 1.0)
+        leave = leaving(d, enter)
+        assert SL.replace_column(S, nupd, leave, d, dmax, 1e-11, 1e-8, 1e8, 2.0) == 0
+
+
 def test_dense_tail_solves_as_through_the_indices_bit_for_bit_after_updates():
     """The tail's columns are stored whole (zeros too) over consecutive positions and the
     solves run over them as dense columns; FTRAN and BTRAN give, bit for bit, what the
@@ -205,30 +226,19 @@ def test_dense_tail_solves_as_through_the_indices_bit_for_bit_after_updates():
     h = S[0]
     assert nrep == 0 and h[SL.H_TAIL] >= ST.DENSE_TAIL_MIN
     kt = n - h[SL.H_TAIL]
-    Lp, Ux, Us, Ue = S[1], S[7], S[4], S[5]
+    Lp, Ux = S[1], S[7]
     assert h[SL.H_ZL] + h[SL.H_ZU] > 0  # (a tail of a sparse basis holds zeros)
     assert h[SL.H_NNZL] == np.count_nonzero(S[3][:Lp[n]])
     assert h[SL.H_NNZU] - n == np.count_nonzero(Ux[:h[SL.H_UFREE]])
-    rng = np.random.default_rng(7)
-    Mp, Mi = Mc.indptr.astype(np.int64), Mc.indices.astype(np.int64)
-    d, rate = np.zeros(n), np.zeros(n)
-    nupd = 0
-    for enter in units[:6]:
-        for trial in range(2):
-            b = rng.standard_normal(n)
-            x, y = np.zeros(n), np.zeros(n)
-            SL.ftran_dense(S, nupd, b, x)
-            SL.btran(S, nupd, b, y)
-            assert np.array_equal(x, _ftran_by_indices(S, nupd, b))
-            assert np.array_equal(y, _btran_by_indices(S, nupd, b))
-        # z_enter enters in place of the live tail slot with the largest |d|
-        dmax = SL.ftran_column(VAR_Z, enter, Mp, Mi, Mc.data, np.zeros(0, np.int64),
-                               np.zeros(0), np.ones(n, np.int64), S, nupd, d, rate, 1.0)
+
+    def live_tail_slot(d, enter):  # the live tail slot with the largest |d|
         pos_of = S[19]
-        tail_slots = [s for s in range(n) if kt <= pos_of[s] < n]
-        leave = max(tail_slots, key=lambda s: abs(d[s]))
-        assert SL.replace_column(S, nupd, leave, d, dmax, 1e-11, 1e-8, 1e8, 2.0) == 0
-        nupd += 1
+        return max((s for s in range(n) if kt <= pos_of[s] < n), key=lambda s: abs(d[s]))
+
+    for nupd, b, x, y in _solves_through_updates(S, Mc, units[:6], 2, live_tail_slot,
+                                                 np.random.default_rng(7)):
+        assert np.array_equal(x, _ftran_by_indices(S, nupd, b))
+        assert np.array_equal(y, _btran_by_indices(S, nupd, b))
     assert np.count_nonzero(S[12][kt:n]) == 6  # six tail positions dead
 
 
@@ -256,23 +266,14 @@ def test_solves_stay_backward_stable_on_ill_conditioned_bases_and_after_updates(
     nrep, S, _ = _factor(Mc, sk, rank_tol=1e-15)
     assert nrep == 0
     B = _basis(Mc, sk)
-    Mp, Mi = Mc.indptr.astype(np.int64), Mc.indices.astype(np.int64)
-    d, rate = np.zeros(n), np.zeros(n)
-    nupd = 0
-    worst = 0.0
-    for enter in units[:10]:
-        for trial in range(3):
-            b = rng.standard_normal(n)
-            x, y = np.zeros(n), np.zeros(n)
-            SL.ftran_dense(S, nupd, b, x)
-            SL.btran(S, nupd, b, y)
-            worst = max(worst, _backward_error(B, x, b), _backward_error(B.T, y, b))
-        # z_enter (column `enter` of M) enters in place of the slot with the largest |d|
-        dmax = SL.ftran_column(VAR_Z, enter, Mp, Mi, Mc.data, np.zeros(0, np.int64),
-                               np.zeros(0), np.ones(n, np.int64), S, nupd, d, rate, 1.0)
+    worst, updates = 0.0, 0
+
+    def largest(d, enter):  # the slot with the largest |d| leaves; B follows the exchange
         leave = int(np.argmax(np.abs(d)))
-        assert SL.replace_column(S, nupd, leave, d, dmax, 1e-11, 1e-8, 1e8, 2.0) == 0
         B[:, leave] = A[:, enter]
-        nupd += 1
-    assert nupd == 10
+        return leave
+
+    for updates, b, x, y in _solves_through_updates(S, Mc, units[:10], 3, largest, rng):
+        worst = max(worst, _backward_error(B, x, b), _backward_error(B.T, y, b))
+    assert updates == 9  # (the solves after the 10th update are not made)
     assert worst <= 1e-14
