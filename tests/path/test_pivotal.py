@@ -22,6 +22,7 @@ from compass_sparse.path.dense_engine import DensePathEngine
 from compass_sparse.path.outcome import LinearCode, WarmBasis
 from compass_sparse.path.pivotal import PivotalPath
 from compass_sparse.path.warm import components, default_basis
+from minor_log import pivot_ts
 
 MANAGERS = {"sparse": BasisManager, "dense": DenseBasis, "compiled": DensePathEngine}
 HYP = settings(derandomize=True, max_examples=30, deadline=None,
@@ -365,7 +366,7 @@ def test_cycle_limit_returns_best_t_point(name, n, seed):
     assert_valid_triple(res, lb, ub)
     assert_on_path(res, g.lcp, x0)
     # the best-t point is returned: on the path (above) at the largest t of its pivots
-    ts = [float(ln.split()[3]) for ln in log if ln.startswith("minor")]
+    ts = pivot_ts(log)
     assert ts and abs(res.t - max(ts)) <= 1e-6 * max(ts)  # (the log prints t to 7 digits)
     # the same problem needs re-entries, and solves with the default limit
     full = run_path(g.lcp, name, x=x0, warm=slack)

@@ -3,7 +3,6 @@ refactorize when the next pivot's update work exceeds the average per pivot sinc
 last factorization, (F + c_1 + ... + c_k) / k, all counted in entries, never the clock;
 and the option that bounds it (factorization_update_limit: None = automatic)."""
 
-import re
 
 import numpy as np
 import pytest
@@ -17,12 +16,7 @@ from compass_sparse.path.dense_engine import DensePathEngine
 from compass_sparse.path.pivotal import PivotalPath
 from compass_sparse.path.sparse_engine import AUTO_UPDATE_LIMIT, SparsePathEngine
 from compass_sparse.routes import DEFAULT_UPDATE_LIMIT, basis_factory
-
-
-def _pivots(lines):
-    """A minor log's pivots without t and without the update's outcome."""
-    return [re.sub(r" \((OK|REFUSED|REFACTORED|REPAIRED)\)$", "", re.sub(r" t \S+", "", s))
-            for s in lines]
+from minor_log import pivots_without_t
 
 
 def _header(F, X, k, appended, nnz_r):
@@ -77,7 +71,7 @@ def test_factorization_work_grows_with_the_factors_and_resets_the_counts():
     assert work_b > work_a
 
 
-def test_automatic_refactorizes_where_the_rule_says_and_keeps_the_pivots():
+def test_automatic_refactorizes_where_the_rule_says_and_keeps_thepivots_without_t():
     """On a long path the automatic engine takes the Python loop's pivots; with the
     factorization made (nearly) free it refactorizes at almost every pivot, with it made
     dear only at the hard limit -- the rule, not the limit, decides in between."""
@@ -93,11 +87,11 @@ def test_automatic_refactorizes_where_the_rule_says_and_keeps_the_pivots():
         eng._S[0][SL.H_FWEIGHT] = round(weight * 1024)
         log = []
         res = PivotalPath(M, q, lb, ub, eng, Options(), log=log.append).run(x)
-        logs[name] = _pivots(log)
+        logs[name] = pivots_without_t(log)
         facs[name] = (eng.stats.factorizations, res.pivots)
     ref_log = []
     ref = PivotalPath(M, q, lb, ub, BasisManager(M), Options(), log=ref_log.append).run(x)
-    ref_log = _pivots(ref_log)
+    ref_log = pivots_without_t(ref_log)
     pivots = ref.pivots
     assert pivots > 100
     for name in logs:

@@ -16,6 +16,7 @@ from compass_sparse.basis.dense import DenseBasis
 from compass_sparse.path.dense_engine import DensePathEngine
 from compass_sparse.path.outcome import LinearCode
 from compass_sparse.path.pivotal import PivotalPath
+from minor_log import pivot_ts
 
 
 def _both(lcp, x=None, options=None, **kw):
@@ -204,7 +205,7 @@ def test_lemke_ray_start_keeps_t_at_or_above_zero():
         path = PivotalPath(M, q, lb, ub, mgr(M), Options(), log=log.append)
         res = path.run(x, ray_start=True)
         assert path.st.t_lower == 0.0 and path.st.below_from == -1
-        ts = [float(ln.split()[3]) for ln in log if ln.startswith("minor")]
+        ts = pivot_ts(log)
         assert ts and min(ts) >= 0.0
         seen.append(res)
     _assert_same_path(*seen, M, q)

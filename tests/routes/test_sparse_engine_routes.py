@@ -8,28 +8,18 @@ whole solves of real problems (traffic, CGE, obstacle, thesis families)."""
 
 from __future__ import annotations
 
-import re
 
 import numpy as np
 import pytest
 import scipy.sparse as sp
 
 import compass_sparse.generators as gen
-from compass_sparse import MCP, Options, solve_mcp
+from compass_sparse import Options, solve_mcp
 from compass_sparse.basis import BasisManager
 from compass_sparse.path.outcome import LinearCode
 from compass_sparse.path.pivotal import PivotalPath
 from compass_sparse.path.sparse_engine import SparsePathEngine
-
-_STATUS = re.compile(r" \((OK|REFUSED|REFACTORED|REPAIRED)\)$")
-
-
-def _pivots(lines):
-    """The minor log's pivots without t (equal to rounding) and the update outcome (which
-    the two factorizations may decide differently: a refactorization instead of an
-    update changes no pivot)."""
-    return [_STATUS.sub("", re.sub(r" t \S+", "", s)) for s in lines]
-
+from minor_log import pivots_without_t
 
 def _both(lcp, x=None, options=None, engine_kw=None, **kw):
     M, q, lb, ub = lcp
@@ -40,7 +30,7 @@ def _both(lcp, x=None, options=None, engine_kw=None, **kw):
     for make in (BasisManager, lambda A: SparsePathEngine(A, **(engine_kw or {}))):
         log = []
         res = PivotalPath(M, q, lb, ub, make(M), opt, log=log.append).run(x, **kw)
-        out.append((res, _pivots(log)))
+        out.append((res, pivots_without_t(log)))
     return out
 
 
@@ -201,7 +191,7 @@ def test_same_path_on_thesis_family_linearizations(n, family, seed):
         assert both[1][0].code is LinearCode.SOLVED and both[1][0].pivots == 7
 
 
-def _minor_pivots(problem, options):
+def _minorpivots_without_t(problem, options):
     """The pivots of a whole solve (its minor log) and its Result."""
     import logging
 
@@ -225,7 +215,7 @@ def _minor_pivots(problem, options):
     finally:
         lg.removeHandler(h)
         lg.setLevel(old)
-    return _pivots(lines), res
+    return pivots_without_t(lines), res
 
 
 def _cge_outtax():
@@ -243,7 +233,7 @@ def _cge_outtax():
      lambda: gen.p_matrix_lcp(700, "banded", 3, "mixed").problem, {"crash_method": "none"},
      None),
 ])
-def test_whole_solves_take_the_python_loops_pivots(name, make, opts, same_from, monkeypatch):
+def test_whole_solves_take_the_python_loopspivots_without_t(name, make, opts, same_from, monkeypatch):
     """solve_mcp on the sparse engine and on the Python loop (path_basis='sparse'): the
     same status, major iterations and pivots, the same pivots in the same order, points
     equal to rounding -- but on traffic, whose rates are often equal in exact arithmetic
@@ -256,8 +246,8 @@ def test_whole_solves_take_the_python_loops_pivots(name, make, opts, same_from, 
     # (the CGE model is denser than the route gives the engine: forced onto it here)
     monkeypatch.setattr(routes, "SPARSE_ENGINE_MAX_DENSITY", np.inf)
     problem = make()
-    piv_e, re_ = _minor_pivots(problem, opts)
-    piv_p, rp = _minor_pivots(problem.with_start(problem.x0), dict(opts, path_basis="sparse"))
+    piv_e, re_ = _minorpivots_without_t(problem, opts)
+    piv_p, rp = _minorpivots_without_t(problem.with_start(problem.x0), dict(opts, path_basis="sparse"))
     assert re_.routes["path"] == "sparse engine" and rp.routes["path"] == "sparse basis"
     if same_from is None:
         assert piv_e == piv_p
