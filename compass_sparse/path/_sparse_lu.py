@@ -148,14 +148,16 @@ ETA_ROOM_UPDATES = 50
 """The appended columns of U and the row etas get room for at most this many updates of n
 entries each (more updates fit when they are sparser: a traffic basis' updates hold a few
 hundred entries); an update that does not fit is declined (UPD_FILL) and the path
-refactorizes."""
+refactorizes.  The same storage holds the dense tail's block while a factorization makes
+it (see :mod:`compass_sparse.path._sparse_steps`), so it is never smaller than L's: a
+block that does not fit returns GROW like L and U."""
 
 
 def _capacities(n: int, update_limit: int, nnz_guess: int):
     lim = max(int(update_limit), 1)
     capL = max(int(nnz_guess), 4 * n, 1024)
     eta = min(lim, ETA_ROOM_UPDATES) * (n + 1)
-    return lim, n + lim + 1, capL, capL + eta, max(eta, 1024)
+    return lim, n + lim + 1, capL, capL + eta, max(eta, capL)
 
 
 def storage_bytes(n: int, update_limit: int, nnz_guess: int) -> int:
@@ -333,8 +335,9 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh
         k += 1
         # the dense tail (see _sparse_steps): when the L columns cover most rows left
         dense_run = dense_run + 1 if lp - Lp[k - 1] >= DENSE_TAIL_SHARE * (n - k) else 0
-        if (dense_run >= DENSE_TAIL_RUN and n - t - 1 >= DENSE_TAIL_MIN
-                and tail_fits(n, n - k, n - t - 1, Rx.shape[0])):
+        if dense_run >= DENSE_TAIL_RUN and n - t - 1 >= DENSE_TAIL_MIN:
+            if not tail_fits(n, n - k, n - t - 1, Rx.shape[0]):
+                return GROW
             k, ufree, nrep, w, zl, zu = dense_tail(t + 1, k, ufree, order, sk, si, Mp, Mi,
                                                    Mx, rI, rX, art_sign, S, rank_tol,
                                                    piv_thresh, pref, rep_slot, nrep)

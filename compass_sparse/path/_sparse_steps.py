@@ -25,8 +25,11 @@ against the column's own norm).  The factors are stored as the sparse steps stor
 but the block's parts whole, zeros too, over consecutive positions, so that FTRAN and BTRAN
 run over the tail's columns as dense columns (:mod:`compass_sparse.path._sparse_lu`); the
 Forrest-Tomlin updates are unchanged.  The block is factorized in the row-eta storage,
-which a factorization empties; a block that does not fit there is not made (the steps go
-on sparse).
+which a factorization empties and which is at least as large as L's; a block that does
+not fit returns GROW (the engine grows the storage and runs the path again), as L and U
+do.  (The storage was that of the updates alone, about 50 n entries: on the CGE models'
+bases at n = 2024, whose Schur complement is dense over ~900 columns, the tail stopped at
+318 columns and the sparse steps did the rest, 620 ms a factorization against 250.)
 """
 from __future__ import annotations
 
