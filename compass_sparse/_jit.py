@@ -73,6 +73,7 @@ __all__ = [
     "INTERPRET_SOLVES",
     "NO_INDICES",
     "NO_VALUES",
+    "LazyExternal",
     "LazyKernel",
     "cold_start",
     "compilations",
@@ -513,9 +514,33 @@ def materialize(namespace: dict):
                 ns[name] = obj._dispatcher
 
 
+class LazyExternal:
+    """A C function that compiled kernels call (a BLAS routine), bound on first use like
+    the kernels: ``factory()`` imports numba and returns its ``ExternalFunction``.  The
+    kernels' module holds this stand-in; :func:`materialize` puts the function in its place
+    before numba types a caller or loads one from its cache, whose machine code names the
+    function's symbol.  Only compiled code calls it."""
+
+    def __init__(self, factory, name: str):
+        self.factory = factory
+        self.name = name
+        self._function = None
+
+    def build(self):
+        if self._function is None:
+            with interrupts_held():
+                self._function = self.factory()
+        return self._function
+
+    def __call__(self, *args):
+        raise RuntimeError(f"{self.name} is called from compiled kernels only")
+
+
 def _materialize(namespace: dict):
     for name, obj in list(namespace.items()):
-        if isinstance(obj, LazyKernel):
+        if isinstance(obj, LazyExternal):
+            namespace[name] = obj.build()
+        elif isinstance(obj, LazyKernel):
             namespace[name] = obj._build()
             # A kernel defined elsewhere has callees in its own module too.
             home = sys.modules.get(obj.__module__)

@@ -1,4 +1,4 @@
-"""One BLAS thread for the dense kernels that need it.
+"""One BLAS thread for the dense kernels that need it, and BLAS for compiled kernels.
 
 A multithreaded BLAS on a loaded machine spends its time spinning threads on small and
 medium dense kernels (measured here: a 200 x 200 inverse took 0.2 s against 2 ms on one
@@ -77,3 +77,19 @@ class _OneThread:
             c.set_num_threads(k)
         self.saved.clear()
         return False
+
+
+def blas_external(name: str, nargs: int):
+    """SciPy's BLAS routine ``name`` (Fortran calling convention: every one of its
+    ``nargs`` arguments a pointer, integers 32-bit) as a function that compiled kernels
+    call (:class:`compass_sparse._jit.LazyExternal` builds it on first use).  Its address
+    is registered under a symbol of its own, so that a kernel loaded from numba's cache
+    finds it in a new process."""
+    # (lazy: numba, for the compiled kernels only)
+    import llvmlite.binding as llvm
+    from numba import types
+    from numba.extending import get_cython_function_address
+
+    symbol = f"compass_sparse_blas_{name}"
+    llvm.add_symbol(symbol, get_cython_function_address("scipy.linalg.cython_blas", name))
+    return types.ExternalFunction(symbol, types.void(*([types.voidptr] * nargs)))

@@ -117,9 +117,10 @@ grows it and runs the path again)."""
 # solve: iw is the factorization's work space, free between factorizations)
 # (H_TAIL: the columns of the last factorization's dense tail, see _sparse_steps; H_ZL,
 # H_ZU: the zeros its block stores in L and U, which the counts of entries leave out)
+# (H_NEED: after GROW, the entries of L's storage the factorization is known to need, or 0)
 H_M1, H_NNZL, H_UFREE, H_NNZU, H_NNZR, H_BASE, H_N, H_FRESH, H_LAST, H_FWORK, H_XWORK, \
-    H_KSOL, H_UFACT, H_FWEIGHT, H_SPNNZ, H_TAIL, H_ZL, H_ZU = range(18)
-N_HEADER = 18
+    H_KSOL, H_UFACT, H_FWEIGHT, H_SPNNZ, H_TAIL, H_ZL, H_ZU, H_NEED = range(19)
+N_HEADER = 19
 
 FACTOR_WEIGHT = 2.5
 """The cost of one work unit of a factorization (an entry of L visited by the depth-first
@@ -195,8 +196,12 @@ def allocate(n: int, update_limit: int, nnz_guess: int):
 
 def grown_size(S, factor: float = 2.0):
     """(n, update limit, L's capacity) of a factor tuple like S with ``factor`` times its
-    L and U storage."""
-    return int(S[0][H_N]), S[13].shape[0] - 1, int(factor * S[2].shape[0])
+    L and U storage, or more when the factorization that returned GROW knew it needed more
+    (a dense tail: without this a CGE basis at n = 2024 grew five times in a row, 19 ms of
+    factorization lost each time)."""
+    h = S[0]
+    return int(h[H_N]), S[13].shape[0] - 1, max(int(factor * S[2].shape[0]),
+                                                 int(1.25 * h[H_NEED]))
 
 
 def empty():
@@ -248,6 +253,7 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh
     h[H_TAIL] = 0
     h[H_ZL] = 0
     h[H_ZU] = 0
+    h[H_NEED] = 0
     work = 4 * n  # the factorization's work units (refactor_pays): the passes over n, ...
     Lp[0] = 0
     for t in range(n):
@@ -336,13 +342,19 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh
         # the dense tail (see _sparse_steps): when the L columns cover most rows left
         dense_run = dense_run + 1 if lp - Lp[k - 1] >= DENSE_TAIL_SHARE * (n - k) else 0
         if dense_run >= DENSE_TAIL_RUN and n - t - 1 >= DENSE_TAIL_MIN:
+            # (the block in R, its lower part and the staged columns in L and U: at most
+            # (n - k)(n - t - 1) entries more in each)
+            block = (n - k) * (n - t - 1)
             if not tail_fits(n, n - k, n - t - 1, Rx.shape[0]):
+                h[H_NEED] = max(block + n + 5 * (n - k), Lp[k] + block, ufree + block)
                 return GROW
+            k0, ufree0 = k, ufree
             k, ufree, nrep, w, zl, zu = dense_tail(t + 1, k, ufree, order, sk, si, Mp, Mi,
                                                    Mx, rI, rX, art_sign, S, rank_tol,
                                                    piv_thresh, pref, rep_slot, nrep)
             work += w
             if k < 0:
+                h[H_NEED] = max(Lp[k0] + block, ufree0 + block)
                 return GROW
             h[H_TAIL] = n - t - 1
             h[H_ZL] = zl

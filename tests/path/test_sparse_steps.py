@@ -116,12 +116,13 @@ def test_dense_tail_starts_after_the_run_of_dense_columns_and_not_on_a_sparse_ba
     _check_solves(S, tri.toarray())
 
 
+@pytest.mark.parametrize("n", [40, 300], ids=["column loop", "panels"])
 @pytest.mark.parametrize("delta, dependent", [(1e-9, False), (1e-13, True)])
-def test_rank_tolerance_in_the_dense_tail(delta, dependent):
+def test_rank_tolerance_in_the_dense_tail(delta, dependent, n):
     """Column 7 = 2 x column 3 + delta e_0 (relative to its norm) in a dense basis, both
-    in the tail: independent above RANK_TOL (the factors solve), dependent below it --
-    one of the two slots is reported with the row left without a pivot."""
-    n = 40
+    in the tail (of 36 columns: eliminated column by column; of 296: in panels): independent
+    above RANK_TOL (the factors solve), dependent below it -- one of the two slots is
+    reported with the row left without a pivot."""
     rng = np.random.default_rng(3)
     M = rng.standard_normal((n, n)) + n * np.eye(n)
     M[:, 7] = 2.0 * M[:, 3]
@@ -155,6 +156,22 @@ def test_dense_tail_that_does_not_fit_in_l_asks_for_more_storage():
     assert nrep == SL.GROW
     nrep, S, _ = _factor(M, sk, nnz_guess=4 * n * n)
     assert nrep == 0
+    _check_solves(S, M)
+
+
+def test_a_dense_tail_that_does_not_fit_grows_the_storage_once():
+    """The factorization that finds no room for its dense tail knows the room it needs
+    (h[H_NEED]): the storage grows to it at once, where doubling it grew a CGE basis'
+    storage five times in a row (a partial factorization lost each time)."""
+    n = 120
+    rng = np.random.default_rng(6)
+    M = rng.standard_normal((n, n)) + n * np.eye(n)
+    sk = np.full(n, VAR_Z, dtype=np.int64)
+    nrep, S, _ = _factor(M, sk, update_limit=1, nnz_guess=1)
+    assert nrep == SL.GROW and S[0][SL.H_NEED] > 4 * S[2].shape[0]
+    _, lim, cap = SL.grown_size(S)
+    nrep, S, _ = _factor(M, sk, update_limit=lim, nnz_guess=cap)
+    assert nrep == 0 and S[0][SL.H_TAIL] == n - ST.DENSE_TAIL_RUN
     _check_solves(S, M)
 
 
@@ -282,3 +299,50 @@ def test_solves_stay_backward_stable_on_ill_conditioned_bases_and_after_updates(
         worst = max(worst, _backward_error(B, x, b), _backward_error(B.T, y, b))
     assert updates == 9  # (the solves after the 10th update are not made)
     assert worst <= 1e-14
+
+
+def _block_factors(A0):
+    """_block_lu of the block A0 (column-major copy); returns (pivots, tpiv, drow, and
+    the relative residual of L U against A0's rows in pivot order, pivoted columns)."""
+    m, nc = A0.shape
+    A = A0.ravel(order="F").copy()
+    drow, rowpos = np.arange(m, dtype=np.int64), np.arange(m, dtype=np.int64)
+    tpiv = np.zeros(nc, dtype=np.int64)
+    npiv, _ = ST._block_lu(m, nc, A, drow, rowpos, np.abs(A0).max(axis=0),
+                           -np.ones(nc, dtype=np.int64), tpiv, RANK_TOL, 1.0)
+    F = A.reshape(nc, m).T
+    cols = np.flatnonzero(tpiv >= 0)
+    L = np.tril(F[:, cols], -1)[:, :len(cols)] + np.eye(m, len(cols))
+    U = np.triu(F[:len(cols), cols])
+    res = np.max(np.abs(L @ U - A0[drow][:, cols])) / np.max(np.abs(A0))
+    return npiv, tpiv, drow, res
+
+
+def test_dense_block_in_panels_takes_the_pivots_of_partial_pivoting():
+    """A block of 300 columns (at least BLOCKED_MIN) is factorized in panels, its updates
+    by BLAS: the row order is LAPACK's partial pivoting (getrf, the same rule without ties)
+    and L U reproduces the block to rounding."""
+    import scipy.linalg as sla
+    n = 300
+    assert n >= ST.BLOCKED_MIN
+    A0 = np.random.default_rng(7).standard_normal((n, n))
+    npiv, tpiv, drow, res = _block_factors(A0)
+    assert npiv == n and np.all(tpiv == np.arange(n))
+    assert res <= 1e-13
+    _, ipiv = sla.lu_factor(A0)
+    order = np.arange(n)
+    for i, p in enumerate(ipiv):
+        order[[i, p]] = order[[p, i]]
+    assert np.array_equal(drow, order)
+
+
+def test_dependent_columns_inside_panels_are_skipped_and_the_rest_factorized():
+    """Two dependent columns (40 = 2 x 7; 201 = 5 - 100) of a 330 x 300 block, inside the
+    2nd and 7th panels: both skipped (no pivot), the panels around them updated pivot by
+    pivot, the 298 others factorized."""
+    A0 = np.random.default_rng(8).standard_normal((330, 300))
+    A0[:, 40] = 2.0 * A0[:, 7]
+    A0[:, 201] = A0[:, 5] - A0[:, 100]
+    npiv, tpiv, _, res = _block_factors(A0)
+    assert npiv == 298 and list(np.flatnonzero(tpiv < 0)) == [40, 201]
+    assert res <= 1e-13
