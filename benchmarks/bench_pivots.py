@@ -8,7 +8,8 @@ Problems (all from ``compass_sparse.generators``; only the public API is used):
 * ``cge_*``: the static CGE ``static_cge(**size_for(2000))`` (n = 2024) under shocks
   (from its benchmark equilibrium, as a counterfactual is solved): a 50% output tax on
   every sector, region 1's productivity halved, and cut to a fifth (sectors shut down),
-  the first factor's endowment cut to a tenth in every region;
+  the first factor's endowment cut to a tenth in every region; ``cge_*_engine``: the same
+  with ``path_basis="sparse engine"`` (the automatic route keeps them on the manager);
 * ``grid4900``: ``p_matrix_lcp(4900, "grid")`` and ``obstacle60``: ``obstacle_problem(60)``
   (n = 3600), both with the crash off (one pivotal path does the work).
 
@@ -95,6 +96,11 @@ def _cge(shock):
     return m.with_shock(**kw).problem, {}
 
 
+def _on_engine(case):
+    problem, opts = case
+    return problem, dict(opts, path_basis="sparse engine")
+
+
 def _grid():
     from compass_sparse.generators import p_matrix_lcp
     return p_matrix_lcp(4900, "grid", seed=0).problem, {"crash_method": "none"}
@@ -116,6 +122,11 @@ CASES = {
     "cge_productivity": lambda: _cge("productivity"),
     "cge_productivity_deep": lambda: _cge("productivity_deep"),
     "cge_endowment": lambda: _cge("endowment"),
+    # the CGE shocks on the compiled sparse engine (option path_basis), which 'auto' does
+    # not choose for their Jacobians (9.6 entries a column)
+    "cge_outtax_engine": lambda: _on_engine(_cge("outtax")),
+    "cge_productivity_engine": lambda: _on_engine(_cge("productivity")),
+    "cge_endowment_engine": lambda: _on_engine(_cge("endowment")),
     "grid4900": _grid,
     "obstacle60": _obstacle,
 }

@@ -14,7 +14,8 @@ log level and never from the clock -- and recorded in ``Result.routes``:
               "sparse engine" (above it, ``path_basis = "auto"``, ``engine = "auto"``, the
               sparse LU left to the solver -- ``lu_backend`` and ``lu_ordering`` "auto" and
               no ``COMPASS_SPARSE_LU`` in the environment: a chosen LU is the manager's --
-              and a Jacobian of at most ``SPARSE_ENGINE_MAX_DENSITY`` entries per column),
+              and a Jacobian of at most ``SPARSE_ENGINE_MAX_DENSITY`` entries per column;
+              or ``path_basis = "sparse engine"``, at every order and density),
               "dense basis" (``path_basis = "dense"``, n <= ``DENSE_BASIS_MAX_N``) or
               "sparse basis" (the Python loop over the basis manager: every other case);
 ``nms``       "compiled" (``engine = "auto"``, compiled kernels, the problem left unscaled
@@ -130,6 +131,8 @@ class kernel_route:
 def path_route(n: int, options: Options, nnz: int | None = None) -> str:
     """The basis of the pivotal paths of a problem of order n whose Jacobian has ``nnz``
     entries (None: unknown, taken as sparse)."""
+    if options.path_basis == "sparse engine":
+        return "sparse engine"
     if options.path_basis == "auto" and n <= DENSE_ENGINE_MAX_N:
         return "dense engine"
     if (options.path_basis == "auto" and options.engine == "auto"

@@ -3,6 +3,7 @@ the options, never from the log level; recorded in Result.routes; the options en
 path_basis force the reference routes."""
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 import compass_sparse as cs
@@ -64,6 +65,36 @@ def test_path_basis_forces_the_reference_bases():
     assert choose_routes(50, Options(path_basis="sparse")).path == "sparse basis"
     r = cs.solve_mcp(gen.thesis_family(10, 2, 4).problem, options={"path_basis": "sparse"})
     assert r.success and r.routes["path"] == "sparse basis"
+
+
+def test_path_basis_sparse_engine_runs_the_compiled_sparse_engine_at_any_order_and_density():
+    """'sparse engine' takes the engine past the density rule (a CGE model, 9.6 entries a
+    column, goes to the manager on 'auto') and below the dense engine's order; the CGE
+    endowment shock at n = 506 is solved on it in the manager's pivots."""
+    from compass_sparse.generators.cge import size_for, static_cge
+
+    opt = Options(path_basis="sparse engine")
+    assert choose_routes(DENSE_ENGINE_MAX_N + 1, opt, nnz=(DENSE_ENGINE_MAX_N + 1) ** 2).path \
+        == "sparse engine"
+    assert choose_routes(50, opt).path == "sparse engine"
+    m = static_cge(**size_for(600), seed=0)
+    R, F = m.block_shapes["W"]
+    e = np.ones((R, F))
+    e[:, 0] = 0.1
+    p = m.with_shock(endowment=e).problem
+    runs = {pb: cs.solve_mcp(p, options={"path_basis": pb}) for pb in ("auto", "sparse engine")}
+    assert runs["auto"].routes["path"] == "sparse basis"
+    assert runs["sparse engine"].routes["path"] == "sparse engine"
+    for r in runs.values():
+        assert r.success and r.residual.natural <= 1e-6
+    assert runs["sparse engine"].minor_iterations == runs["auto"].minor_iterations
+
+
+@pytest.mark.parametrize("other", [{"engine": "reference"}, {"lu_backend": "superlu"},
+                                   {"lu_ordering": "amd"}])
+def test_path_basis_sparse_engine_refuses_options_it_cannot_honour(other):
+    with pytest.raises(OptionError, match="path_basis='sparse engine'"):
+        Options(path_basis="sparse engine", **other)
 
 
 @pytest.mark.parametrize("field,value", [("engine", "fast"), ("path_basis", "lu")])
