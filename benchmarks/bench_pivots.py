@@ -98,6 +98,13 @@ def _cge(shock):
 
 def _on_engine(case):
     problem, opts = case
+    from compass_sparse import Options, OptionError
+    try:
+        Options(path_basis="sparse engine")
+    except OptionError:  # a baseline tree from before the option: the same route by
+        import compass_sparse.routes as routes  # lifting its density limit
+        routes.SPARSE_ENGINE_MAX_DENSITY = math.inf
+        return problem, opts
     return problem, dict(opts, path_basis="sparse engine")
 
 
