@@ -27,11 +27,11 @@ from .linear_system import solve_free_lcp
 from .merit import fb_phi, normal_map_at
 from .nms.log import SectionLog
 from .options import Options
-from .path.linear_mcp import solve_linear_mcp
+from .path.linear_mcp import solve_handing_over
 from .path.outcome import LinearCode
 from .progress import Progress, pass_line
 from .problem.mcp import MCP, as_real
-from .report import judge_on, make_result
+from .report import judge_on, lu_report, make_result
 from .result import Result
 from .routes import basis_factory, choose_routes, kernel_route
 from .solve import blas_threads, check_basis, loggers, solve_without_preprocessor
@@ -154,22 +154,23 @@ def _lcp_path(problem, M, q, z, f, x, opt, t0, passes, st, crash_its, log_minor,
                            passes=passes, crash_iterations=crash_its,
                            factorizations=st.factorizations, routes=routes.as_dict())
     deadline = t0 + opt.time_limit if math.isfinite(opt.time_limit) else None
-    bm = basis_factory(routes.path, opt, deadline)(M)
+    make = basis_factory(routes.path, opt, deadline)
+    bm = make(M)
     tp = time.perf_counter()
     # One path solves a linear problem: give it room (a Lemke path may need ~n pivots).
     limit = opt.minor_iteration_limit or max(10 * n, 1000)
     with blas_threads(n):
-        res = solve_linear_mcp(M, q, lb, ub, bm, opt, x, warm=warm,
-                               ray_start=opt.lemke_start in ("always", "first"),
-                               keep_ray=True, minor_limit=limit, deadline=deadline,
-                               log=log_minor)
+        res, bm = solve_handing_over(make.hand_over, M, q, lb, ub, bm, opt, x, warm=warm,
+                                     ray_start=opt.lemke_start in ("always", "first"),
+                                     keep_ray=True, minor_limit=limit, deadline=deadline,
+                                     log=log_minor)
     pivots = res.pivots
     passes["path"] = PassStats(ran=True, time=time.perf_counter() - tp, iterations=1,
                                pivots=pivots, factorizations=bm.stats.factorizations)
     counts = {"nit": 1, "minor_iterations": pivots, "crash_iterations": crash_its,
               "factorizations": bm.stats.factorizations + st.factorizations,
               "basis_updates": bm.stats.updates, "passes": passes,
-              "routes": routes.as_dict()}
+              "routes": routes.as_dict(), "lu": lu_report(bm)}
     if res.code is LinearCode.SOLVED:
         zs = res.z
         fs = problem.F(zs)

@@ -16,6 +16,10 @@ log level and never from the clock -- and recorded in ``Result.routes``:
               no ``COMPASS_SPARSE_LU`` in the environment: a chosen LU is the manager's --
               and a Jacobian of at most ``SPARSE_ENGINE_MAX_DENSITY`` entries per column;
               or ``path_basis = "sparse engine"``, at every order and density),
+              "sparse basis to engine" (the same conditions but a denser Jacobian: the
+              paths start on the basis manager, and a path that makes
+              :func:`hand_over_pivots` pivots hands them to the sparse engine: the linear
+              MCP is solved again there, and every later path runs there),
               "dense basis" (``path_basis = "dense"``, n <= ``DENSE_BASIS_MAX_N``) or
               "sparse basis" (the Python loop over the basis manager: every other case);
 ``nms``       "compiled" (``engine = "auto"``, compiled kernels, the problem left unscaled
@@ -60,8 +64,8 @@ from .path.sparse_engine import SPARSE_ENGINE_MAX_DENSITY, SparsePathEngine
 __all__ = ["COMPILED_NMS_MAX_N", "COMPILE_SECONDS_DENSE", "COMPILE_SECONDS_MEDIUM",
            "COMPILE_SECONDS_SPARSE",
            "DENSE_BASIS_MAX_N", "DENSE_ENGINE_MAX_N", "UPDATE_LIMIT_FLOOR", "Routes",
-           "DEFAULT_UPDATE_LIMIT",
-           "basis_factory", "choose_routes", "compile_estimate", "kernel_route"]
+           "DEFAULT_UPDATE_LIMIT", "HAND_OVER_MIN_PIVOTS", "HAND_OVER_SHARE",
+           "basis_factory", "hand_over_pivots", "choose_routes", "compile_estimate", "kernel_route"]
 
 DENSE_ENGINE_MAX_N = 500
 """Largest n whose paths run on the compiled dense engine (above: the sparse manager)."""
@@ -136,9 +140,10 @@ def path_route(n: int, options: Options, nnz: int | None = None) -> str:
     if options.path_basis == "auto" and n <= DENSE_ENGINE_MAX_N:
         return "dense engine"
     if (options.path_basis == "auto" and options.engine == "auto"
-            and automatic_lu(options.lu_backend, options.lu_ordering)
-            and (nnz is None or nnz <= SPARSE_ENGINE_MAX_DENSITY * n)):
-        return "sparse engine"
+            and automatic_lu(options.lu_backend, options.lu_ordering)):
+        if nnz is None or nnz <= SPARSE_ENGINE_MAX_DENSITY * n:
+            return "sparse engine"
+        return "sparse basis to engine"
     if options.path_basis == "dense" and n <= DENSE_BASIS_MAX_N:
         return "dense basis"
     return "sparse basis"
@@ -160,10 +165,32 @@ def choose_routes(n: int, options: Options, *, kernels: str = "compiled",
                                 and compiled_tracker_available()) else "python")
 
 
+HAND_OVER_MIN_PIVOTS = 100
+HAND_OVER_SHARE = 10
+"""On the route "sparse basis to engine" a path on the basis manager that makes
+max(HAND_OVER_MIN_PIVOTS, n / HAND_OVER_SHARE) pivots hands the solve's paths to the
+compiled sparse engine.  Why: the manager's supernodal LU and its reused factors make it
+the faster basis for solves that pivot little on dense-ish Jacobians (the CGE models,
+9.6 entries a column: a 50% output tax at n = 2024, 36 pivots, 0.36-0.43 s against
+0.54-0.85 s on the engine), the engine for those that pivot much (the endowment shock,
+3348 pivots: 5.5-8.4 s on the manager against 2.3-2.9 s; the thesis families at
+n = 600: equal, and 2.5 against 1.7 s); a path's pivots tell which kind a solve is,
+where its density does not.  The pivots made before the hand-over are spent (counted
+in the Result): at most ~0.4 s at n = 2024 (~2 ms a pivot on the manager)."""
+
+
+def hand_over_pivots(n: int) -> int:
+    """The pivots of a manager's path after which the route "sparse basis to engine"
+    hands the paths to the engine."""
+    return max(HAND_OVER_MIN_PIVOTS, n // HAND_OVER_SHARE)
+
+
 def basis_factory(route: str, options: Options, deadline=None):
     """``make(M)``: the basis of the pivotal paths of a linear MCP with matrix M on the path
     route ``route``; the sparse manager gets the solve's deadline, so that a factorization
-    that cannot finish in time is not started (TIME_LIMIT)."""
+    that cannot finish in time is not started (TIME_LIMIT).  On the route "sparse basis to
+    engine", ``make.hand_over`` is ``(pivots, make_engine)``: the pivots of
+    :func:`hand_over_pivots` as a function of n, and the engine's factory (else None)."""
     def make(M):
         # (the engines resolve factorization_update_limit themselves, the managers here:
         # path.engine.resolve_update_limit either way)
@@ -180,4 +207,6 @@ def basis_factory(route: str, options: Options, deadline=None):
                                                     ordering=options.lu_ordering,
                                                     reuse_factors=options.factor_reuse))
 
+    make.hand_over = ((hand_over_pivots, lambda M: SparsePathEngine(M, options))
+                      if route == "sparse basis to engine" else None)
     return make

@@ -55,7 +55,7 @@ import scipy.sparse as sp
 
 from .exceptions import CompassError, ProblemError, ShapeError
 from .options import Options
-from .path.linear_mcp import solve_linear_mcp
+from .path.linear_mcp import solve_handing_over
 from .path.outcome import LinearCode
 from .problem.mcp import MCP
 from .routes import basis_factory, path_route
@@ -260,9 +260,9 @@ def _linear_mcp(M, q, lo, hi):
     MCP has one solution, which the path reaches."""
     opt = Options(convergence_tolerance=LINEAR_TOLERANCE)
     n = q.size
-    basis = basis_factory(path_route(n, opt, M.nnz), opt)(M)
-    return solve_linear_mcp(M, q, lo, hi, basis, opt, np.zeros(n), keep_ray=True,
-                            minor_limit=max(10 * n, 1000))
+    make = basis_factory(path_route(n, opt, M.nnz), opt)
+    return solve_handing_over(make.hand_over, M, q, lo, hi, make(M), opt, np.zeros(n),
+                              keep_ray=True, minor_limit=max(10 * n, 1000))[0]
 
 
 def tangent_predictor(problem, x, *, f=None, active_tol: float = ACTIVE_TOL):

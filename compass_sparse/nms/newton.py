@@ -5,7 +5,8 @@ pivotal path warm-started from the last path's basis
 
 :class:`NewtonStep` owns what the paths of a solve share: the linearizer (made once per
 Jacobian pattern), the basis of the paths (made on the first linear MCP by the solve's
-basis factory: the route's engine or manager), the direct step's factors, the crash's last
+basis factory: the route's engine or manager; on the route "sparse basis to engine" the
+manager until a path hands the paths to the engine), the direct step's factors, the crash's last
 factors offered to the first basis, and the warm basis handed from path to path (and to
 the Result).
 """
@@ -16,7 +17,7 @@ import time
 from ..linalg.direct import DirectFactors
 from ..path.direct_step import (DIRECT_MIN_N, REUSE_BEATS_REFACTOR_NNZ, direct_step_applies,
                                 direct_step_worth_trying)
-from ..path.linear_mcp import dense_newton_result, solve_linear_mcp
+from ..path.linear_mcp import dense_newton_result, solve_handing_over
 from ..path.linearize import Linearizer, linearizer_for
 from ..path.outcome import DIRECT_STEP_LINE, LinearCode, WarmBasis
 
@@ -170,7 +171,10 @@ class NewtonStep:
         direct = self.direct if direct_step_worth_trying(self.direct, self.basis,
                                                          self.last_pivots) else None
         # A warm path that stalls before half-way is retried from the Lemke start.
-        return solve_linear_mcp(M, q, self.lb, self.ub, self.basis, opt, x, warm=self.warm,
-                                r=r, ray_start=start_ray, retry_below=0.5,
-                                minor_limit=opt.minor_limit(self.n), deadline=self.deadline,
-                                log=self.log, direct=direct, dense_start=dense_start)
+        res, self.basis = solve_handing_over(
+            None if getattr(self.basis, "runs_paths", False)
+            else getattr(self.make_basis, "hand_over", None),
+            M, q, self.lb, self.ub, self.basis, opt, x, warm=self.warm, r=r,
+            ray_start=start_ray, retry_below=0.5, minor_limit=opt.minor_limit(self.n),
+            deadline=self.deadline, log=self.log, direct=direct, dense_start=dense_start)
+        return res

@@ -15,17 +15,17 @@ from ..linalg.csc import trusted_csc
 from ..linalg.direct import DirectFactors
 from .direct_step import (FEASIBILITY_TOLERANCE, RESIDUAL_TOLERANCE, dense_direct_path,
                           dense_newton_direct, failed_direct_start)
-from .outcome import DIRECT_STEP_LINE, LinearCode, PathResult, WarmBasis
+from .outcome import DIRECT_STEP_LINE, HAND_OVER_LINE, LinearCode, PathResult, WarmBasis
 from .pivotal import PivotalPath
 
-__all__ = ["dense_newton_result", "solve_linear_mcp"]
+__all__ = ["dense_newton_result", "solve_handing_over", "solve_linear_mcp"]
 
 
 def solve_linear_mcp(M, q, lb, ub, basis, options, x, *, warm: WarmBasis | None = None,
                      r=None, ray_start: bool = False, retry_below: float = np.inf,
                      keep_ray: bool = False, minor_limit=None, deadline=None,
                      log=None, direct: DirectFactors | None = None,
-                     dense_start=None) -> PathResult:
+                     dense_start=None, hand_over: int | None = None) -> PathResult:
     """One linear MCP by the pivotal path from x (warm-started from ``warm``), retried
     from the Lemke ray start when ``options.lemke_start`` is "automatic", the first path
     failed and reached only t < ``retry_below``.  The retry's result is kept when it
@@ -37,8 +37,15 @@ def solve_linear_mcp(M, q, lb, ub, basis, options, x, *, warm: WarmBasis | None 
     for these arguments, when the caller has computed it (a failed step is not made
     again).  With ``options.engine = "reference"`` the path makes its start and its
     direct step itself (the reference of the one compiled call: the same bits).
+    ``hand_over``: a path that makes this many pivots (below ``minor_limit``) stops there,
+    and the result is returned at once with ``handed_over`` set, without the retry (the
+    caller solves the linear MCP again on the compiled sparse engine; see
+    :data:`compass_sparse.routes.HAND_OVER_MIN_PIVOTS`).
     """
-    kw = dict(minor_limit=minor_limit, deadline=deadline, log=log)
+    if hand_over is not None and minor_limit is not None and hand_over >= minor_limit:
+        hand_over = None
+    kw = dict(minor_limit=minor_limit if hand_over is None else hand_over,
+              deadline=deadline, log=log)
     res = None
     if (direct is not None and direct.dense and not ray_start and r is not None
             and options.engine == "auto"):
@@ -50,6 +57,8 @@ def solve_linear_mcp(M, q, lb, ub, basis, options, x, *, warm: WarmBasis | None 
     if res is None:
         res = PivotalPath(M, q, lb, ub, basis, options, direct=direct, **kw).run(
             x, warm=warm, ray_start=ray_start, r=r)
+    if _handed_over(res, hand_over):
+        return res
     if (res.code is LinearCode.SOLVED or ray_start or options.lemke_start != "automatic"
             or res.t >= retry_below
             or (deadline is not None and time.perf_counter() > deadline)):
@@ -57,11 +66,47 @@ def solve_linear_mcp(M, q, lb, ub, basis, options, x, *, warm: WarmBasis | None 
     res2 = PivotalPath(M, q, lb, ub, basis, options, **kw).run(x, ray_start=True)
     pivots = res.pivots + res2.pivots
     factorizations = res.factorizations + res2.factorizations
+    if _handed_over(res2, hand_over):
+        res2.pivots, res2.factorizations = pivots, factorizations
+        return res2
     if (res2.code is LinearCode.SOLVED or res2.t > res.t
             or (keep_ray and res2.code is LinearCode.RAY and res2.unbounded)):
         res = res2
     res.pivots, res.factorizations = pivots, factorizations
     return res
+
+
+def solve_handing_over(hand_over, M, q, lb, ub, basis, options, x, **kw):
+    """:func:`solve_linear_mcp` on ``basis``; ``hand_over``: None, or (pivots(n),
+    make_engine(M)) of :func:`compass_sparse.routes.basis_factory` (the route "sparse basis
+    to engine"): a path that makes that many pivots stops, and the linear MCP is solved
+    again, from its start, on a new compiled sparse engine, which counts on in the basis'
+    stats (the pivots and factorizations of both are counted).  Returns (the result, the
+    basis that ended it: ``basis`` or the engine, the basis of the later paths)."""
+    if hand_over is None:
+        return solve_linear_mcp(M, q, lb, ub, basis, options, x, **kw), basis
+    pivots_of, make_engine = hand_over
+    res = solve_linear_mcp(M, q, lb, ub, basis, options, x,
+                           hand_over=pivots_of(M.shape[0]), **kw)
+    if not res.handed_over:
+        return res, basis
+    if kw.get("log") is not None:
+        kw["log"](HAND_OVER_LINE)
+    engine = make_engine(M)
+    engine.stats = basis.stats
+    kw.update(direct=None, dense_start=None)  # (tried on the manager, or not applicable)
+    res2 = solve_linear_mcp(M, q, lb, ub, engine, options, x, **kw)
+    res2.pivots += res.pivots
+    res2.factorizations += res.factorizations
+    return res2, engine
+
+
+def _handed_over(res: PathResult, hand_over: int | None) -> bool:
+    """Whether ``res`` stopped at the hand-over's pivots (and mark it so)."""
+    if (hand_over is not None and res.code is LinearCode.MINOR_LIMIT
+            and res.pivots >= hand_over):
+        res.handed_over = True
+    return res.handed_over
 
 
 def _dense_direct_result(M, q, lb, ub, manager, options, x, r, warm, direct, kw, out=None):

@@ -13,6 +13,10 @@ __all__ = ["DIRECT_STEP_LINE", "LinearCode", "PathResult", "WarmBasis"]
 DIRECT_STEP_LINE = "minor       0 t 1.000000e+00 direct step (no pivot: one solve)"
 """The minor log's line for a path that the direct Newton step ended."""
 
+HAND_OVER_LINE = "hand-over: the paths continue on the compiled sparse engine"
+"""The minor log's line after a path on the basis manager stopped at the hand-over's
+pivots (the linear MCP is then solved again on the engine, from its start)."""
+
 
 class LinearCode(enum.Enum):
     """Outcome of one pivotal path: PATH's one-letter linear-solver codes."""
@@ -53,6 +57,9 @@ class PathResult:
     time: float = 0.0
     message: str = ""
     direct_lu_nnz: int = 0  #: entries of the direct step's LU (0: not tried)
+    #: the path stopped at the hand-over's pivots (solve_linear_mcp's ``hand_over``): the
+    #: caller runs the linear MCP again on the compiled sparse engine
+    handed_over: bool = False
 
     @property
     def x(self) -> np.ndarray:

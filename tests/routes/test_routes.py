@@ -38,7 +38,7 @@ def test_auto_routes_by_size():
     assert choose_routes(n, opt, nnz=int(SPARSE_ENGINE_MAX_DENSITY * n)).path == \
         "sparse engine"
     assert choose_routes(n, opt, nnz=int(SPARSE_ENGINE_MAX_DENSITY * n) + 1).path == \
-        "sparse basis"
+        "sparse basis to engine"
     assert choose_routes(n, Options(lu_ordering="metis")).path == "sparse basis"
     assert choose_routes(COMPILED_NMS_MAX_N, opt).nms == "compiled"
     assert choose_routes(COMPILED_NMS_MAX_N + 1, opt).nms == "python"
@@ -69,7 +69,7 @@ def test_path_basis_forces_the_reference_bases():
 
 def test_path_basis_sparse_engine_runs_the_compiled_sparse_engine_at_any_order_and_density():
     """'sparse engine' takes the engine past the density rule (a CGE model, 9.6 entries a
-    column, goes to the manager on 'auto') and below the dense engine's order; the CGE
+    column, starts on the manager on 'auto') and below the dense engine's order; the CGE
     endowment shock at n = 506 is solved on it in the manager's pivots."""
     from compass_sparse.generators.cge import size_for, static_cge
 
@@ -83,7 +83,7 @@ def test_path_basis_sparse_engine_runs_the_compiled_sparse_engine_at_any_order_a
     e[:, 0] = 0.1
     p = m.with_shock(endowment=e).problem
     runs = {pb: cs.solve_mcp(p, options={"path_basis": pb}) for pb in ("auto", "sparse engine")}
-    assert runs["auto"].routes["path"] == "sparse basis"
+    assert runs["auto"].routes["path"] == "sparse basis to engine"
     assert runs["sparse engine"].routes["path"] == "sparse engine"
     for r in runs.values():
         assert r.success and r.residual.natural <= 1e-6
@@ -116,9 +116,47 @@ def test_a_dense_lcp_above_the_dense_engines_order_stays_on_the_basis_manager():
     M = A @ A.T + np.eye(n)
     q = rng.normal(size=n)
     r = cs.solve_lcp(M, q, options={"crash_method": "none"})
-    assert r.routes["path"] == "sparse basis"
+    assert r.routes["path"] == "sparse basis to engine"
     assert r.success and r.residual.natural <= 1e-6
     banded = cs.solve_lcp(gen.p_matrix_lcp(n, "banded", seed=1).lcp[0],
                           gen.p_matrix_lcp(n, "banded", seed=1).lcp[1],
                           options={"crash_method": "none"})
     assert banded.routes["path"] == "sparse engine"
+
+
+def test_a_long_path_on_the_manager_hands_the_paths_to_the_sparse_engine():
+    """A dense LCP of order 501 (route "sparse basis to engine"): its path on the basis
+    manager makes hand_over_pivots(n) pivots, stops, and the LCP is solved again on the
+    compiled sparse engine -- the solution of the manager alone, in its pivots plus the
+    ones spent, the factorizations of both counted, the engine's LU reported."""
+    from compass_sparse.routes import hand_over_pivots
+
+    n = DENSE_ENGINE_MAX_N + 1
+    rng = np.random.default_rng(0)
+    A = rng.normal(size=(n, n)) / n
+    M = A @ A.T + np.eye(n)
+    q = rng.normal(size=n)
+    # (from the Lemke start: without it the start basis solves the LCP in no pivot)
+    opts = {"crash_method": "none", "lemke_start": "always"}
+    handed = cs.solve_lcp(M, q, options=opts)
+    alone = cs.solve_lcp(M, q, options=dict(opts, path_basis="sparse"))
+    assert alone.minor_iterations > hand_over_pivots(n)
+    assert alone.lu["backend"] != "sparse engine" and handed.lu["backend"] == "sparse engine"
+    assert handed.success and handed.residual.natural <= 1e-9
+    assert np.max(np.abs(handed.x - alone.x)) <= 1e-9 * max(1.0, np.max(np.abs(alone.x)))
+    assert handed.minor_iterations == alone.minor_iterations + hand_over_pivots(n)
+    assert handed.factorizations >= alone.factorizations
+
+
+def test_a_path_shorter_than_the_hand_over_stays_on_the_manager():
+    """The CGE endowment shock at n = 506 (9.6 entries a column: route "sparse basis to
+    engine") needs 4 pivots: every path stays on the manager."""
+    from compass_sparse.generators.cge import size_for, static_cge
+
+    m = static_cge(**size_for(600), seed=0)
+    R, F = m.block_shapes["W"]
+    e = np.ones((R, F))
+    e[:, 0] = 0.1
+    r = cs.solve_mcp(m.with_shock(endowment=e).problem)
+    assert r.routes["path"] == "sparse basis to engine"
+    assert r.success and r.lu["backend"] != "sparse engine" and r.minor_iterations < 100
