@@ -296,16 +296,15 @@ class Options(OptionsMixin):
         "auto", "the basis the pivotal paths run on: 'auto' (the compiled dense engine, a dense "
         "LU with Forrest-Tomlin updates, up to n = 500; above, the compiled sparse engine, a "
         "sparse LU with Forrest-Tomlin updates, for Jacobians of at most 8 entries per "
-        "column when lu_backend and lu_ordering are 'auto', else the sparse basis manager), "
+        "column when lu_backend and lu_ordering are 'auto'; for denser ones up to n = 10 000 "
+        "the sparse basis manager until a path makes max(100, n/10) pivots, then the sparse "
+        "engine; else the sparse basis manager), "
         "'dense' (the Python pivot loop on the dense reference basis, an explicit inverse "
         "with rank-one updates, up to n = 300; the sparse basis manager above) or 'sparse' "
         "(the Python pivot loop on the sparse basis manager at every order) or 'sparse engine' "
-        "(the compiled sparse engine at every order, whatever the Jacobian's density: for "
-        "solves that pivot much on Jacobians denser than 'auto' sends to it (a CGE shock "
-        "of 3348 pivots at n = 2024 took 3.4-4.6 s on it against 7.1 s on the manager; "
-        "with few pivots the manager's supernodal LU and reused factors are faster: 0.9 "
-        "against 0.3 s); it needs lu_backend and lu_ordering 'auto' and engine 'auto'); they "
-        "take the same pivots up to rounding",
+        "(the compiled sparse engine at every order, whatever the Jacobian's density, from "
+        "the first path; it needs lu_backend and lu_ordering 'auto' and engine 'auto'); "
+        "they take the same pivots up to rounding",
         choices=("auto", "dense", "sparse", "sparse engine"))
 
     # --- output ---------------------------------------------------------------------

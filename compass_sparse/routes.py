@@ -16,7 +16,8 @@ log level and never from the clock -- and recorded in ``Result.routes``:
               no ``COMPASS_SPARSE_LU`` in the environment: a chosen LU is the manager's --
               and a Jacobian of at most ``SPARSE_ENGINE_MAX_DENSITY`` entries per column;
               or ``path_basis = "sparse engine"``, at every order and density),
-              "sparse basis to engine" (the same conditions but a denser Jacobian: the
+              "sparse basis to engine" (the same conditions but a denser Jacobian, n at
+              most ``HAND_OVER_MAX_N``: the
               paths start on the basis manager, and a path that makes
               :func:`hand_over_pivots` pivots hands them to the sparse engine: the linear
               MCP is solved again there, and every later path runs there),
@@ -64,7 +65,7 @@ from .path.sparse_engine import SPARSE_ENGINE_MAX_DENSITY, SparsePathEngine
 __all__ = ["COMPILED_NMS_MAX_N", "COMPILE_SECONDS_DENSE", "COMPILE_SECONDS_MEDIUM",
            "COMPILE_SECONDS_SPARSE",
            "DENSE_BASIS_MAX_N", "DENSE_ENGINE_MAX_N", "UPDATE_LIMIT_FLOOR", "Routes",
-           "DEFAULT_UPDATE_LIMIT", "HAND_OVER_MIN_PIVOTS", "HAND_OVER_SHARE",
+           "DEFAULT_UPDATE_LIMIT", "HAND_OVER_MAX_N", "HAND_OVER_MIN_PIVOTS", "HAND_OVER_SHARE",
            "basis_factory", "hand_over_pivots", "choose_routes", "compile_estimate", "kernel_route"]
 
 DENSE_ENGINE_MAX_N = 500
@@ -143,7 +144,8 @@ def path_route(n: int, options: Options, nnz: int | None = None) -> str:
             and automatic_lu(options.lu_backend, options.lu_ordering)):
         if nnz is None or nnz <= SPARSE_ENGINE_MAX_DENSITY * n:
             return "sparse engine"
-        return "sparse basis to engine"
+        if n <= HAND_OVER_MAX_N:
+            return "sparse basis to engine"
     if options.path_basis == "dense" and n <= DENSE_BASIS_MAX_N:
         return "dense basis"
     return "sparse basis"
@@ -177,6 +179,13 @@ the faster basis for solves that pivot little on dense-ish Jacobians (the CGE mo
 n = 600: equal, and 2.5 against 1.7 s); a path's pivots tell which kind a solve is,
 where its density does not.  The pivots made before the hand-over are spent (counted
 in the Result): at most ~0.4 s at n = 2024 (~2 ms a pivot on the manager)."""
+
+
+HAND_OVER_MAX_N = 10_000
+"""Above this order a denser Jacobian's paths stay on the manager ("sparse basis"): the
+hand-over is measured up to n = 2452, and a large CGE model's bases, whose Schur
+complement is dense, would give the engine a dense tail of thousands of columns where the
+manager's supernodal LU and METIS order serve (benchmarks/cge.md)."""
 
 
 def hand_over_pivots(n: int) -> int:

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-import compass_sparse.lcp as lcp_module
+import compass_sparse.path.linear_mcp as linear_mcp_module
 from compass_sparse import MCP, MCPSolver, Options, Status, solve_lcp, solve_mcp
 from compass_sparse.exceptions import (CompassError, EvaluationError, OptionError,
                                        ProblemError, ShapeError)
@@ -136,7 +136,8 @@ def test_ctrl_c_during_solve_lcps_first_path_returns_a_result(monkeypatch):
     def interrupted(*a, **k):  # Ctrl-C while the first pivotal path runs
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(lcp_module, "solve_linear_mcp", interrupted)
+    # (solve_lcp's path: solve_handing_over, which calls solve_linear_mcp)
+    monkeypatch.setattr(linear_mcp_module, "solve_linear_mcp", interrupted)
     # (no crash: it would solve this 2 x 2 LCP before the path starts)
     r = solve_lcp(M2, q2, options={"crash_method": "none"})
     assert r.status is Status.USER_INTERRUPT and r.x.shape == (2,)

@@ -14,10 +14,10 @@ PACKAGE = ROOT / "compass_sparse"
 LAZY_OK = ("gamspy", "gams", "gamspy_base", "pyomo", "casadi", "pandas", "pyarrow",
            "matplotlib", "distributed", "dask", "cloudpickle",  # optional extras
            "numba", "scipy.linalg", "scipy.sparse.linalg", "scipy.optimize", "kvxopt",
-           "pymetis", "threadpoolctl")  # deliberately lazy heavy imports
+           "pymetis", "threadpoolctl", "llvmlite")  # deliberately lazy heavy imports
 """Top-level modules a function may import: the optional extras, and the heavy imports
-kept out of ``import compass_sparse`` (numba, scipy's linalg, scipy.optimize's HiGHS for
-the feasibility LP, SuiteSparse, METIS)."""
+kept out of ``import compass_sparse`` (numba and its LLVM binding, scipy's linalg,
+scipy.optimize's HiGHS for the feasibility LP, SuiteSparse, METIS)."""
 
 LAZY_OWN = {("compass_sparse.solve", "compass_sparse.presolve")}
 """(module, package module) pairs a function may import lazily: the preprocessor, whose

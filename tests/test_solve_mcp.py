@@ -579,7 +579,7 @@ def test_warm_basis_survives_presolve():
     """Result.basis is in the user's index space after presolve removed variables, and a
     re-solve from it (presolve runs again) needs no pivots; a basis of the wrong size is
     an input error, not a silent cold start."""
-    import compass_sparse.nms.newton as nms_mod
+    import compass_sparse.path.linear_mcp as linear_mcp_mod  # (NewtonStep calls it)
     from compass_sparse import ShapeError
 
     n = 40
@@ -595,20 +595,20 @@ def test_warm_basis_survives_presolve():
     warm_seen = []
     # the linear MCP of each major iteration (a small problem's direct step may end it
     # without running a PivotalPath), with the warm basis it is handed
-    solve_linear = nms_mod.solve_linear_mcp
+    solve_linear = linear_mcp_mod.solve_linear_mcp
 
     def spy(*args, warm=None, **kw):
         warm_seen.append(None if warm is None else warm.basic.copy())
         return solve_linear(*args, warm=warm, **kw)
 
-    nms_mod.solve_linear_mcp = spy
+    linear_mcp_mod.solve_linear_mcp = spy
     try:
         # A tighter tolerance makes the re-solve take a Newton step from the solution.
         again = solve_mcp(problem, x0=r.x, basis=r.basis,
                           options={"convergence_tolerance": 1e-13, "major_iteration_limit": 1,
                                    "crash_method": "none"})
     finally:
-        nms_mod.solve_linear_mcp = solve_linear
+        linear_mcp_mod.solve_linear_mcp = solve_linear
     keep = np.setdiff1d(np.arange(n), fix)
     assert warm_seen and warm_seen[0] is not None
     np.testing.assert_array_equal(warm_seen[0], r.basis.basic[keep])

@@ -33,8 +33,10 @@ by an artificial), ``pivot_tolerance`` 1e-11 (a replacement refused), ``stabilit
 1e-8 (|d1 - d2| / |d1|), ``fill_factor`` 2 and ``growth_limit`` ``GROWTH_LIMIT``.
 The route (:func:`compass_sparse.routes.path_route`) gives the engine the problems above
 the dense engine's order whose Jacobian has at most ``SPARSE_ENGINE_MAX_DENSITY`` entries
-per column on average; denser ones (the thesis families' dense Jacobians) stay on the
-basis manager, whose supernodal LU factors a dense block faster.
+per column on average; denser ones (the CGE models, the thesis families' dense
+Jacobians) start on the basis manager and come here after a long path (the route "sparse
+basis to engine", :func:`compass_sparse.routes.hand_over_pivots`); option ``path_basis =
+"sparse engine"`` sends every problem here.
 """
 from __future__ import annotations
 
@@ -55,14 +57,16 @@ __all__ = ["AUTO_UPDATE_LIMIT", "ORDERING", "SPARSE_ENGINE_MAX_DENSITY", "Sparse
 _I = np.int64
 
 SPARSE_ENGINE_MAX_DENSITY = 8.0
-"""Average entries per column of the Jacobian above which a problem's paths stay on the
-basis manager (``routes.path_route``): the compiled LU eliminates column by column, and
-on bases that fill (dense blocks; the CGE models) a supernodal LU is faster, and the
-manager reuses the crash's factors.  Measured (benchmarks/pivots.md): traffic (5.2 entries
-per column) 3.5x faster on the engine at n = 912; the static CGE model at n = 2024 (9.6
-per column) under a 50% output tax 2.07 s on the engine against 0.32 s on the manager
-(36 pivots: its time is the factorizations); the thesis families' dense Jacobians (n per
-column) alike."""
+"""Average entries per column of the Jacobian above which a problem's paths start on the
+basis manager (``routes.path_route``: the route "sparse basis to engine", which hands
+them to this engine after a long path).  On such Jacobians (the CGE models, 9.6 entries
+a column; the thesis families' dense ones) a basis that fills factors faster in the
+manager's supernodal LU, and the manager reuses factors from one major iteration to the
+next: a solve that pivots little is faster there (a 50% output tax on the static CGE
+model at n = 2024, 36 pivots: 0.36-0.43 s against 0.54-0.85 s here), one that pivots
+much is faster here since its dense tails are factored by BLAS (the endowment shock,
+3348 pivots: 2.3-2.9 s against 5.5-8.4 s; benchmarks/pivots.md).  Traffic (5.2 entries a
+column) was 3.5x faster here at n = 912."""
 
 GROWTH_LIMIT = 1e8
 """The Forrest-Tomlin growth limit of the sparse factors: an update whose row-eta

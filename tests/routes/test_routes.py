@@ -11,6 +11,7 @@ import compass_sparse.generators as gen
 from compass_sparse.exceptions import OptionError
 from compass_sparse.options import HOMOTOPY_DENSE_MAX_N, Options
 from compass_sparse.routes import (COMPILED_NMS_MAX_N, DENSE_BASIS_MAX_N, DENSE_ENGINE_MAX_N,
+                                   HAND_OVER_MAX_N,
                                    Routes, choose_routes)
 from compass_sparse.path.sparse_engine import SPARSE_ENGINE_MAX_DENSITY
 
@@ -39,6 +40,9 @@ def test_auto_routes_by_size():
         "sparse engine"
     assert choose_routes(n, opt, nnz=int(SPARSE_ENGINE_MAX_DENSITY * n) + 1).path == \
         "sparse basis to engine"
+    big = HAND_OVER_MAX_N + 1
+    assert choose_routes(big, opt, nnz=int(SPARSE_ENGINE_MAX_DENSITY * big) + 1).path == \
+        "sparse basis"
     assert choose_routes(n, Options(lu_ordering="metis")).path == "sparse basis"
     assert choose_routes(COMPILED_NMS_MAX_N, opt).nms == "compiled"
     assert choose_routes(COMPILED_NMS_MAX_N + 1, opt).nms == "python"
