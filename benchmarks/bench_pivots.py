@@ -98,12 +98,11 @@ def _cge(shock):
 
 def _on_engine(case):
     problem, opts = case
-    from compass_sparse import Options, OptionError
+    from compass_sparse import OptionError, Options, routes
     try:
         Options(path_basis="sparse engine")
     except OptionError:  # a baseline tree from before the option: the same route by
-        import compass_sparse.routes as routes  # lifting its density limit
-        routes.SPARSE_ENGINE_MAX_DENSITY = math.inf
+        routes.SPARSE_ENGINE_MAX_DENSITY = math.inf  # lifting its density limit
         return problem, opts
     return problem, dict(opts, path_basis="sparse engine")
 
