@@ -250,17 +250,26 @@ def _panel_update(nr, nc, A, j0, j1, rs, r0, tpiv):
         return p * m * w + p * p * w // 2
     flops = 0
     for j in range(j0, j1):
-        rr = tpiv[j]
-        if rr < 0:
-            continue
-        lcol = A[j * nr + rr + 1:j * nr + nr]
-        for c in range(j1, nc):
-            a = A[c * nr + rr]
-            if a != 0.0:
-                flops += nr - rr - 1
-                dst = A[c * nr + rr + 1:c * nr + nr]
-                for r in range(nr - rr - 1):
-                    dst[r] -= lcol[r] * a
+        if tpiv[j] >= 0:
+            flops += _eliminate(A, nr, j, tpiv[j], j1, nc)
+    return flops
+
+
+@njit(cache=True, inline="always")
+def _eliminate(A, nr, j, r0, c0, c1):
+    """The columns c0 .. c1-1 of the block updated by column j's pivot on block row r0
+    (its multipliers below r0); returns the multiply-adds.  (Views with a loop index from
+    0: numba then knows no index is negative and the loop vectorizes; 1.06 -> 0.29 ns per
+    multiply-add measured at 200 x 200.)"""
+    flops = 0
+    lcol = A[j * nr + r0 + 1:j * nr + nr]
+    for c in range(c0, c1):
+        a = A[c * nr + r0]
+        if a != 0.0:
+            flops += nr - r0 - 1
+            dst = A[c * nr + r0 + 1:c * nr + nr]
+            for r in range(nr - r0 - 1):
+                dst[r] -= lcol[r] * a
     return flops
 
 
@@ -312,19 +321,10 @@ def _block_lu(nr, nc, A, drow, rowpos, tcmax, tpref, tpiv, rank_tol, piv_thresh)
                 rowpos[i1], rowpos[i0] = r0, piv
             tpiv[j] = r0
             pv = A[col + r0]
-            # (views with a loop index from 0: numba then knows no index is negative and
-            # the update loop vectorizes; 1.06 -> 0.29 ns per multiply-add measured at
-            # 200 x 200)
             lcol = A[col + r0 + 1:col + nr]
             for r in range(nr - r0 - 1):
                 lcol[r] = lcol[r] / pv
-            for c in range(j + 1, j1):
-                a = A[c * nr + r0]
-                if a != 0.0:
-                    flops += nr - r0 - 1
-                    dst = A[c * nr + r0 + 1:c * nr + nr]
-                    for r in range(nr - r0 - 1):
-                        dst[r] -= lcol[r] * a
+            flops += _eliminate(A, nr, j, r0, j + 1, j1)
             r0 += 1
         if j1 < nc and r0 > rs:
             flops += _panel_update(nr, nc, A, j0, j1, rs, r0, tpiv) // BLAS_WORK_DIVISOR
