@@ -17,10 +17,9 @@ log level and never from the clock -- and recorded in ``Result.routes``:
               and a Jacobian of at most ``SPARSE_ENGINE_MAX_DENSITY`` entries per column;
               or ``path_basis = "sparse engine"``, at every order and density),
               "sparse basis to engine" (the same conditions but a denser Jacobian, n at
-              most ``HAND_OVER_MAX_N``: the
-              paths start on the basis manager, and a path that makes
-              :func:`hand_over_pivots` pivots hands them to the sparse engine: the linear
-              MCP is solved again there, and every later path runs there),
+              most ``HAND_OVER_MAX_N``: the paths start on the basis manager, and a path
+              that makes :func:`hand_over_pivots` pivots hands them to the sparse engine:
+              the linear MCP is solved again there, and every later path runs there),
               "dense basis" (``path_basis = "dense"``, n <= ``DENSE_BASIS_MAX_N``) or
               "sparse basis" (the Python loop over the basis manager: every other case);
 ``nms``       "compiled" (``engine = "auto"``, compiled kernels, the problem left unscaled
@@ -65,8 +64,9 @@ from .path.sparse_engine import SPARSE_ENGINE_MAX_DENSITY, SparsePathEngine
 __all__ = ["COMPILED_NMS_MAX_N", "COMPILE_SECONDS_DENSE", "COMPILE_SECONDS_MEDIUM",
            "COMPILE_SECONDS_SPARSE",
            "DENSE_BASIS_MAX_N", "DENSE_ENGINE_MAX_N", "UPDATE_LIMIT_FLOOR", "Routes",
-           "DEFAULT_UPDATE_LIMIT", "HAND_OVER_MAX_N", "HAND_OVER_MIN_PIVOTS", "HAND_OVER_SHARE",
-           "basis_factory", "hand_over_pivots", "choose_routes", "compile_estimate", "kernel_route"]
+           "DEFAULT_UPDATE_LIMIT", "HAND_OVER_MAX_N", "HAND_OVER_MIN_PIVOTS",
+           "HAND_OVER_SHARE", "basis_factory", "choose_routes", "compile_estimate",
+           "hand_over_pivots", "kernel_route"]
 
 DENSE_ENGINE_MAX_N = 500
 """Largest n whose paths run on the compiled dense engine (above: the sparse manager)."""
@@ -176,14 +176,14 @@ the faster basis for solves that pivot little on dense-ish Jacobians (the CGE mo
 9.6 entries a column: a 50% output tax at n = 2024, 36 pivots, 0.36-0.43 s against
 0.54-0.85 s on the engine), the engine for those that pivot much (the endowment shock,
 3348 pivots: 5.5-8.4 s on the manager against 2.3-2.9 s; the thesis families at
-n = 600: equal, and 2.5 against 1.7 s); a path's pivots tell which kind a solve is,
+n = 600: 5.4 against 5.3 s, and 2.5 against 1.3 s); a path's pivots tell which kind a solve is,
 where its density does not.  The pivots made before the hand-over are spent (counted
 in the Result): at most ~0.4 s at n = 2024 (~2 ms a pivot on the manager)."""
 
 
 HAND_OVER_MAX_N = 10_000
 """Above this order a denser Jacobian's paths stay on the manager ("sparse basis"): the
-hand-over is measured up to n = 2452, and a large CGE model's bases, whose Schur
+hand-over is measured up to n = 2024, and a large CGE model's bases, whose Schur
 complement is dense, would give the engine a dense tail of thousands of columns where the
 manager's supernodal LU and METIS order serve (benchmarks/cge.md)."""
 
