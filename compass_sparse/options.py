@@ -296,7 +296,7 @@ class Options(OptionsMixin):
         "auto", "the basis the pivotal paths run on: 'auto' (the compiled dense engine, a dense "
         "LU with Forrest-Tomlin updates, up to n = 500; above, the compiled sparse engine, a "
         "sparse LU with Forrest-Tomlin updates, for Jacobians of at most 8 entries per "
-        "column when lu_backend and lu_ordering are 'auto'; for denser ones up to n = 10 000 "
+        "column when lu_backend and lu_ordering are 'auto'; for denser ones up to n = 5000 "
         "the sparse basis manager until a path makes max(100, n/10) pivots, then the sparse "
         "engine; else the sparse basis manager), "
         "'dense' (the Python pivot loop on the dense reference basis, an explicit inverse "

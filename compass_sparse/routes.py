@@ -181,11 +181,14 @@ where its density does not.  The pivots made before the hand-over are spent (cou
 in the Result): at most ~0.4 s at n = 2024 (~2 ms a pivot on the manager)."""
 
 
-HAND_OVER_MAX_N = 10_000
+HAND_OVER_MAX_N = 5000
 """Above this order a denser Jacobian's paths stay on the manager ("sparse basis"): the
 hand-over is measured up to n = 2024, and a large CGE model's bases, whose Schur
 complement is dense, would give the engine a dense tail of thousands of columns where the
-manager's supernodal LU and METIS order serve (benchmarks/cge.md)."""
+manager's supernodal LU and METIS order serve (benchmarks/cge.md).  The engine does not
+estimate a factorization's time before it starts (the manager does; the engine checks its
+storage against the memory budget): at n = 5000 a wholly dense tail is a block of 2.5e7
+entries (200 MB) and ~3 s of panels at 0.08 ns a multiply-add."""
 
 
 def hand_over_pivots(n: int) -> int:
