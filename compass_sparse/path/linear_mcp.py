@@ -81,9 +81,10 @@ def solve_handing_over(hand_over, M, q, lb, ub, basis, options, x, **kw):
     make_engine(M)) of :func:`compass_sparse.routes.basis_factory` (the route "sparse basis
     to engine"): a path that makes that many pivots stops, and the linear MCP is solved
     again, from its start, on a new compiled sparse engine, which counts on in the basis'
-    stats (the pivots and factorizations of both are counted).  Returns (the result, the
-    basis that ended it: ``basis`` or the engine, the basis of the later paths)."""
-    if hand_over is None:
+    stats (the pivots and factorizations of both are counted); a basis that is already an
+    engine (``runs_paths``) never hands over.  Returns (the result, the basis that ended
+    it: ``basis`` or the engine, the basis of the later paths)."""
+    if hand_over is None or getattr(basis, "runs_paths", False):
         return solve_linear_mcp(M, q, lb, ub, basis, options, x, **kw), basis
     pivots_of, make_engine = hand_over
     res = solve_linear_mcp(M, q, lb, ub, basis, options, x,

@@ -8,7 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["DIRECT_STEP_LINE", "LinearCode", "PathResult", "WarmBasis"]
+__all__ = ["DIRECT_STEP_LINE", "HAND_OVER_LINE", "LinearCode", "PathResult",
+           "WarmBasis"]
 
 DIRECT_STEP_LINE = "minor       0 t 1.000000e+00 direct step (no pivot: one solve)"
 """The minor log's line for a path that the direct Newton step ended."""

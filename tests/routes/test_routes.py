@@ -71,21 +71,27 @@ def test_path_basis_forces_the_reference_bases():
     assert r.success and r.routes["path"] == "sparse basis"
 
 
-def test_path_basis_sparse_engine_runs_the_compiled_sparse_engine_at_any_order_and_density():
-    """'sparse engine' takes the engine past the density rule (a CGE model, 9.6 entries a
-    column, starts on the manager on 'auto') and below the dense engine's order; the CGE
-    endowment shock at n = 506 is solved on it in the manager's pivots."""
+def _cge_endowment_shock():
+    """The static CGE model at n = 506 (9.6 Jacobian entries a column) with the first
+    factor's endowment at a tenth in every region."""
     from compass_sparse.generators.cge import size_for, static_cge
 
-    opt = Options(path_basis="sparse engine")
-    assert choose_routes(DENSE_ENGINE_MAX_N + 1, opt, nnz=(DENSE_ENGINE_MAX_N + 1) ** 2).path \
-        == "sparse engine"
-    assert choose_routes(50, opt).path == "sparse engine"
     m = static_cge(**size_for(600), seed=0)
     R, F = m.block_shapes["W"]
     e = np.ones((R, F))
     e[:, 0] = 0.1
-    p = m.with_shock(endowment=e).problem
+    return m.with_shock(endowment=e).problem
+
+
+def test_path_basis_sparse_engine_runs_the_compiled_sparse_engine_at_any_order_and_density():
+    """'sparse engine' takes the engine past the density rule (a CGE model, 9.6 entries a
+    column, starts on the manager on 'auto') and below the dense engine's order; the CGE
+    endowment shock at n = 506 is solved on it in the manager's pivots."""
+    opt = Options(path_basis="sparse engine")
+    assert choose_routes(DENSE_ENGINE_MAX_N + 1, opt, nnz=(DENSE_ENGINE_MAX_N + 1) ** 2).path \
+        == "sparse engine"
+    assert choose_routes(50, opt).path == "sparse engine"
+    p = _cge_endowment_shock()
     runs = {pb: cs.solve_mcp(p, options={"path_basis": pb}) for pb in ("auto", "sparse engine")}
     assert runs["auto"].routes["path"] == "sparse basis to engine"
     assert runs["sparse engine"].routes["path"] == "sparse engine"
@@ -155,12 +161,6 @@ def test_a_long_path_on_the_manager_hands_the_paths_to_the_sparse_engine():
 def test_a_path_shorter_than_the_hand_over_stays_on_the_manager():
     """The CGE endowment shock at n = 506 (9.6 entries a column: route "sparse basis to
     engine") needs 4 pivots: every path stays on the manager."""
-    from compass_sparse.generators.cge import size_for, static_cge
-
-    m = static_cge(**size_for(600), seed=0)
-    R, F = m.block_shapes["W"]
-    e = np.ones((R, F))
-    e[:, 0] = 0.1
-    r = cs.solve_mcp(m.with_shock(endowment=e).problem)
+    r = cs.solve_mcp(_cge_endowment_shock())
     assert r.routes["path"] == "sparse basis to engine"
     assert r.success and r.lu["backend"] != "sparse engine" and r.minor_iterations < 100
