@@ -101,6 +101,23 @@ def test_the_dense_tail_is_not_cut_short_by_the_row_eta_storage():
     assert _factor(M, sk, update_limit=1, nnz_guess=1)[0] == SL.GROW
 
 
+def test_a_large_tail_solved_along_the_positions_factors_like_a_dense_solve():
+    """A tail of BLOCKED_MIN columns or more solves its columns with L_k along the
+    positions (no depth-first search; on the CGE bases the search cost as much as the
+    elimination): here a random basis (n = 700, 100 unit columns) whose tail of 266
+    columns follows 334 sparse steps holding ~3800 entries of L, so the positional solves
+    do eliminate; the factors solve B x = b and B^T y = c as numpy does."""
+    n = 700
+    M = _random(n, 0.008, 3)
+    sk = np.full(n, VAR_Z, dtype=np.int64)
+    sk[np.random.default_rng(4).choice(n, 100, replace=False)] = VAR_W
+    nrep, S, _ = _factor(M, sk, nnz_guess=n * n)
+    tail = S[0][SL.H_TAIL]
+    assert nrep == 0 and tail >= ST.BLOCKED_MIN
+    assert S[1][n - tail] > 1000  # L's entries before the tail
+    _check_solves(S, _basis(M, sk))
+
+
 def test_dense_tail_starts_after_the_run_of_dense_columns_and_not_on_a_sparse_basis():
     """A dense basis switches after DENSE_TAIL_RUN columns; a tridiagonal one never."""
     n = 40
