@@ -415,7 +415,7 @@ def _announce(estimate):
     """The one-time notice, on stderr.  The one line the library writes itself: a process
     that is about to spend a minute compiling must say so even where no logging is set up
     (the package's logger has only a NullHandler), and it says it once."""
-    sys.stderr.write(f"compass_sparse: compiling kernels, one-time: up to ~{estimate:.0f} s "
+    sys.stderr.write(f"compass_sparse: compiling kernels, one-time: about {estimate:.0f} s "
                      "(cached on disk afterwards; 'compass-sparse warmup' compiles them "
                      "all ahead)\n")
     sys.stderr.flush()

@@ -94,18 +94,21 @@ class Routes:
         return asdict(self)
 
 
-COMPILE_SECONDS_DENSE = 80.0
+COMPILE_SECONDS_DENSE = 140.0
 """Seconds a solve of a small problem (n <= ``DENSE_ENGINE_MAX_N``: the compiled crash,
 major iterations, dense engine and homotopy) spends compiling when numba's cache is empty:
-the estimate of the one-time notice (CPU seconds measured on a 2-core machine,
-benchmarks/first_run.md; a partly warm cache compiles less)."""
+the estimate of the one-time notice, CPU seconds measured on a 2-core machine
+(``benchmarks/bench_compile_estimate.py``, ``results/compile_estimate.json``; a partly
+warm cache compiles less).  The thesis demo: 138 s (97 s at 81ac55b)."""
 
-COMPILE_SECONDS_MEDIUM = 45.0
-"""The same up to ``COMPILED_NMS_MAX_N`` (the sparse basis, the compiled major iterations;
-the preprocessor of a model of that size)."""
+COMPILE_SECONDS_MEDIUM = 120.0
+"""The same up to ``COMPILED_NMS_MAX_N`` (the compiled major iterations and the sparse
+engine, or the basis manager; the preprocessor of a model of that size).  The traffic
+model at n = 912: 107-130 s.  (It was 45 s, from before the sparse engine's route.)"""
 
-COMPILE_SECONDS_SPARSE = 25.0
-"""The same for larger problems (the sparse basis, the Python major iterations)."""
+COMPILE_SECONDS_SPARSE = 110.0
+"""The same for larger problems (the sparse engine, the Python major iterations).  The
+structured demo at n = 1e5: 99-113 s.  (It was 25 s.)"""
 
 
 def compile_estimate(n: int) -> float:
