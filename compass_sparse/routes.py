@@ -222,6 +222,6 @@ def basis_factory(route: str, options: Options, deadline=None):
                                                     ordering=options.lu_ordering,
                                                     reuse_factors=options.factor_reuse))
 
-    make.hand_over = ((hand_over_pivots, lambda M: SparsePathEngine(M, options))
+    make.hand_over = ((hand_over_pivots, basis_factory("sparse engine", options))
                       if route == "sparse basis to engine" else None)
     return make

@@ -172,7 +172,7 @@ class NewtonStep:
                                                          self.last_pivots) else None
         # A warm path that stalls before half-way is retried from the Lemke start.
         res, self.basis = solve_handing_over(
-            getattr(self.make_basis, "hand_over", None), M, q, self.lb, self.ub, self.basis,
+            self.make_basis.hand_over, M, q, self.lb, self.ub, self.basis,
             opt, x, warm=self.warm, r=r, ray_start=start_ray, retry_below=0.5,
             minor_limit=opt.minor_limit(self.n), deadline=self.deadline, log=self.log,
             direct=direct, dense_start=dense_start)
