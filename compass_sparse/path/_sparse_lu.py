@@ -137,7 +137,7 @@ noise (replayed)."""
 REORDER_FILL = 1.2
 """A factorization computes a fresh elimination order when the last one's L + U held
 more than REORDER_FILL times the entries of the last factorization in a fresh order
-(or when many basic columns are new: :data:`compass_sparse.path._sparse_order.
+(or when many basic columns are new or have left: :data:`compass_sparse.path._sparse_order.
 REUSE_NEW_SHARE`); else it reuses that order, also from one path to the next (the next
 path starts from the last one's basis, and M keeps its pattern).  ``h[H_FRESH] = 0``
 (new factors) forces a fresh one.  Measured (the paths of a traffic solve replayed, one

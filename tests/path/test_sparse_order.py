@@ -316,3 +316,34 @@ def test_few_new_columns_reuse_the_last_order_and_many_take_a_fresh_one():
     h[SL.H_FRESH] = 0
     factor(more[1:])
     assert rank[left] < 0
+
+
+def test_an_order_is_not_reused_once_many_of_its_columns_have_left_the_basis():
+    """Regression: the reuse rule counted only the columns new since the last fresh
+    order, so an order made for a basis of many z columns served every smaller basis that
+    followed (on a CGE shock at n = 2024, an order made with 2023 z basic factored a basis
+    of 1237 with 3.2 times the entries of a fresh order).  Now up to nb / REUSE_NEW_SHARE
+    + REUSE_NEW_MIN ranked columns may leave and the order is reused (they keep their
+    rank); one more and the order is fresh.  A basis of half the columns is factored with
+    the entries of a fresh order of its own."""
+    n, factor = _grid_lcp_factor()
+    rng = np.random.default_rng(1)
+    base = rng.choice(n, 240, replace=False)
+    h, rank = factor(base)
+    gone = max(g for g in range(base.size)
+               if g <= (base.size - g) // SO.REUSE_NEW_SHARE + SO.REUSE_NEW_MIN)
+    factor(base[gone:])  # `gone` columns left, none new: reused
+    assert np.all(rank[base[:gone]] >= 0)
+    factor(base)  # (the order's own basis again)
+    factor(base[gone + 1:])  # one more left: a fresh order without them
+    assert np.all(rank[base[:gone + 1]] < 0) and np.all(rank[base[gone + 1:]] >= 0)
+    assert h[SL.H_LAST] == h[SL.H_FRESH]
+
+    everything = np.arange(n)
+    half = np.sort(rng.choice(n, n // 2, replace=False))
+    factor(everything)
+    factor(half)
+    in_run = int(h[SL.H_LAST])
+    _, own = _grid_lcp_factor()
+    h_own, _ = own(half)  # new factors: a fresh order of this basis
+    assert in_run == int(h_own[SL.H_LAST])
