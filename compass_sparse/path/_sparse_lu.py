@@ -19,12 +19,12 @@ reached from b's nonzeros in the graph of L (depth-first search, Gilbert and Pei
 pivoted rows are column k of U; among the rest the pivot row is the column's matched row
 r when ``|x_r| >= piv_thresh * max |x_i|``, else the row of largest |x_i| (threshold
 partial pivoting, multipliers at most 1 / piv_thresh; the engine uses
-``PIVOT_THRESHOLD`` = 1: partial pivoting, the matched row kept on ties).  L's column k
-is x / pivot on the remaining rows.  So ``P B Q = L U`` over *positions* (step indices),
-with L and U held in CSC arrays over positions after the factorization.  When the
-Schur complement left has become dense, the last columns are eliminated as one dense block
-with the same pivot rule (:mod:`compass_sparse.path._sparse_steps`, the dense tail;
-``h[H_TAIL]`` its columns): on the late bases of the traffic model at n = 2452 (a 200 x 200
+``PIVOT_THRESHOLD`` = 0.1).  L's column k is x / pivot on the remaining rows.  So
+``P B Q = L U`` over *positions* (step indices), with L and U held in CSC arrays over
+positions after the factorization.  When the Schur complement left has become dense, the
+last columns are eliminated as one dense block with partial pivoting
+(``TAIL_PIVOT_THRESHOLD``, the matched row kept on ties;
+:mod:`compass_sparse.path._sparse_steps`, the dense tail; ``h[H_TAIL]`` its columns): on the late bases of the traffic model at n = 2452 (a 200 x 200
 tail holding most of the 1.5e6 multiply-adds) it took the factorization from 4-8 ms to
 2.5-4 ms.
 
@@ -100,12 +100,24 @@ from ._sparse_steps import (DENSE_TAIL_MIN, DENSE_TAIL_RUN, DENSE_TAIL_SHARE, ba
 UPD_FILL = 5
 """replace_column's outcome when the update would exceed the fill limit or the storage."""
 
-PIVOT_THRESHOLD = 1.0
-"""The sparse engine's pivoting threshold: partial pivoting (multipliers at most 1); a
-column's matched row (:mod:`compass_sparse.path._sparse_order`) is kept on ties.  A
-threshold of 0.1 (multipliers up to 10, the matched row kept more often) took 3.5% off
-the entries of L + U on the bases of a traffic solve at n = 2452 (1.037e6 against
-1.075e6 over its 53 factorizations) and 6% off their time: not worth the growth."""
+PIVOT_THRESHOLD = 0.1
+"""The sparse steps' pivoting threshold: a column pivots on its matched row
+(:mod:`compass_sparse.path._sparse_order`) while that entry is at least a tenth of the
+column's largest remaining one (multipliers at most 10, as UMFPACK's default), else on
+the largest.  The matched rows are the minimum degree order's plan, and partial pivoting
+(1.0) left it wherever a matched entry was not the column's largest: on the bases of the
+CGE endowment shock at n = 2024 the long path's pivot-weighted L + U went from 313e3 to
+254e3 and the solve took 0.91 of the time (process pairs, median of 6), the same pivots
+and final point; a mid-path basis of 1237 basic z factored in 51e3 entries against 70e3.
+On the traffic model's bases it changes the entries by 3.5% (1.037e6 against 1.075e6
+over a solve's 53 factorizations at n = 2452) and the time within the noise.  The dense
+tail keeps partial pivoting: ``TAIL_PIVOT_THRESHOLD``."""
+
+TAIL_PIVOT_THRESHOLD = 1.0
+"""The dense tail's pivoting threshold: partial pivoting, the matched row kept on ties.
+The tail's columns are stored whole, so a looser threshold there saves no entries; with
+0.1 there too, the traffic solve at n = 2452 made 61 factorizations instead of 57 (the
+same pivots) and its replayed path kernels took 213-288 ms against 182-211 ms."""
 
 GROW = -1
 """factor()'s return when L or U did not fit in the preallocated storage (the engine
@@ -351,7 +363,8 @@ def factor(Mp, Mi, Mx, rI, rX, colkey, sk, si, art_sign, S, rank_tol, piv_thresh
             k0, ufree0 = k, ufree
             k, ufree, nrep, w, zl, zu = dense_tail(t + 1, k, ufree, order, sk, si, Mp, Mi,
                                                    Mx, rI, rX, art_sign, S, rank_tol,
-                                                   piv_thresh, pref, rep_slot, nrep)
+                                                   TAIL_PIVOT_THRESHOLD, pref, rep_slot,
+                                                   nrep)
             work += w
             if k < 0:
                 h[H_NEED] = max(Lp[k0] + block, ufree0 + block)

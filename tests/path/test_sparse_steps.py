@@ -363,3 +363,46 @@ def test_dependent_columns_inside_panels_are_skipped_and_the_rest_factorized():
     npiv, tpiv, _, res = _block_factors(A0)
     assert npiv == 298 and list(np.flatnonzero(tpiv < 0)) == [40, 201]
     assert res <= 1e-13
+
+
+def _weak_diagonal(n, seed):
+    """A sparse M whose diagonal entries are 0.15-0.9 of their column's largest
+    off-diagonal one: each column's own row is an acceptable match
+    (``_sparse_order.MATCH_TOL``) without being its largest entry."""
+    rng = np.random.default_rng(seed)
+    A = sp.random(n, n, density=4.0 / n, random_state=seed, format="csc")
+    A.data = rng.uniform(0.5, 1.0, A.nnz) * rng.choice([-1.0, 1.0], A.nnz)
+    A.setdiag(0.0)
+    A.eliminate_zeros()
+    offmax = np.maximum(abs(A).max(axis=0).toarray().ravel(), 1.0)
+    return sp.csc_matrix(A + sp.diags(rng.uniform(0.15, 0.9, n) * offmax))
+
+
+@pytest.mark.parametrize("piv_thresh", [SL.PIVOT_THRESHOLD, 1.0])
+def test_multipliers_stay_within_the_pivoting_thresholds(piv_thresh):
+    """The sparse steps keep a column's matched row while its entry is at least
+    ``piv_thresh`` of the column's largest, so their multipliers are at most
+    1 / piv_thresh -- and at the engine's threshold (0.1) some exceed 1, where partial
+    pivoting would have left the matched row -- while the dense tail pivots partially
+    (``TAIL_PIVOT_THRESHOLD``: multipliers at most 1).  The factors solve as numpy does."""
+    n = 400
+    M = _weak_diagonal(n, seed=3)
+    M.sort_indices()
+    S = SL.allocate(n, 50, 40 * M.nnz)
+    perm = np.zeros((N_PERM, n), dtype=np.int64)
+    ar = np.arange(n, dtype=np.int64)
+    nrep = SL.factor(M.indptr.astype(np.int64), M.indices.astype(np.int64), M.data,
+                     np.zeros(0, np.int64), np.zeros(0), ar, np.full(n, VAR_Z, np.int64), ar,
+                     np.ones(n, dtype=np.int64), S, RANK_TOL, piv_thresh, perm[W_REP_SLOT],
+                     perm[W_REP_ROW])
+    assert nrep == 0
+    h, Lp, Lx = S[0], S[1], S[3]
+    kt = n - int(h[SL.H_TAIL])
+    assert 0 < kt < n  # sparse steps and a dense tail
+    sparse_max = np.max(np.abs(Lx[:Lp[kt]]))
+    tail_max = np.max(np.abs(Lx[Lp[kt]:Lp[n]]))
+    assert sparse_max <= (1.0 + 1e-12) / piv_thresh
+    assert tail_max <= (1.0 + 1e-12) / SL.TAIL_PIVOT_THRESHOLD
+    if piv_thresh < 1.0:
+        assert sparse_max > 1.0
+    _check_solves(S, M.toarray())
