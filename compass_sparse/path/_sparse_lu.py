@@ -24,9 +24,9 @@ partial pivoting, multipliers at most 1 / piv_thresh; the engine uses
 positions after the factorization.  When the Schur complement left has become dense, the
 last columns are eliminated as one dense block with partial pivoting
 (``TAIL_PIVOT_THRESHOLD``, the matched row kept on ties;
-:mod:`compass_sparse.path._sparse_steps`, the dense tail; ``h[H_TAIL]`` its columns): on the late bases of the traffic model at n = 2452 (a 200 x 200
-tail holding most of the 1.5e6 multiply-adds) it took the factorization from 4-8 ms to
-2.5-4 ms.
+:mod:`compass_sparse.path._sparse_steps`, the dense tail; ``h[H_TAIL]`` its columns): on
+the late bases of the traffic model at n = 2452 (a 200 x 200 tail holding most of the
+1.5e6 multiply-adds) it took the factorization from 4-8 ms to 2.5-4 ms.
 
 Rank repair (thesis §3.3.1, as the basis manager and the dense engine do): a column
 whose largest remaining entry is at most ``rank_tol * ||B[:, s]||_inf`` (or a second unit
@@ -103,15 +103,15 @@ UPD_FILL = 5
 PIVOT_THRESHOLD = 0.1
 """The sparse steps' pivoting threshold: a column pivots on its matched row
 (:mod:`compass_sparse.path._sparse_order`) while that entry is at least a tenth of the
-column's largest remaining one (multipliers at most 10, as UMFPACK's default), else on
-the largest.  The matched rows are the minimum degree order's plan, and partial pivoting
-(1.0) left it wherever a matched entry was not the column's largest: on the bases of the
-CGE endowment shock at n = 2024 the long path's pivot-weighted L + U went from 313e3 to
-254e3 and the solve took 0.91 of the time (process pairs, median of 6), the same pivots
-and final point; a mid-path basis of 1237 basic z factored in 51e3 entries against 70e3.
-On the traffic model's bases it changes the entries by 3.5% (1.037e6 against 1.075e6
-over a solve's 53 factorizations at n = 2452) and the time within the noise.  The dense
-tail keeps partial pivoting: ``TAIL_PIVOT_THRESHOLD``."""
+column's largest remaining one (multipliers at most 10, UMFPACK's default for
+unsymmetric matrices), else on the largest.  The matched rows are the minimum degree
+order's plan, and partial pivoting (1.0) left it wherever a matched entry was not the
+column's largest: on the bases of the CGE endowment shock at n = 2024 the long path's
+pivot-weighted L + U went from 313e3 to 254e3 and the solve took 0.91 of the time
+(process pairs, median of 6), the same pivots and final point; a mid-path basis of 1237
+basic z factored in 52e3 entries against 70e3.  The traffic solves keep their
+factorizations (57 at n = 2452) and their time (process pairs: 1.03 and 0.96 at
+n = 2452 and 912).  The dense tail keeps partial pivoting: ``TAIL_PIVOT_THRESHOLD``."""
 
 TAIL_PIVOT_THRESHOLD = 1.0
 """The dense tail's pivoting threshold: partial pivoting, the matched row kept on ties.
@@ -149,12 +149,13 @@ noise (replayed)."""
 REORDER_FILL = 1.2
 """A factorization computes a fresh elimination order when the last one's L + U held
 more than REORDER_FILL times the entries of the last factorization in a fresh order
-(or when many basic columns are new or have left: :data:`compass_sparse.path._sparse_order.
-REUSE_NEW_SHARE`); else it reuses that order, also from one path to the next (the next
-path starts from the last one's basis, and M keeps its pattern).  ``h[H_FRESH] = 0``
-(new factors) forces a fresh one.  Measured (the paths of a traffic solve replayed, one
-process per tree, interleaved): reusing across paths took 6% off the path kernels at
-n = 912 and 20% at n = 2452 against a fresh order at each path's start."""
+(or when many basic columns are new or have left:
+:data:`compass_sparse.path._sparse_order.REUSE_NEW_SHARE`); else it reuses that order,
+also from one path to the next (the next path starts from the last one's basis, and M
+keeps its pattern).  ``h[H_FRESH] = 0`` (new factors) forces a fresh one.  Measured
+(the paths of a traffic solve replayed, one process per tree, interleaved): reusing
+across paths took 6% off the path kernels at n = 912 and 20% at n = 2452 against a fresh
+order at each path's start."""
 
 
 ETA_ROOM_UPDATES = 50

@@ -45,8 +45,9 @@ exchanged: a factorization reuses the last fresh order -- each column's rank
 in it and its matched row, the columns new since ordered after the others and preferring
 their own row -- while few of its columns are new and few of the order's have left
 (``REUSE_NEW_SHARE``) and the last factors did not fill much beyond the fresh order's
-(the caller's rule, :data:`compass_sparse.path._sparse_lu.REORDER_FILL`).  On the bases of a traffic solve
-at n = 2452 this took 12-35% off the factorizations for 2-4% more entries.
+(the caller's rule, :data:`compass_sparse.path._sparse_lu.REORDER_FILL`).  On the bases
+of a traffic solve at n = 2452 this took 12-35% off the factorizations for 2-4% more
+entries.
 
 Everything runs on preallocated integer work space (:func:`work_size` entries); the
 quotient graph compacts its storage when it fills, and returns -1 when even then it does
