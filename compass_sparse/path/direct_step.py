@@ -104,7 +104,8 @@ def direct_step_worth_trying(direct, basis, last_pivots) -> bool:
     of 9 solves): traffic n = 912 (majors 2-7 pivot), the direct step tried before 3 of
     its 9 paths instead of all 9, 7 ms less a solve (74 against 81 ms on a loaded machine),
     the same 586 pivots; the Ramsey model at n = 993 (no pivot in any major iteration)
-    unchanged, 12 ms a solve with the direct step against 22 ms without.  The basis manager's paths and the dense engine's always try it."""
+    unchanged, 12 ms a solve with the direct step against 22 ms without.  The basis
+    manager's paths and the dense engine's always try it."""
     if direct is None:
         return False
     if direct.dense or not getattr(basis, "runs_paths", False):
