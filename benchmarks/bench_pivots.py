@@ -18,9 +18,11 @@ major iterations, restarts, crash iterations, F and J evaluations, CPU and wall 
 solve (medians over ``--repeats`` timed solves, after one untimed solve that compiles and
 loads the numba kernels), the time spent in the user's F and J (estimated: F and J timed
 at the solution times the evaluation counts; "net" = solve CPU less that),
-microseconds per pivot (net CPU / pivots), and the largest factors' entries (``max_nnz_lu``,
-the largest nnz(L + U) of the solve's factorizations: a count, free of this machine's
-timing noise, that a pivot's time on the sparse engine follows).
+microseconds per pivot (net CPU / pivots), the largest factors' entries (``max_nnz_lu``,
+the largest nnz(L + U) of the solve's factorizations) and the entries the sparse engine's
+pivots read (``pivot_lu_entries``: the factors' entries held at each of its pivots,
+summed; printed in millions): counts, free of this machine's timing noise, that a
+pivot's time on the sparse engine follows.
 Counts must be the same in every repeat (the solver is deterministic); a difference is
 reported.  A problem whose untimed solve ends at its time limit gets one timed solve.  PATH's figures come from ``benchmarks/reference/pivots.csv`` (PATH cannot run
 here: GAMS' demo licence expired).
@@ -193,10 +195,11 @@ def run_case(name, repeats, time_limit):
             crash=int(res.crash_iterations), nfev=int(res.nfev), njev=int(res.njev),
             domain_errors=int(getattr(res, "domain_errors", 0)),
             max_nnz_lu=int((getattr(res, "lu", None) or {}).get("max_nnz_lu", 0)),
+            pivot_lu_entries=int((getattr(res, "lu", None) or {}).get("pivot_lu_entries", 0)),
             cpu=cpu, wall=wall))
         x = res.x
     counts = ("status", "pivots", "factorizations", "majors", "restarts", "crash", "nfev",
-              "njev", "max_nnz_lu")
+              "njev", "max_nnz_lu", "pivot_lu_entries")
     same = all(all(r[k] == rows[0][k] for k in counts) for r in rows)
     out = dict(rows[0])
     out.update({k: statistics.median(r[k] for r in rows) for k in ("cpu", "wall")})
@@ -221,7 +224,8 @@ def load_reference():
 
 FIELDS = ["tree", "problem", "n", "status", "success", "natural", "pivots", "factorizations", "majors",
           "restarts", "crash", "nfev", "njev", "domain_errors", "cpu", "wall", "user_cpu",
-          "net_cpu", "us_per_pivot", "pivots_per_var", "max_nnz_lu", "repeats", "counts_repeat",
+          "net_cpu", "us_per_pivot", "pivots_per_var", "max_nnz_lu", "pivot_lu_entries",
+          "repeats", "counts_repeat",
           "path_pivots", "path_time", "path_source"]
 
 
@@ -273,7 +277,7 @@ def main(argv=None):
         w.writeheader()
         hdr = (f"{'problem':18s} {'n':>5s} {'status':10s} {'pivots':>7s} {'PATH':>5s} "
                f"{'fact':>5s} {'maj':>4s} {'rst':>3s} {'crash':>5s} {'cpu s':>7s} "
-               f"{'wall s':>7s} {'net s':>7s} {'us/piv':>7s} {'max L+U':>8s}")
+               f"{'wall s':>7s} {'net s':>7s} {'us/piv':>7s} {'max L+U':>8s} {'read M':>7s}")
         print(hdr + ("   (* baseline)" if args.baseline else ""), flush=True)
         trees = ([("baseline", Path(args.baseline)), ("this", HERE.parent)]
                  if args.baseline else [("this", None)])
@@ -289,7 +293,8 @@ def main(argv=None):
             print(f"{name[:13] + ('*' if tree == 'baseline' else ''):18s} {r['n']:5d} {r['status']:10s} {r['pivots']:7d} "
                   f"{r['path_pivots'] or '-':>5s} {r['factorizations']:5d} {r['majors']:4d} "
                   f"{r['restarts']:3d} {r['crash']:5d} {r['cpu']:7.3f} {r['wall']:7.3f} "
-                  f"{r['net_cpu']:7.3f} {r['us_per_pivot']:7.0f} {r.get('max_nnz_lu', 0):8d}"
+                  f"{r['net_cpu']:7.3f} {r['us_per_pivot']:7.0f} {r.get('max_nnz_lu', 0):8d} "
+                  f"{r.get('pivot_lu_entries', 0) / 1e6:7.1f}"
                   + ("" if r["counts_repeat"] else "  (counts differ between repeats)")
                   + ("" if r["success"] else f"  natural residual {r['natural']:.1e}"),
                   flush=True)

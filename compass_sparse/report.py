@@ -99,7 +99,8 @@ def lu_report(bm) -> dict:
     return dict(backend=st.backend, ordering=st.ordering,
                 orderings_computed=st.orderings_computed, time_ordering=st.time_ordering,
                 time_factor=st.time_factor, est_nnz_lu=st.est_nnz_lu, est_flops=st.est_flops,
-                est_bytes=st.est_bytes, max_nnz_lu=st.max_nnz_lu, reuses=st.reuses,
+                est_bytes=st.est_bytes, max_nnz_lu=st.max_nnz_lu,
+                pivot_lu_entries=st.pivot_lu_entries, reuses=st.reuses,
                 reuse_steps=st.reuse_steps, reuse_fallbacks=st.reuse_fallbacks,
                 peak_rss_bytes=(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
                                 if resource is not None else 0))

@@ -61,7 +61,9 @@ class Result:
     #: ``compass_sparse.plot.convergence`` draws it
     history: list | None = None
     #: sparse LU of the basis: backend, ordering, symbolic estimates (est_nnz_lu, est_flops,
-    #: est_bytes: the largest met), max_nnz_lu, times, and the process's peak RSS in bytes
+    #: est_bytes: the largest met), max_nnz_lu, pivot_lu_entries (the sparse engine's
+    #: factor entries held at each of its pivots, summed), times, and the process's peak
+    #: RSS in bytes
     lu: dict = field(default_factory=dict)
     #: which implementation of each pass ran (:mod:`compass_sparse.routes`): "kernels"
     #: (compiled or interpreted), "path" (dense engine, dense basis or sparse basis),

@@ -26,7 +26,7 @@ from .._jit import njit
 from ._sparse_lu import GROW as SP_GROW, UPD_FILL
 from ._sparse_lu import factor as sp_factor, ftran_column as sp_ftran_column
 from ._sparse_lu import ftran_dense as sp_ftran_dense, replace_column as sp_replace_column
-from ._sparse_lu import count_solve, refactor_pays
+from ._sparse_lu import H_NNZL, H_NNZR, H_NNZU, count_solve, refactor_pays
 from ._dense_lu import (P_ROW, P_SLOT, UPD_GROWTH, UPD_LIMIT, UPD_OK, UPD_REFUSED, UPD_UNSTABLE,
                         W_CAND, W_FACTOR, W_REP_ROW, W_REP_SLOT, basis_column, factor, ftran,
                         lu_factor, replace_column)
@@ -46,8 +46,10 @@ MSG_NONE, MSG_RAY_UNBOUNDED, MSG_T_ZERO, MSG_CYCLE, MSG_LIMIT, MSG_SING_FACTOR, 
 
 # integer state (istate) and float state (fstate) layout
 I_EK, I_EI, I_PIV, I_TSLOT, I_NFAC, I_NUPD, I_NETA, I_MSG, I_REFUSED, I_UNSTABLE, \
-    I_GROWTH, I_BELOW, I_FILL = range(13)
-N_ISTATE = 13
+    I_GROWTH, I_BELOW, I_FILL, I_LUSUM = range(14)
+N_ISTATE = 14
+# (I_LUSUM: the sparse factors' entries, L + U with the updates' columns and row etas,
+# held at each pivot's FTRAN, summed over the path's pivots: what its pivots read)
 F_ES, F_EV, F_T, F_BEST_T, F_RES, F_TLOW = range(6)
 N_FSTATE = 6
 # tolerances (tol) and limits (lim)
@@ -443,6 +445,8 @@ def path_loop(fk, prob, tab, state, D, S, tol, lim, rec, rect):
         # d = B^{-1} a, its largest |d_k| and the basic variables' rates -es d
         rate = work[7]
         dmax = _ftran_column(fk, prob, tab, D, S, istate[I_NETA], ek, ei, col, d, rate, -es)
+        if fk != FAC_DENSE:
+            istate[I_LUSUM] += S[0][H_NNZL] + S[0][H_NNZU] + S[0][H_NNZR]
         t_slot = istate[I_TSLOT]
         t = fstate[F_T]
         piv_tol = tol[T_PIV] * max(1.0, dmax)

@@ -174,6 +174,7 @@ class SparsePathEngine(PathEngine):
         super()._account(istate)
         h = self._S[0]
         self.stats.max_nnz_lu = max(self.stats.max_nnz_lu, int(h[SL.H_BASE]))
+        self.stats.pivot_lu_entries += int(istate[K.I_LUSUM])
 
     def prepare(self, q, lb, ub):
         if self._S is None:
