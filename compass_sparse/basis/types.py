@@ -215,9 +215,10 @@ class BasisStats:
     est_flops: float = -1.0
     est_bytes: float = -1.0
     max_nnz_lu: int = 0
-    #: the sparse engine's factor entries (L + U, the updates' columns and row etas) held
-    #: at each of its pivots, summed: what its pivots read (over its pivots, the
-    #: pivot-weighted mean size of the factors; a count, unlike a time)
+    #: the sparse engine's nonzero factor entries (L + U, the updates' columns and row
+    #: etas) held at each of its pivots, summed: what its pivots read, but for a dense
+    #: tail's stored zeros (over its pivots, the pivot-weighted mean size of the factors;
+    #: a count, unlike a time)
     pivot_lu_entries: int = 0
     reuses: int = 0  #: factor() calls answered by the held factors (no factorization)
     reuse_solves: int = 0  #: solves by preconditioned GMRES on held factors

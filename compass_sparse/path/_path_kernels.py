@@ -48,8 +48,9 @@ MSG_NONE, MSG_RAY_UNBOUNDED, MSG_T_ZERO, MSG_CYCLE, MSG_LIMIT, MSG_SING_FACTOR, 
 I_EK, I_EI, I_PIV, I_TSLOT, I_NFAC, I_NUPD, I_NETA, I_MSG, I_REFUSED, I_UNSTABLE, \
     I_GROWTH, I_BELOW, I_FILL, I_LUSUM = range(14)
 N_ISTATE = 14
-# (I_LUSUM: the sparse factors' entries, L + U with the updates' columns and row etas,
-# held at each pivot's FTRAN, summed over the path's pivots: what its pivots read)
+# (I_LUSUM: the sparse factors' nonzero entries, L + U with the updates' columns and row
+# etas, held at each pivot's FTRAN, summed over the path's pivots: what its pivots read,
+# but for the zeros a dense tail stores, h[H_ZL] + h[H_ZU], which its loops read too)
 F_ES, F_EV, F_T, F_BEST_T, F_RES, F_TLOW = range(6)
 N_FSTATE = 6
 # tolerances (tol) and limits (lim)
