@@ -188,14 +188,15 @@ def run_case(name, repeats, time_limit):
         c0, w0 = time.process_time(), time.perf_counter()
         res = solve_mcp(p, options=options)
         cpu, wall = time.process_time() - c0, time.perf_counter() - w0
+        lu = getattr(res, "lu", None) or {}  # (a baseline tree may report fewer figures)
         rows.append(dict(
             status=res.status.name, natural=natural_residual(problem, res.x),
             pivots=int(res.minor_iterations), factorizations=int(res.factorizations),
             majors=int(res.nit), restarts=int(res.restarts),
             crash=int(res.crash_iterations), nfev=int(res.nfev), njev=int(res.njev),
             domain_errors=int(getattr(res, "domain_errors", 0)),
-            max_nnz_lu=int((getattr(res, "lu", None) or {}).get("max_nnz_lu", 0)),
-            pivot_lu_entries=int((getattr(res, "lu", None) or {}).get("pivot_lu_entries", 0)),
+            max_nnz_lu=int(lu.get("max_nnz_lu", 0)),
+            pivot_lu_entries=int(lu.get("pivot_lu_entries", 0)),
             cpu=cpu, wall=wall))
         x = res.x
     counts = ("status", "pivots", "factorizations", "majors", "restarts", "crash", "nfev",
