@@ -182,7 +182,7 @@ def _stage(t0, nc, nr, order, sk, si, Mp, Mi, Mx, rI, rX, art_sign, S, pref, ufr
     the staging 283-375 -> 182-194 ms over the solve's 40 factorizations).  The sums
     are taken in another order, as the panels' are; smaller tails keep their bits."""
     (h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead, Rs, Ri, Rx, Rpos, pinv,
-     slot_at, pos_of, iw, fw, ow) = S
+     slot_at, pos_of, iw, fw, ow, seg) = S
     n = sk.shape[0]
     xi, pstack, mark, crow = iw[n:2 * n], iw[2 * n:3 * n], iw[3 * n:4 * n], iw[4 * n:5 * n]
     x, cval, tcmax = fw[0], fw[1], fw[2]
@@ -248,6 +248,30 @@ def _stage(t0, nc, nr, order, sk, si, Mp, Mi, Mx, rI, rX, art_sign, S, pref, ufr
         if full or ufree > capU:
             return -1, work
     return ufree, work
+
+
+@njit(cache=True, inline="always")
+def axpy_run(w, i0, vals, e0, m, x):
+    """w[i0 + r] -= vals[e0 + r] * x for r < m: a run of a factor's column over the dense
+    tail's rows, stored with its zeros over consecutive positions, so that the solves'
+    loop (:mod:`compass_sparse.path._sparse_lu`) runs over contiguous memory and
+    vectorizes instead of going through the row indices; each w entry gets the same
+    operation as through the indices (an explicit zero subtracts 0)."""
+    dst = w[i0:i0 + m]
+    src = vals[e0:e0 + m]
+    for r in range(m):
+        dst[r] -= src[r] * x
+
+
+@njit(cache=True, inline="always")
+def dot_run(s, w, i0, vals, e0, m):
+    """s - sum vals[e0 + r] * w[i0 + r], term by term in order (the same operations as
+    through the row indices)."""
+    src = vals[e0:e0 + m]
+    ws = w[i0:i0 + m]
+    for r in range(m):
+        s -= src[r] * ws[r]
+    return s
 
 
 BLOCKED_MIN = 256
@@ -397,7 +421,7 @@ def dense_tail(t0, k0, ufree, order, sk, si, Mp, Mi, Mx, rI, rX, art_sign, S, ra
     stored in L and in U), or (-1, 0, 0, 0, 0, 0) when L or U did not fit in their
     storage."""
     (h, Lp, Li, Lx, Us, Ue, Ui, Ux, Ud, Urp, Urj, Urx, dead, Rs, Ri, Rx, Rpos, pinv,
-     slot_at, pos_of, iw, fw, ow) = S
+     slot_at, pos_of, iw, fw, ow, seg) = S
     n = sk.shape[0]
     nc = n - t0
     nr = n - k0

@@ -281,6 +281,59 @@ def test_dense_tail_solves_as_through_the_indices_bit_for_bit_after_updates():
     assert np.count_nonzero(S[12][kt:n]) == 6  # six tail positions dead
 
 
+def test_spikes_keep_their_tail_rows_whole_and_solve_as_through_the_indices():
+    """An update's new column of U whose rows in the dense tail are at least
+    ``SPIKE_SEGMENT_SHARE`` nonzero stores them whole, in position order, with their row
+    indices too (row p's entry zero), and the solves read them as one contiguous run:
+    FTRAN and BTRAN give, bit for bit, what the same factors give through the indices,
+    and agree with numpy's solve of the basis.  The entries counted leave the zeros out."""
+    n = 200
+    M = _random(n, 0.03, 0)
+    Mc = sp.csc_matrix(M)
+    Mc.sort_indices()
+    sk = np.full(n, VAR_Z, dtype=np.int64)
+    units = np.random.default_rng(1).choice(n, 70, replace=False)
+    sk[units] = VAR_W
+    nrep, S, _ = _factor(M, sk, nnz_guess=n * n)
+    h = S[0]
+    tail = int(h[SL.H_TAIL])
+    kt = n - tail
+    assert nrep == 0 and tail >= ST.DENSE_TAIL_MIN
+    Md = M.toarray()
+    B = np.where(sk == VAR_W, 0.0, 1.0) * Md  # the basis: M's column or -e_i by slot
+    B[units, units] = -1.0
+
+    def live_tail_slot(d, enter):
+        pos_of = S[19]
+        return max((s for s in range(n) if kt <= pos_of[s] < n), key=lambda s: abs(d[s]))
+
+    def entered(d, enter):  # the slot leaving, and the basis after the exchange
+        s = live_tail_slot(d, enter)
+        B[:, s] = Md[:, enter]
+        return s
+
+    checked = 0
+    for nupd, b, x, y in _solves_through_updates(S, Mc, units[:6], 2, entered,
+                                                 np.random.default_rng(7)):
+        assert np.array_equal(x, _ftran_by_indices(S, nupd, b))
+        assert np.array_equal(y, _btran_by_indices(S, nupd, b))
+        assert np.allclose(B @ x, b, atol=1e-10) and np.allclose(B.T @ y, b, atol=1e-10)
+        checked += 1
+    assert checked == 12
+    Us, Ue, Ui, Ux, seg = S[4], S[5], S[6], S[7], S[23]
+    whole = [j for j in range(n, n + 6) if seg[j] >= 0]
+    assert whole  # (these spikes are dense in the tail rows)
+    nnz_spikes = 0
+    for j in range(n, n + 6):
+        idx = Ui[Us[j]:Ue[j]]
+        assert np.all(np.diff(idx) > 0)  # position order, the run included
+        nnz_spikes += np.count_nonzero(Ux[Us[j]:Ue[j]])
+        if seg[j] >= 0:
+            assert np.array_equal(Ui[seg[j]:seg[j] + tail], np.arange(kt, n))
+    assert h[SL.H_UFREE] - h[SL.H_UFACT] == sum(Ue[j] - Us[j] for j in range(n, n + 6))
+    assert nnz_spikes < h[SL.H_UFREE] - h[SL.H_UFACT]  # zeros stored, and not counted
+
+
 def _backward_error(B, x, b):
     """||B x - b|| / (||B|| ||x|| + ||b||), infinity norms: the normwise backward error."""
     return np.abs(B @ x - b).max() / (np.abs(B).sum(1).max() * np.abs(x).max()
