@@ -248,13 +248,9 @@ def _solves_through_updates(S, Mc, enters, trials, leaving, rng):
         assert SL.replace_column(S, nupd, leave, d, dmax, 1e-11, 1e-8, 1e8, 2.0) == 0
 
 
-def test_dense_tail_solves_as_through_the_indices_bit_for_bit_after_updates():
-    """The tail's columns are stored whole (zeros too) over consecutive positions and the
-    solves run over them as dense columns; FTRAN and BTRAN give, bit for bit, what the
-    same factors give through their row indices -- on the fresh factors and after
-    Forrest-Tomlin updates that kill columns of the tail -- and the counts of entries
-    leave the stored zeros out."""
-    n = 200
+def _tail_factors(n):
+    """A random sparse basis (3 % dense, 70 unit columns) whose last columns go to the
+    dense tail, factored: (M, M as sorted CSC, sk, the unit slots, S)."""
     M = _random(n, 0.03, 0)
     Mc = sp.csc_matrix(M)
     Mc.sort_indices()
@@ -262,19 +258,34 @@ def test_dense_tail_solves_as_through_the_indices_bit_for_bit_after_updates():
     units = np.random.default_rng(1).choice(n, 70, replace=False)
     sk[units] = VAR_W
     nrep, S, _ = _factor(M, sk, nnz_guess=n * n)
+    assert nrep == 0 and S[0][SL.H_TAIL] >= ST.DENSE_TAIL_MIN
+    return M, Mc, sk, units, S
+
+
+def _live_tail_slot(S, d):
+    """The slot of largest |d| among those whose position is a live one of the tail."""
+    n = d.size
+    kt = n - S[0][SL.H_TAIL]
+    pos_of = S[19]
+    return max((s for s in range(n) if kt <= pos_of[s] < n), key=lambda s: abs(d[s]))
+
+
+def test_dense_tail_solves_as_through_the_indices_bit_for_bit_after_updates():
+    """The tail's columns are stored whole (zeros too) over consecutive positions and the
+    solves run over them as dense columns; FTRAN and BTRAN give, bit for bit, what the
+    same factors give through their row indices -- on the fresh factors and after
+    Forrest-Tomlin updates that kill columns of the tail -- and the counts of entries
+    leave the stored zeros out."""
+    n = 200
+    M, Mc, sk, units, S = _tail_factors(n)
     h = S[0]
-    assert nrep == 0 and h[SL.H_TAIL] >= ST.DENSE_TAIL_MIN
     kt = n - h[SL.H_TAIL]
     Lp, Ux = S[1], S[7]
     assert h[SL.H_ZL] + h[SL.H_ZU] > 0  # (a tail of a sparse basis holds zeros)
     assert h[SL.H_NNZL] == np.count_nonzero(S[3][:Lp[n]])
     assert h[SL.H_NNZU] - n == np.count_nonzero(Ux[:h[SL.H_UFREE]])
-
-    def live_tail_slot(d, enter):  # the live tail slot with the largest |d|
-        pos_of = S[19]
-        return max((s for s in range(n) if kt <= pos_of[s] < n), key=lambda s: abs(d[s]))
-
-    for nupd, b, x, y in _solves_through_updates(S, Mc, units[:6], 2, live_tail_slot,
+    for nupd, b, x, y in _solves_through_updates(S, Mc, units[:6], 2,
+                                                 lambda d, e: _live_tail_slot(S, d),
                                                  np.random.default_rng(7)):
         assert np.array_equal(x, _ftran_by_indices(S, nupd, b))
         assert np.array_equal(y, _btran_by_indices(S, nupd, b))
@@ -288,27 +299,16 @@ def test_spikes_keep_their_tail_rows_whole_and_solve_as_through_the_indices():
     FTRAN and BTRAN give, bit for bit, what the same factors give through the indices,
     and agree with numpy's solve of the basis.  The entries counted leave the zeros out."""
     n = 200
-    M = _random(n, 0.03, 0)
-    Mc = sp.csc_matrix(M)
-    Mc.sort_indices()
-    sk = np.full(n, VAR_Z, dtype=np.int64)
-    units = np.random.default_rng(1).choice(n, 70, replace=False)
-    sk[units] = VAR_W
-    nrep, S, _ = _factor(M, sk, nnz_guess=n * n)
+    M, Mc, sk, units, S = _tail_factors(n)
     h = S[0]
     tail = int(h[SL.H_TAIL])
     kt = n - tail
-    assert nrep == 0 and tail >= ST.DENSE_TAIL_MIN
     Md = M.toarray()
     B = np.where(sk == VAR_W, 0.0, 1.0) * Md  # the basis: M's column or -e_i by slot
     B[units, units] = -1.0
 
-    def live_tail_slot(d, enter):
-        pos_of = S[19]
-        return max((s for s in range(n) if kt <= pos_of[s] < n), key=lambda s: abs(d[s]))
-
     def entered(d, enter):  # the slot leaving, and the basis after the exchange
-        s = live_tail_slot(d, enter)
+        s = _live_tail_slot(S, d)
         B[:, s] = Md[:, enter]
         return s
 
