@@ -539,20 +539,19 @@ def solve(S, nupd, w, out, keep, rate, sign):
             x = x / Ud[j]
             w[j] = x
             e1 = Ue[j]
+            e0 = e1  # (a run of the column over the tail's rows: where, how long)
+            m = 0
             if kt <= j < n and dead[j] == 0:
                 # the tail's block part: rows kt .. j-1, the column's last j - kt entries
-                e1 -= j - kt
-                axpy_run(w, kt, Ux, e1, j - kt, x)
-            elif seg[j] >= 0:
-                # an appended column's tail rows, stored whole (replace_column)
+                m = j - kt
+                e0 = e1 - m
+            elif seg[j] >= 0:  # an appended column's tail rows, stored whole
                 e0 = seg[j]
-                for e in range(Us[j], e0):
-                    w[Ui[e]] -= Ux[e] * x
-                axpy_run(w, kt, Ux, e0, n - kt, x)
-                for e in range(e0 + n - kt, e1):
-                    w[Ui[e]] -= Ux[e] * x
-                continue
-            for e in range(Us[j], e1):
+                m = n - kt
+            for e in range(Us[j], e0):
+                w[Ui[e]] -= Ux[e] * x
+            axpy_run(w, kt, Ux, e0, m, x)
+            for e in range(e0 + m, e1):
                 w[Ui[e]] -= Ux[e] * x
     dmax = 0.0
     if keep:
@@ -669,16 +668,13 @@ def _utsolve(S, w, start, N):
             w[j] = 0.0
             continue
         s = w[j]
-        e0 = seg[j]
-        if e0 >= 0:  # (the same terms in the same order, the tail rows' contiguously)
-            for e in range(Us[j], e0):
-                s -= Ux[e] * w[Ui[e]]
-            s = dot_run(s, w, kt, Ux, e0, n - kt)
-            for e in range(e0 + n - kt, Ue[j]):
-                s -= Ux[e] * w[Ui[e]]
-        else:
-            for e in range(Us[j], Ue[j]):
-                s -= Ux[e] * w[Ui[e]]
+        # (the same terms in the same order, a run over the tail's rows contiguously)
+        e0, m = (seg[j], n - kt) if seg[j] >= 0 else (Ue[j], 0)
+        for e in range(Us[j], e0):
+            s -= Ux[e] * w[Ui[e]]
+        s = dot_run(s, w, kt, Ux, e0, m)
+        for e in range(e0 + m, Ue[j]):
+            s -= Ux[e] * w[Ui[e]]
         w[j] = s / Ud[j]
 
 
